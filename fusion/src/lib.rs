@@ -1,0 +1,50 @@
+//! Sextant's navigation math: pure functions and plain state, no I/O, no clocks, no threads.
+//!
+//! Every algorithm here runs identically in the live fusion daemon, in offline replay and in
+//! Monte Carlo experiments. Module map (papers in `shared/SEEDS.md`):
+//! - [`earth`]: ellipsoids, geodetic ↔ ECEF, gravity (normal and J2, paper 002), rates, radii.
+//! - [`attitude`]: rotation helpers (Euler angles, rotation vectors, skew matrices).
+//! - [`time`]: time scales (GPS, TAI, UTC, TT, UT1).
+//! - [`celestial`]: GCRS/ICRF → ITRS (IAU 2006/2000A precession-nutation, ERA, polar motion).
+//! - [`strapdown`]: ECEF strapdown mechanization with selectable integrators (paper 002).
+//! - [`ekf`]: the error-state Kalman filter and its measurement models.
+//! - [`alignment`]: static coarse alignment (levelling and gyrocompassing, paper 003).
+//! - [`navigator`]: the fusion engine the daemons drive: alignment, mechanization, filter,
+//!   measurement buffering, modes and health.
+
+pub mod alignment;
+pub mod attitude;
+pub mod celestial;
+pub mod earth;
+pub mod ekf;
+pub mod navigator;
+pub mod strapdown;
+pub mod time;
+
+/// Errors of the navigation library.
+#[derive(Debug, thiserror::Error, Clone, PartialEq)]
+pub enum FusionError {
+    /// A sample carried a value that cannot be physical (NaN, infinity, impossible magnitude).
+    #[error("invalid {sensor} sample at t = {time_ns} ns: {reason}")]
+    InvalidSample {
+        /// Which sensor.
+        sensor: &'static str,
+        /// Time of validity of the sample, GPS ns.
+        time_ns: i64,
+        /// What was wrong.
+        reason: String,
+    },
+    /// A sample's time went backwards or repeated.
+    #[error("{sensor} sample at t = {time_ns} ns is not after the previous one ({previous_ns} ns)")]
+    TimeNotIncreasing {
+        /// Which sensor.
+        sensor: &'static str,
+        /// Time of validity of the sample, GPS ns.
+        time_ns: i64,
+        /// Time of the previous sample, GPS ns.
+        previous_ns: i64,
+    },
+    /// A configuration value makes no sense.
+    #[error("invalid configuration: {0}")]
+    Config(String),
+}
