@@ -3,6 +3,7 @@
 //! Every algorithm here runs identically in the live fusion daemon, in offline replay and in
 //! Monte Carlo experiments. Module map (papers in `shared/SEEDS.md`):
 //! - [`earth`]: ellipsoids, geodetic ↔ ECEF, gravity (normal and J2, paper 002), rates, radii.
+//! - [`atmosphere`]: ISA pressure ↔ altitude for the barometer.
 //! - [`attitude`]: rotation helpers (Euler angles, rotation vectors, skew matrices).
 //! - [`time`]: time scales (GPS, TAI, UTC, TT, UT1).
 //! - [`celestial`]: GCRS/ICRF → ITRS (IAU 2006/2000A precession-nutation, ERA, polar motion).
@@ -13,6 +14,7 @@
 //!   measurement buffering, modes and health.
 
 pub mod alignment;
+pub mod atmosphere;
 pub mod attitude;
 pub mod celestial;
 pub mod earth;
