@@ -1,1 +1,180 @@
-pub fn x(){}
+//! Helpers for Sextant's end-to-end tests: locating the real binaries, reading recordings back
+//! with an independent reader (the `mcap` crate's reader and the `jsonschema` validator, never
+//! the writer's own state), and inspecting what a run left behind (processes, shared memory).
+
+use anyhow::{Context, Result, anyhow, bail};
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+
+/// Directory holding the workspace's binaries of the profile the tests were built with
+/// (`target/<profile>`), found from the test executable's own path (`target/<profile>/deps`).
+pub fn bin_dir() -> Result<PathBuf> {
+    let exe = std::env::current_exe()?;
+    let deps = exe.parent().ok_or_else(|| anyhow!("test executable has no parent"))?;
+    let dir = deps.parent().ok_or_else(|| anyhow!("deps has no parent"))?;
+    Ok(dir.to_path_buf())
+}
+
+/// Path of a workspace binary; fails with a hint when it was not built.
+pub fn bin(name: &str) -> Result<PathBuf> {
+    let p = bin_dir()?.join(name);
+    if !p.exists() {
+        bail!(
+            "{} not found: build the workspace first (cargo test --workspace builds every binary)",
+            p.display()
+        );
+    }
+    Ok(p)
+}
+
+/// Repository root (for `config/`).
+pub fn repo_root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| PathBuf::from("."))
+}
+
+/// One decoded message of a recording.
+#[derive(Debug, Clone)]
+pub struct Record {
+    /// MCAP topic.
+    pub topic: String,
+    /// MCAP log time, ns.
+    pub log_time: u64,
+    /// Decoded JSON payload.
+    pub json: serde_json::Value,
+}
+
+/// What a recording holds, read with the `mcap` crate's reader.
+#[derive(Debug, Default)]
+pub struct Recording {
+    /// Messages in file order.
+    pub records: Vec<Record>,
+    /// Topic → (schema name, schema encoding, message encoding).
+    pub channels: BTreeMap<String, (String, String, String)>,
+    /// Messages that failed their channel's JSON Schema: (topic, error).
+    pub invalid: Vec<(String, String)>,
+}
+
+impl Recording {
+    /// Messages on one topic.
+    pub fn topic<'a>(&'a self, topic: &'a str) -> impl Iterator<Item = &'a Record> + 'a {
+        self.records.iter().filter(move |r| r.topic == topic)
+    }
+    /// Number of messages on one topic.
+    pub fn count(&self, topic: &str) -> usize {
+        self.topic(topic).count()
+    }
+}
+
+/// Read every message of an MCAP file, decode its JSON and validate it against its channel's
+/// JSON Schema.
+pub fn read_recording(path: &Path) -> Result<Recording> {
+    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+    let mut rec = Recording::default();
+    let mut validators: BTreeMap<u16, jsonschema::Validator> = BTreeMap::new();
+    for msg in mcap::MessageStream::new(&bytes)? {
+        let msg = msg.with_context(|| format!("decoding {}", path.display()))?;
+        let ch = &msg.channel;
+        let schema = ch
+            .schema
+            .as_ref()
+            .ok_or_else(|| anyhow!("channel {} has no schema", ch.topic))?;
+        rec.channels.entry(ch.topic.clone()).or_insert_with(|| {
+            (
+                schema.name.clone(),
+                schema.encoding.clone(),
+                ch.message_encoding.clone(),
+            )
+        });
+        if !validators.contains_key(&ch.id) {
+            let s: serde_json::Value = serde_json::from_slice(&schema.data)
+                .with_context(|| format!("schema of {} is not JSON", ch.topic))?;
+            let v = jsonschema::validator_for(&s)
+                .map_err(|e| anyhow!("schema of {} is not a valid JSON Schema: {e}", ch.topic))?;
+            validators.insert(ch.id, v);
+        }
+        let json: serde_json::Value = serde_json::from_slice(&msg.data)
+            .with_context(|| format!("message on {} is not JSON", ch.topic))?;
+        if let Some(v) = validators.get(&ch.id)
+            && let Err(e) = v.validate(&json)
+        {
+            rec.invalid.push((ch.topic.clone(), e.to_string()));
+        }
+        rec.records.push(Record {
+            topic: ch.topic.clone(),
+            log_time: msg.log_time,
+            json,
+        });
+    }
+    Ok(rec)
+}
+
+/// Entries (files and directories, recursively) that iceoryx2 keeps in the file system:
+/// shared memory in /dev/shm and its bookkeeping under /tmp/iceoryx2.
+pub fn iceoryx_entries() -> BTreeSet<PathBuf> {
+    let mut out = BTreeSet::new();
+    if let Ok(rd) = std::fs::read_dir("/dev/shm") {
+        for e in rd.flatten() {
+            let name = e.file_name().to_string_lossy().to_string();
+            if name.starts_with("iox2") {
+                out.insert(e.path());
+            }
+        }
+    }
+    fn walk(p: &Path, out: &mut BTreeSet<PathBuf>) {
+        if let Ok(rd) = std::fs::read_dir(p) {
+            for e in rd.flatten() {
+                let path = e.path();
+                if path.is_dir() {
+                    walk(&path, out);
+                } else {
+                    out.insert(path);
+                }
+            }
+        }
+    }
+    walk(Path::new("/tmp/iceoryx2"), &mut out);
+    out
+}
+
+/// Processes whose command line contains `needle` (excluding the caller).
+pub fn processes_matching(needle: &str) -> Vec<(i32, String)> {
+    let me = std::process::id() as i32;
+    let mut out = Vec::new();
+    if let Ok(rd) = std::fs::read_dir("/proc") {
+        for e in rd.flatten() {
+            let Ok(pid) = e.file_name().to_string_lossy().parse::<i32>() else {
+                continue;
+            };
+            if pid == me {
+                continue;
+            }
+            if let Ok(raw) = std::fs::read(e.path().join("cmdline")) {
+                let cmd = String::from_utf8_lossy(&raw).replace('\0', " ");
+                if cmd.contains(needle) {
+                    out.push((pid, cmd));
+                }
+            }
+        }
+    }
+    out
+}
+
+/// A JSON array of numbers as a Vec (empty when absent).
+pub fn f64s(v: &serde_json::Value) -> Vec<f64> {
+    v.as_array()
+        .map(|a| a.iter().filter_map(|x| x.as_f64()).collect())
+        .unwrap_or_default()
+}
+
+/// Read a number at a JSON pointer (e.g. "/header/time_ns").
+pub fn num(v: &serde_json::Value, ptr: &str) -> Option<f64> {
+    v.pointer(ptr).and_then(|x| x.as_f64())
+}
+
+/// Read an integer at a JSON pointer.
+pub fn int(v: &serde_json::Value, ptr: &str) -> Option<i64> {
+    v.pointer(ptr).and_then(|x| x.as_i64())
+}
