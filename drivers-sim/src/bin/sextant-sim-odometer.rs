@@ -1,0 +1,12 @@
+//! `sextant-sim-odometer`: simulated driver process (see HELPERS.md for the command line).
+
+use clap::Parser;
+use sextant_drivers_sim::driver::{self, DriverArgs};
+use sextant_drivers_sim::sources::OdometerSource;
+
+fn main() -> anyhow::Result<()> {
+    driver::init_logging();
+    let args = DriverArgs::parse();
+    driver::run(&args, "sextant-sim-odometer", OdometerSource::new)?;
+    Ok(())
+}

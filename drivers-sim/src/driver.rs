@@ -1,0 +1,179 @@
+//! The loop shared by every driver binary: command line, scenario loading, signal handling,
+//! pacing on CLOCK_MONOTONIC and publishing on the iceoryx2 bus.
+//!
+//! Sample k at sim time `t_k = k·period` (ns since the scenario epoch) is computed first, then
+//! sent at CLOCK_MONOTONIC `start_mono_ns + t_k/speed` (absolute `clock_nanosleep`, woken at
+//! least every 100 ms to notice a stop request). The process exits after the last sample with
+//! `t_k ≤ duration`, or as soon as SIGINT/SIGTERM arrives; either way the iceoryx2 ports and
+//! node are dropped cleanly.
+
+use crate::SimError;
+use crate::scenario::Scenario;
+use crate::sources::SampleSource;
+use clap::Parser;
+use nix::sys::signal::{SaFlags, SigAction, SigHandler, SigSet, Signal, sigaction};
+use nix::sys::time::TimeSpec;
+use nix::time::{ClockId, ClockNanosleepFlags, clock_nanosleep};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+
+/// Command line common to every simulated driver (HELPERS.md process contract).
+#[derive(Debug, Clone, Parser)]
+pub struct DriverArgs {
+    /// Scenario file (TOML).
+    #[arg(long)]
+    pub scenario: PathBuf,
+    /// Service-name prefix of this run.
+    #[arg(long, default_value = "sextant")]
+    pub prefix: String,
+    /// CLOCK_MONOTONIC time (ns) that corresponds to the scenario epoch; default: now.
+    #[arg(long)]
+    pub start_mono_ns: Option<u64>,
+    /// Simulation speed relative to wall time (`inf` = as fast as possible).
+    #[arg(long, default_value_t = 1.0)]
+    pub speed: f64,
+    /// Override of the scenario duration, s.
+    #[arg(long)]
+    pub duration: Option<f64>,
+}
+
+/// Set by the SIGINT/SIGTERM handler.
+static STOP: AtomicBool = AtomicBool::new(false);
+
+extern "C" fn on_signal(_: nix::libc::c_int) {
+    STOP.store(true, Ordering::SeqCst);
+}
+
+/// Install the SIGINT/SIGTERM handlers that request a clean stop (no `SA_RESTART`, so sleeps
+/// are interrupted).
+pub fn install_signal_handlers() -> Result<(), SimError> {
+    let action = SigAction::new(
+        SigHandler::Handler(on_signal),
+        SaFlags::empty(),
+        SigSet::empty(),
+    );
+    for sig in [Signal::SIGINT, Signal::SIGTERM] {
+        // SAFETY: the handler only stores to an atomic, which is async-signal-safe.
+        unsafe { sigaction(sig, &action) }.map_err(|e| SimError::Signal(format!("{sig}: {e}")))?;
+    }
+    Ok(())
+}
+
+/// Whether a stop was requested by a signal.
+pub fn stop_requested() -> bool {
+    STOP.load(Ordering::SeqCst)
+}
+
+/// Sleep until CLOCK_MONOTONIC reaches `target_ns`; returns false when a stop was requested.
+pub fn sleep_until_mono(target_ns: u64) -> bool {
+    loop {
+        if stop_requested() {
+            return false;
+        }
+        let now = msgs::monotonic_ns();
+        if now >= target_ns {
+            return true;
+        }
+        let wake = target_ns.min(now + 100_000_000);
+        let ts = TimeSpec::new(
+            (wake / 1_000_000_000) as nix::libc::time_t,
+            (wake % 1_000_000_000) as nix::libc::c_long,
+        );
+        // EINTR (a signal) and spurious wake-ups just loop.
+        let _ = clock_nanosleep(
+            ClockId::CLOCK_MONOTONIC,
+            ClockNanosleepFlags::TIMER_ABSTIME,
+            &ts,
+        );
+    }
+}
+
+/// Log to stderr, filter from `RUST_LOG` (default `info`).
+pub fn init_logging() {
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .try_init();
+}
+
+/// What a driver run did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RunSummary {
+    /// Messages published.
+    pub published: u64,
+    /// True when stopped by a signal before the end.
+    pub interrupted: bool,
+}
+
+fn cli_invalid(key: &str, reason: String) -> SimError {
+    SimError::Invalid {
+        file: Path::new("command line").to_path_buf(),
+        key: key.to_string(),
+        reason,
+    }
+}
+
+/// Run one driver: load the scenario, build the source with `make(scenario, epoch_gps_ns)`,
+/// publish every sample on time as node `node_name`.
+pub fn run<S, F>(args: &DriverArgs, node_name: &str, make: F) -> Result<RunSummary, SimError>
+where
+    S: SampleSource,
+    F: FnOnce(&Scenario, i64) -> S,
+{
+    if !(args.speed > 0.0) {
+        return Err(cli_invalid("--speed", format!("must be > 0, got {}", args.speed)));
+    }
+    let scn = Scenario::load(&args.scenario)?;
+    let duration_ns = match args.duration {
+        Some(d) if d.is_finite() && d > 0.0 => (d * 1e9).round() as i64,
+        Some(d) => return Err(cli_invalid("--duration", format!("must be > 0 s, got {d}"))),
+        None => scn.duration_ns(),
+    };
+    install_signal_handlers()?;
+    let start_mono = args.start_mono_ns.unwrap_or_else(msgs::monotonic_ns);
+    let epoch_ns = scn.epoch_gps().ns;
+    let mut source = make(&scn, epoch_ns);
+    let bus = msgs::ipc::Bus::new(&args.prefix, node_name)?;
+    let mut publisher = bus.publisher::<S::Msg>()?;
+    let period = source.period_ns();
+    tracing::info!(
+        scenario = %args.scenario.display(),
+        prefix = %args.prefix,
+        period_ns = period,
+        duration_s = duration_ns as f64 * 1e-9,
+        speed = args.speed,
+        "{node_name} started"
+    );
+    let mut summary = RunSummary {
+        published: 0,
+        interrupted: false,
+    };
+    let mut k = source.first_index();
+    while k * period <= duration_ns {
+        if stop_requested() {
+            summary.interrupted = true;
+            break;
+        }
+        let t_ns = k * period;
+        let msg = source.sample(t_ns);
+        let offset = t_ns as f64 / args.speed;
+        let target = start_mono.saturating_add(if offset.is_finite() { offset as u64 } else { 0 });
+        if !sleep_until_mono(target) {
+            summary.interrupted = true;
+            break;
+        }
+        publisher.send(msg)?;
+        summary.published += 1;
+        k += 1;
+    }
+    tracing::info!(
+        published = summary.published,
+        interrupted = summary.interrupted,
+        "{node_name} finished"
+    );
+    drop(publisher);
+    drop(bus);
+    Ok(summary)
+}

@@ -1,0 +1,221 @@
+//! IMU error model: constant bias + random walk + temperature term, scale factor, misalignment,
+//! angle/velocity random walk, ADC quantisation. Applied to the true increments of
+//! [`crate::truth::TruthGenerator`].
+//!
+//! Every random draw comes from the IMU's own stream ([`crate::sensor_rng`] with name `"imu"`)
+//! in a fixed order per interval, whether or not a term is zero, so that the truth process can
+//! re-derive the true biases by running the same model.
+
+use crate::scenario::{ImuGrade, Scenario, TemperatureProfile};
+use crate::truth::Increments;
+use nalgebra::{Matrix3, Vector3};
+use rand::Rng;
+use rand_chacha::ChaCha20Rng;
+use rand_distr::StandardNormal;
+
+/// Standard gravity used to convert µg and g, m/s².
+pub const G0_M_S2: f64 = 9.806_65;
+const DEG_H_TO_RAD_S: f64 = std::f64::consts::PI / 180.0 / 3600.0;
+const ARCSEC_TO_RAD: f64 = std::f64::consts::PI / 180.0 / 3600.0;
+
+fn gauss3(rng: &mut ChaCha20Rng) -> Vector3<f64> {
+    let x: f64 = rng.sample(StandardNormal);
+    let y: f64 = rng.sample(StandardNormal);
+    let z: f64 = rng.sample(StandardNormal);
+    Vector3::new(x, y, z)
+}
+
+/// Small-angle non-orthogonal misalignment matrix `I + δ` with 1-σ `sigma_rad` off-diagonals.
+fn misalignment(rng: &mut ChaCha20Rng, sigma_rad: f64) -> Matrix3<f64> {
+    let mut m = Matrix3::identity();
+    for (i, j) in [(0, 1), (0, 2), (1, 0), (1, 2), (2, 0), (2, 1)] {
+        let n: f64 = rng.sample(StandardNormal);
+        m[(i, j)] = sigma_rad * n;
+    }
+    m
+}
+
+/// Errors of one triad (gyros or accelerometers), SI units.
+#[derive(Debug, Clone)]
+struct TriadErrors {
+    /// Constant bias, rad/s or m/s².
+    bias0: Vector3<f64>,
+    /// Random-walk part of the bias (state), rad/s or m/s².
+    bias_rw: Vector3<f64>,
+    /// Random-walk intensity, (rad/s)/√s or (m/s²)/√s.
+    bias_rw_per_rt_s: f64,
+    /// Temperature coefficient per axis, (rad/s)/°C or (m/s²)/°C.
+    temp_coeff: Vector3<f64>,
+    /// Scale-factor error per axis (dimensionless).
+    scale: Vector3<f64>,
+    /// Misalignment `I + δ`.
+    mis: Matrix3<f64>,
+    /// White noise intensity: rad/√s (ARW) or (m/s)/√s (VRW).
+    white_per_rt_s: f64,
+    /// ADC least significant bit of the rate output (0 = none), rad/s or m/s².
+    lsb: f64,
+}
+
+impl TriadErrors {
+    #[allow(clippy::too_many_arguments)]
+    fn draw(
+        rng: &mut ChaCha20Rng,
+        bias_sigma: f64,
+        bias_rw_per_rt_s: f64,
+        temp_coeff_sigma: f64,
+        scale_sigma: f64,
+        mis_sigma_rad: f64,
+        white_per_rt_s: f64,
+        lsb: f64,
+    ) -> Self {
+        let bias0 = bias_sigma * gauss3(rng);
+        let temp_coeff = temp_coeff_sigma * gauss3(rng);
+        let scale = scale_sigma * gauss3(rng);
+        let mis = misalignment(rng, mis_sigma_rad);
+        Self {
+            bias0,
+            bias_rw: Vector3::zeros(),
+            bias_rw_per_rt_s,
+            temp_coeff,
+            scale,
+            mis,
+            white_per_rt_s,
+            lsb,
+        }
+    }
+
+    fn bias(&self, dtemp_c: f64) -> Vector3<f64> {
+        self.bias0 + self.bias_rw + self.temp_coeff * dtemp_c
+    }
+
+    /// Corrupt the true increment `x` (rad or m/s) over `dt` with `bias` and white draw `w`.
+    fn apply(&self, x: &Vector3<f64>, dt: f64, bias: &Vector3<f64>, w: &Vector3<f64>) -> Vector3<f64> {
+        let scaled = (Matrix3::from_diagonal(&(Vector3::repeat(1.0) + self.scale)) * self.mis) * x;
+        let y = scaled + bias * dt + w * (self.white_per_rt_s * dt.sqrt());
+        if self.lsb > 0.0 {
+            y.map(|v| (v / dt / self.lsb).round() * self.lsb * dt)
+        } else {
+            y
+        }
+    }
+}
+
+/// The random part of one IMU interval (draws already made).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct IntervalErrors {
+    /// Gyro bias applied over the interval (incl. temperature term), body axes, rad/s.
+    pub gyro_bias_rad_s: Vector3<f64>,
+    /// Accelerometer bias applied over the interval, body axes, m/s².
+    pub accel_bias_m_s2: Vector3<f64>,
+    /// Unit-normal white-noise draws for the gyros.
+    gyro_white: Vector3<f64>,
+    /// Unit-normal white-noise draws for the accelerometers.
+    accel_white: Vector3<f64>,
+}
+
+/// Temperature of the sensor block at `t_s` since the epoch, °C.
+pub fn temperature_c(p: &TemperatureProfile, t_s: f64) -> f64 {
+    p.initial_c + p.rate_c_per_h * t_s / 3600.0
+}
+
+/// The IMU error model with its random state.
+#[derive(Debug, Clone)]
+pub struct ImuErrorModel {
+    rng: ChaCha20Rng,
+    gyro: TriadErrors,
+    accel: TriadErrors,
+    temperature: TemperatureProfile,
+    reference_temperature_c: f64,
+    /// When false, [`ImuErrorModel::corrupt`] returns the truth unchanged (tests).
+    pub enabled: bool,
+}
+
+impl ImuErrorModel {
+    /// Draw the constant errors of the scenario's IMU from its stream.
+    pub fn new(scn: &Scenario) -> Self {
+        Self::from_grade(
+            &scn.imu,
+            scn.spec.imu.temperature,
+            crate::sensor_rng(scn.spec.scenario.seed, "imu"),
+        )
+    }
+
+    /// Draw the constant errors of `grade` from `rng`.
+    pub fn from_grade(grade: &ImuGrade, temperature: TemperatureProfile, mut rng: ChaCha20Rng) -> Self {
+        let g = &grade.gyro;
+        let a = &grade.accel;
+        let gyro_lsb = if g.adc_bits > 0 {
+            2.0 * g.full_scale_deg_s.to_radians() / 2f64.powi(g.adc_bits as i32)
+        } else {
+            0.0
+        };
+        let accel_lsb = if a.adc_bits > 0 {
+            2.0 * a.full_scale_g * G0_M_S2 / 2f64.powi(a.adc_bits as i32)
+        } else {
+            0.0
+        };
+        let gyro = TriadErrors::draw(
+            &mut rng,
+            g.bias_deg_h * DEG_H_TO_RAD_S,
+            g.bias_rw_deg_h_per_rt_h * DEG_H_TO_RAD_S / 60.0,
+            g.temp_coeff_deg_h_per_c * DEG_H_TO_RAD_S,
+            g.scale_factor_ppm * 1e-6,
+            g.misalignment_arcsec * ARCSEC_TO_RAD,
+            g.arw_deg_per_rt_h.to_radians() / 60.0,
+            gyro_lsb,
+        );
+        let ug = 1e-6 * G0_M_S2;
+        let accel = TriadErrors::draw(
+            &mut rng,
+            a.bias_ug * ug,
+            a.bias_rw_ug_per_rt_h * ug / 60.0,
+            a.temp_coeff_ug_per_c * ug,
+            a.scale_factor_ppm * 1e-6,
+            a.misalignment_arcsec * ARCSEC_TO_RAD,
+            a.vrw_ug_per_rt_hz * ug,
+            accel_lsb,
+        );
+        Self {
+            rng,
+            gyro,
+            accel,
+            temperature,
+            reference_temperature_c: grade.reference_temperature_c,
+            enabled: true,
+        }
+    }
+
+    /// Make the draws of the interval `(t_end_s − dt_s, t_end_s]` and advance the bias random
+    /// walk. Returns the biases applied over that interval.
+    pub fn next_interval(&mut self, t_end_s: f64, dt_s: f64) -> IntervalErrors {
+        let dtemp = temperature_c(&self.temperature, t_end_s - 0.5 * dt_s) - self.reference_temperature_c;
+        let e = IntervalErrors {
+            gyro_bias_rad_s: self.gyro.bias(dtemp),
+            accel_bias_m_s2: self.accel.bias(dtemp),
+            gyro_white: gauss3(&mut self.rng),
+            accel_white: gauss3(&mut self.rng),
+        };
+        let sq = dt_s.sqrt();
+        let gw = gauss3(&mut self.rng);
+        let aw = gauss3(&mut self.rng);
+        self.gyro.bias_rw += gw * (self.gyro.bias_rw_per_rt_s * sq);
+        self.accel.bias_rw += aw * (self.accel.bias_rw_per_rt_s * sq);
+        e
+    }
+
+    /// Measured (delta-angle rad, delta-velocity m/s) from the true increments.
+    pub fn corrupt(&self, e: &IntervalErrors, inc: &Increments) -> (Vector3<f64>, Vector3<f64>) {
+        if !self.enabled {
+            return (inc.delta_angle_b_rad, inc.delta_velocity_b_m_s);
+        }
+        (
+            self.gyro.apply(&inc.delta_angle_b_rad, inc.dt_s, &e.gyro_bias_rad_s, &e.gyro_white),
+            self.accel.apply(
+                &inc.delta_velocity_b_m_s,
+                inc.dt_s,
+                &e.accel_bias_m_s2,
+                &e.accel_white,
+            ),
+        )
+    }
+}

@@ -1,0 +1,986 @@
+//! Scenario files (TOML): what the simulated world and sensors are.
+//!
+//! Loading is two passes: [`ScenarioFile`] is parsed strictly (`deny_unknown_fields`, so a typo
+//! is an error naming the key), then [`Scenario::validate`] checks values and ranges and names
+//! the file and the dotted key of the first offending value. Sensor error models are *grades*:
+//! each sensor section names a grade `G`, read from the table of that sensor kind (`[imu]`,
+//! `[star_tracker]`, `[gnss]`, `[odometer]`, `[baro]`) in `<sensors_dir>/G.toml`; the scenario's
+//! optional `overrides` table is deep-merged over the grade table before it is parsed.
+//!
+//! Units are in the key names (`_deg`, `_m`, `_s`, `_hz`, `_ppm`, …); every model converts to SI
+//! radians/metres/seconds internally.
+
+use crate::SimError;
+use serde::Deserialize;
+use serde::de::DeserializeOwned;
+use std::path::{Path, PathBuf};
+
+/// Step of the truth integration grid, ns (1 ms). Every sensor period must be a multiple of it.
+pub const TRUTH_GRID_NS: i64 = 1_000_000;
+
+/// The scenario file as written (strict parse, no semantic checks yet).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScenarioFile {
+    /// Name, epoch, duration, seed.
+    pub scenario: ScenarioMeta,
+    /// Starting point of the trajectory.
+    pub site: Site,
+    /// Motion of the vehicle.
+    pub trajectory: Trajectory,
+    /// Inertial measurement unit.
+    pub imu: ImuSection,
+    /// Star tracker.
+    pub star_tracker: StarTrackerSection,
+    /// GNSS receiver.
+    pub gnss: GnssSection,
+    /// Odometer.
+    pub odometer: OdometerSection,
+    /// Barometer.
+    pub baro: BaroSection,
+    /// Truth publication.
+    #[serde(default)]
+    pub truth: TruthSection,
+    /// Earth orientation parameters (UT1 − UTC, polar motion) used for the star tracker.
+    #[serde(default)]
+    pub earth_orientation: fusion::celestial::EarthOrientation,
+}
+
+/// `[scenario]`: identity, time and randomness.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScenarioMeta {
+    /// Human name.
+    pub name: String,
+    /// Start epoch, UTC calendar `YYYY-MM-DDTHH:MM:SS[.fff][Z]`.
+    pub start_utc: String,
+    /// Duration of the run, s.
+    pub duration_s: f64,
+    /// Master random seed; every sensor derives its own stream from it and its name.
+    pub seed: u64,
+    /// Directory of the sensor grade files, relative to the scenario file
+    /// (default `../sensors`).
+    #[serde(default)]
+    pub sensors_dir: Option<String>,
+}
+
+/// `[site]`: geodetic start position on WGS-84.
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Site {
+    /// Geodetic latitude, degrees.
+    pub lat_deg: f64,
+    /// Longitude, degrees (east positive).
+    pub lon_deg: f64,
+    /// Height above the WGS-84 ellipsoid, m.
+    pub height_m: f64,
+}
+
+/// `[trajectory]`: the motion, selected by `kind`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum Trajectory {
+    /// Fixed at the site, optionally on a turntable rotating about the local vertical.
+    Static(StaticTrajectory),
+    /// A ground vehicle driving a list of segments on the ellipsoid at constant height.
+    GroundVehicle(GroundVehicleTrajectory),
+}
+
+/// `kind = "static"`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StaticTrajectory {
+    /// Roll of the body, degrees.
+    #[serde(default)]
+    pub roll_deg: f64,
+    /// Pitch of the body, degrees.
+    #[serde(default)]
+    pub pitch_deg: f64,
+    /// Heading of the body (turntable at zero), degrees from north, clockwise.
+    #[serde(default)]
+    pub heading_deg: f64,
+    /// Turntable moves about the local vertical (applied in order, must not overlap).
+    #[serde(default)]
+    pub turntable: Vec<TurntableMove>,
+}
+
+/// One turntable move: from its current angle to `to_deg` with a raised-cosine rate profile.
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TurntableMove {
+    /// Start of the move, s since the scenario epoch.
+    pub start_s: f64,
+    /// Target turntable angle, degrees (about body z = down, positive clockwise seen from above).
+    pub to_deg: f64,
+    /// Duration of the move, s.
+    pub duration_s: f64,
+}
+
+/// `kind = "ground_vehicle"`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GroundVehicleTrajectory {
+    /// Heading at the start, degrees from north, clockwise.
+    pub initial_heading_deg: f64,
+    /// Segments driven in order; after the last one the vehicle keeps its final speed and heading.
+    pub segments: Vec<Segment>,
+}
+
+/// One piece of a ground-vehicle trajectory. Accelerations and turn rates follow raised-cosine
+/// profiles that start and end at zero, so specific force and angular rate are continuous.
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(tag = "type", rename_all = "snake_case", deny_unknown_fields)]
+pub enum Segment {
+    /// Stand still (speed must be zero) for `duration_s`.
+    Hold {
+        /// Duration, s.
+        duration_s: f64,
+    },
+    /// Change speed to `to_m_s` over `duration_s` (accelerate or decelerate).
+    Speed {
+        /// Target forward speed, m/s.
+        to_m_s: f64,
+        /// Duration, s.
+        duration_s: f64,
+    },
+    /// Turn by `angle_deg` (positive = right, heading increases) over `duration_s` at the
+    /// current speed.
+    Turn {
+        /// Heading change, degrees.
+        angle_deg: f64,
+        /// Duration, s.
+        duration_s: f64,
+    },
+    /// Keep speed and heading for `duration_s`.
+    Cruise {
+        /// Duration, s.
+        duration_s: f64,
+    },
+}
+
+impl Segment {
+    /// Duration of the segment, s.
+    pub fn duration_s(&self) -> f64 {
+        match *self {
+            Segment::Hold { duration_s }
+            | Segment::Speed { duration_s, .. }
+            | Segment::Turn { duration_s, .. }
+            | Segment::Cruise { duration_s } => duration_s,
+        }
+    }
+}
+
+/// A time window `[start_s, start_s + duration_s)` in s since the scenario epoch.
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Window {
+    /// Start, s since the scenario epoch.
+    pub start_s: f64,
+    /// Length, s.
+    pub duration_s: f64,
+}
+
+impl Window {
+    /// Whether time `t_s` (s since the epoch) lies inside the window.
+    pub fn contains(&self, t_s: f64) -> bool {
+        t_s >= self.start_s && t_s < self.start_s + self.duration_s
+    }
+}
+
+/// IMU temperature: `T(t) = initial_c + rate_c_per_h · t/3600`.
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TemperatureProfile {
+    /// Temperature at the epoch, °C.
+    pub initial_c: f64,
+    /// Linear drift, °C per hour.
+    #[serde(default)]
+    pub rate_c_per_h: f64,
+}
+
+impl Default for TemperatureProfile {
+    fn default() -> Self {
+        Self {
+            initial_c: 20.0,
+            rate_c_per_h: 0.0,
+        }
+    }
+}
+
+/// `[imu]`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ImuSection {
+    /// Grade file name (without `.toml`) in the sensors directory.
+    pub grade: String,
+    /// Output rate, Hz.
+    pub rate_hz: f64,
+    /// Temperature profile of the sensor block.
+    #[serde(default)]
+    pub temperature: TemperatureProfile,
+    /// Partial `[imu]` grade table merged over the grade file.
+    #[serde(default)]
+    pub overrides: Option<toml::Table>,
+}
+
+/// `[star_tracker]`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StarTrackerSection {
+    /// Grade file name.
+    pub grade: String,
+    /// Output rate, Hz.
+    pub rate_hz: f64,
+    /// True mounting misalignment κ1, κ2, κ3 (paper 000, `M = R_z(κ1)·R_x(κ2)·R_y(κ3)`), deg.
+    #[serde(default)]
+    pub mounting_kappa_deg: [f64; 3],
+    /// Outage windows (no attitude; samples flagged invalid).
+    #[serde(default)]
+    pub outages: Vec<Window>,
+    /// Partial grade table merged over the grade file.
+    #[serde(default)]
+    pub overrides: Option<toml::Table>,
+}
+
+/// Walker constellation `T/P/F` on circular orbits.
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ConstellationSpec {
+    /// Number of orbital planes P.
+    pub planes: u32,
+    /// Satellites per plane (T = planes · per_plane).
+    pub per_plane: u32,
+    /// Walker phasing factor F.
+    pub phasing: u32,
+    /// Inclination, degrees.
+    pub inclination_deg: f64,
+    /// Semi-major axis, m.
+    pub semi_major_axis_m: f64,
+    /// Right ascension of the first plane's node in the inertial frame at the GPS epoch, deg.
+    #[serde(default)]
+    pub raan0_deg: f64,
+}
+
+impl Default for ConstellationSpec {
+    fn default() -> Self {
+        Self {
+            planes: 6,
+            per_plane: 4,
+            phasing: 1,
+            inclination_deg: 55.0,
+            semi_major_axis_m: 26_559_700.0,
+            raan0_deg: 0.0,
+        }
+    }
+}
+
+/// `[gnss]`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GnssSection {
+    /// Grade file name.
+    pub grade: String,
+    /// Output rate, Hz.
+    pub rate_hz: f64,
+    /// Outage windows (no satellites tracked, no fix).
+    #[serde(default)]
+    pub outages: Vec<Window>,
+    /// Constellation geometry.
+    #[serde(default)]
+    pub constellation: ConstellationSpec,
+    /// Partial grade table merged over the grade file.
+    #[serde(default)]
+    pub overrides: Option<toml::Table>,
+}
+
+/// `[odometer]`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OdometerSection {
+    /// Grade file name.
+    pub grade: String,
+    /// Output rate, Hz.
+    pub rate_hz: f64,
+    /// Partial grade table merged over the grade file.
+    #[serde(default)]
+    pub overrides: Option<toml::Table>,
+}
+
+/// `[baro]`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BaroSection {
+    /// Grade file name.
+    pub grade: String,
+    /// Output rate, Hz.
+    pub rate_hz: f64,
+    /// Partial grade table merged over the grade file.
+    #[serde(default)]
+    pub overrides: Option<toml::Table>,
+}
+
+/// `[truth]`.
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TruthSection {
+    /// Publication rate, Hz.
+    pub rate_hz: f64,
+}
+
+impl Default for TruthSection {
+    fn default() -> Self {
+        Self { rate_hz: 50.0 }
+    }
+}
+
+/// Error model of one gyro triad (grade file `[imu.gyro]`). All 1-σ values are per axis.
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GyroGrade {
+    /// 1-σ constant (turn-on) bias, deg/h.
+    pub bias_deg_h: f64,
+    /// Bias random walk, deg/h per √h.
+    #[serde(default)]
+    pub bias_rw_deg_h_per_rt_h: f64,
+    /// Angle random walk, deg/√h.
+    pub arw_deg_per_rt_h: f64,
+    /// 1-σ scale-factor error, ppm.
+    pub scale_factor_ppm: f64,
+    /// 1-σ axis misalignment (each off-diagonal term), arcsec.
+    pub misalignment_arcsec: f64,
+    /// Bias temperature coefficient, deg/h per °C (times a per-axis unit-normal draw).
+    #[serde(default)]
+    pub temp_coeff_deg_h_per_c: f64,
+    /// ADC resolution for the rate output, bits (0 = no quantisation).
+    #[serde(default)]
+    pub adc_bits: u32,
+    /// Full-scale range ± of the rate output, deg/s (used when `adc_bits` > 0).
+    #[serde(default)]
+    pub full_scale_deg_s: f64,
+}
+
+/// Error model of one accelerometer triad (grade file `[imu.accel]`).
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AccelGrade {
+    /// 1-σ constant (turn-on) bias, µg.
+    pub bias_ug: f64,
+    /// Bias random walk, µg per √h.
+    #[serde(default)]
+    pub bias_rw_ug_per_rt_h: f64,
+    /// Velocity random walk, µg/√Hz.
+    pub vrw_ug_per_rt_hz: f64,
+    /// 1-σ scale-factor error, ppm.
+    pub scale_factor_ppm: f64,
+    /// 1-σ axis misalignment (each off-diagonal term), arcsec.
+    pub misalignment_arcsec: f64,
+    /// Bias temperature coefficient, µg per °C (times a per-axis unit-normal draw).
+    #[serde(default)]
+    pub temp_coeff_ug_per_c: f64,
+    /// ADC resolution for the specific-force output, bits (0 = no quantisation).
+    #[serde(default)]
+    pub adc_bits: u32,
+    /// Full-scale range ± of the specific-force output, g (used when `adc_bits` > 0).
+    #[serde(default)]
+    pub full_scale_g: f64,
+}
+
+/// IMU grade (`[imu]` of a grade file).
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ImuGrade {
+    /// Temperature at which the bias is specified, °C.
+    #[serde(default = "default_ref_temp")]
+    pub reference_temperature_c: f64,
+    /// Gyros.
+    pub gyro: GyroGrade,
+    /// Accelerometers.
+    pub accel: AccelGrade,
+}
+
+fn default_ref_temp() -> f64 {
+    20.0
+}
+
+/// Star-tracker grade.
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StarTrackerGrade {
+    /// 1-σ attitude noise about each axis across the boresight, arcsec.
+    pub sigma_cross_arcsec: f64,
+    /// 1-σ attitude noise about the boresight, arcsec.
+    pub sigma_roll_arcsec: f64,
+    /// Fewest stars identified in a valid frame.
+    #[serde(default = "default_min_stars")]
+    pub min_stars: u32,
+    /// Most stars identified in a valid frame.
+    #[serde(default = "default_max_stars")]
+    pub max_stars: u32,
+}
+
+fn default_min_stars() -> u32 {
+    6
+}
+fn default_max_stars() -> u32 {
+    15
+}
+
+/// GNSS receiver grade.
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GnssGrade {
+    /// 1-σ pseudorange noise, m.
+    pub pseudorange_sigma_m: f64,
+    /// 1-σ range-rate (Doppler) noise, m/s.
+    pub range_rate_sigma_m_s: f64,
+    /// Elevation mask, degrees.
+    pub elevation_mask_deg: f64,
+    /// 1-σ of the receiver clock bias at the epoch, m (c·s).
+    pub clock_bias_initial_sigma_m: f64,
+    /// 1-σ of the receiver clock drift at the epoch, m/s.
+    pub clock_drift_initial_sigma_m_s: f64,
+    /// White-frequency noise PSD driving the clock bias, m²/s.
+    pub clock_bias_psd_m2_s: f64,
+    /// Random-walk-frequency noise PSD driving the clock drift, m²/s³.
+    pub clock_drift_psd_m2_s3: f64,
+    /// C/N0 at zenith, dB-Hz.
+    pub cn0_zenith_dbhz: f64,
+    /// C/N0 at the horizon, dB-Hz (linear in sin(elevation) between).
+    pub cn0_horizon_dbhz: f64,
+    /// 1-σ noise of each baseline carrier-phase difference, cycles.
+    pub phase_sigma_cycles: f64,
+    /// Lengths of baselines AB (body x) and CD (body y), m.
+    pub baseline_length_m: [f64; 2],
+    /// Carrier frequency of the phase measurements, Hz (GPS L1 = 1 575.42 MHz).
+    pub carrier_frequency_hz: f64,
+}
+
+/// Odometer grade.
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OdometerGrade {
+    /// Scale-factor error (true value applied), ppm.
+    pub scale_factor_error_ppm: f64,
+    /// 1-σ white noise of the speed, m/s.
+    pub speed_noise_m_s: f64,
+}
+
+/// Barometer grade.
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BaroGrade {
+    /// Constant pressure bias (true value applied), Pa.
+    pub bias_pa: f64,
+    /// Bias random walk, Pa/√s.
+    #[serde(default)]
+    pub bias_rw_pa_per_rt_s: f64,
+    /// 1-σ white pressure noise, Pa.
+    pub noise_pa: f64,
+}
+
+/// UTC calendar instant parsed from `start_utc`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct UtcCalendar {
+    /// Year.
+    pub year: i32,
+    /// Month 1..=12.
+    pub month: u32,
+    /// Day 1..=31.
+    pub day: u32,
+    /// Hour 0..=23.
+    pub hour: u32,
+    /// Minute 0..=59.
+    pub minute: u32,
+    /// Second (0 ≤ s < 61).
+    pub second: f64,
+}
+
+/// A parsed and validated scenario with its grades resolved.
+#[derive(Debug, Clone)]
+pub struct Scenario {
+    /// File it came from (for messages).
+    pub file: PathBuf,
+    /// The file as written.
+    pub spec: ScenarioFile,
+    /// Start epoch, UTC.
+    pub start: UtcCalendar,
+    /// Resolved IMU grade.
+    pub imu: ImuGrade,
+    /// Resolved star-tracker grade.
+    pub star_tracker: StarTrackerGrade,
+    /// Resolved GNSS grade.
+    pub gnss: GnssGrade,
+    /// Resolved odometer grade.
+    pub odometer: OdometerGrade,
+    /// Resolved baro grade.
+    pub baro: BaroGrade,
+}
+
+fn invalid(file: &Path, key: impl Into<String>, reason: impl Into<String>) -> SimError {
+    SimError::Invalid {
+        file: file.to_path_buf(),
+        key: key.into(),
+        reason: reason.into(),
+    }
+}
+
+/// Parse `YYYY-MM-DDTHH:MM:SS[.fff][Z]` (also with a space instead of `T`).
+pub fn parse_utc(s: &str) -> Option<UtcCalendar> {
+    let s = s.trim().trim_end_matches('Z');
+    let (date, time) = s.split_once(['T', ' '])?;
+    let mut d = date.split('-');
+    let year: i32 = d.next()?.parse().ok()?;
+    let month: u32 = d.next()?.parse().ok()?;
+    let day: u32 = d.next()?.parse().ok()?;
+    if d.next().is_some() {
+        return None;
+    }
+    let mut t = time.split(':');
+    let hour: u32 = t.next()?.parse().ok()?;
+    let minute: u32 = t.next()?.parse().ok()?;
+    let second: f64 = t.next()?.parse().ok()?;
+    if t.next().is_some() {
+        return None;
+    }
+    let leap = (year % 4 == 0 && year % 100 != 0) || year % 400 == 0;
+    let mdays = [31, if leap { 29 } else { 28 }, 31, 30, 31, 30, 31, 31, 30, 31, 30, 31];
+    if !(1980..=2100).contains(&year)
+        || !(1..=12).contains(&month)
+        || day < 1
+        || day > mdays[(month - 1) as usize]
+        || hour > 23
+        || minute > 59
+        || !second.is_finite()
+        || !(0.0..61.0).contains(&second)
+    {
+        return None;
+    }
+    Some(UtcCalendar {
+        year,
+        month,
+        day,
+        hour,
+        minute,
+        second,
+    })
+}
+
+/// Deep-merge `over` into `base` (tables merge key by key, other values replace).
+fn merge(base: &mut toml::Table, over: &toml::Table) {
+    for (k, v) in over {
+        match (base.get_mut(k), v) {
+            (Some(toml::Value::Table(b)), toml::Value::Table(o)) => merge(b, o),
+            _ => {
+                base.insert(k.clone(), v.clone());
+            }
+        }
+    }
+}
+
+/// Load the `section` table of grade file `<dir>/<grade>.toml`, merge `overrides`, parse it.
+fn load_grade<T: DeserializeOwned>(
+    dir: &Path,
+    scenario_file: &Path,
+    section: &str,
+    grade: &str,
+    overrides: Option<&toml::Table>,
+) -> Result<T, SimError> {
+    if grade.is_empty() || grade.contains(['/', '\\']) || grade.starts_with('.') {
+        return Err(invalid(
+            scenario_file,
+            format!("{section}.grade"),
+            format!("`{grade}` is not a plain grade name"),
+        ));
+    }
+    let path = dir.join(format!("{grade}.toml"));
+    let text = std::fs::read_to_string(&path).map_err(|e| SimError::Io {
+        file: path.clone(),
+        reason: format!("grade `{grade}` of `{section}.grade`: {e}"),
+    })?;
+    let mut doc: toml::Table = toml::from_str(&text).map_err(|e| SimError::Parse {
+        file: path.clone(),
+        message: e.to_string(),
+    })?;
+    let mut table = match doc.remove(section) {
+        Some(toml::Value::Table(t)) => t,
+        _ => {
+            return Err(invalid(
+                &path,
+                section,
+                format!("grade file has no `[{section}]` table"),
+            ));
+        }
+    };
+    if let Some(o) = overrides {
+        merge(&mut table, o);
+    }
+    toml::Value::Table(table).try_into().map_err(|e: toml::de::Error| {
+        let origin = if overrides.is_some() {
+            format!(
+                " (grade `{grade}` merged with `{section}.overrides` of {})",
+                scenario_file.display()
+            )
+        } else {
+            String::new()
+        };
+        SimError::Parse {
+            file: path.clone(),
+            message: format!("[{section}]{origin}: {}", e.message()),
+        }
+    })
+}
+
+impl Scenario {
+    /// Read, parse and validate a scenario file; grade files are looked up in `sensors_dir`
+    /// (relative to the scenario file, default `../sensors`).
+    pub fn load(path: &Path) -> Result<Self, SimError> {
+        let text = std::fs::read_to_string(path).map_err(|e| SimError::Io {
+            file: path.to_path_buf(),
+            reason: e.to_string(),
+        })?;
+        Self::from_toml_str(&text, path)
+    }
+
+    /// Parse and validate scenario text as if read from `path` (which fixes the sensors dir).
+    pub fn from_toml_str(text: &str, path: &Path) -> Result<Self, SimError> {
+        let spec = Self::parse(text, path)?;
+        let base = path.parent().unwrap_or(Path::new("."));
+        let dir = base.join(spec.scenario.sensors_dir.as_deref().unwrap_or("../sensors"));
+        Self::validate(spec, path, &dir)
+    }
+
+    /// First pass: strict TOML parse.
+    pub fn parse(text: &str, path: &Path) -> Result<ScenarioFile, SimError> {
+        toml::from_str(text).map_err(|e| SimError::Parse {
+            file: path.to_path_buf(),
+            message: e.to_string(),
+        })
+    }
+
+    /// Second pass: check values, resolve grades. Errors name `file` and the dotted key.
+    pub fn validate(spec: ScenarioFile, file: &Path, sensors_dir: &Path) -> Result<Self, SimError> {
+        let f = file;
+        let finite = |key: &str, v: f64| -> Result<(), SimError> {
+            if v.is_finite() {
+                Ok(())
+            } else {
+                Err(invalid(f, key, format!("must be finite, got {v}")))
+            }
+        };
+        let positive = |key: &str, v: f64| -> Result<(), SimError> {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(invalid(f, key, format!("must be > 0, got {v}")))
+            }
+        };
+        let nonneg = |key: &str, v: f64| -> Result<(), SimError> {
+            if v.is_finite() && v >= 0.0 {
+                Ok(())
+            } else {
+                Err(invalid(f, key, format!("must be ≥ 0, got {v}")))
+            }
+        };
+        let rate = |key: &str, hz: f64| -> Result<(), SimError> {
+            positive(key, hz)?;
+            let period_ns = 1e9 / hz;
+            let p = period_ns.round();
+            if (period_ns - p).abs() > 1e-6 * p || (p as i64) % TRUTH_GRID_NS != 0 {
+                return Err(invalid(
+                    f,
+                    key,
+                    format!("{hz} Hz: the period must be a whole multiple of 1 ms (truth grid)"),
+                ));
+            }
+            Ok(())
+        };
+        let windows = |key: &str, ws: &[Window]| -> Result<(), SimError> {
+            for (i, w) in ws.iter().enumerate() {
+                nonneg(&format!("{key}[{i}].start_s"), w.start_s)?;
+                positive(&format!("{key}[{i}].duration_s"), w.duration_s)?;
+            }
+            Ok(())
+        };
+
+        let m = &spec.scenario;
+        let start = parse_utc(&m.start_utc).ok_or_else(|| {
+            invalid(
+                f,
+                "scenario.start_utc",
+                format!(
+                    "`{}` is not a UTC calendar instant YYYY-MM-DDTHH:MM:SS[.fff] in 1980..2100",
+                    m.start_utc
+                ),
+            )
+        })?;
+        positive("scenario.duration_s", m.duration_s)?;
+        if m.duration_s > 30.0 * 86_400.0 {
+            return Err(invalid(f, "scenario.duration_s", "longer than 30 days"));
+        }
+        let s = &spec.site;
+        finite("site.lat_deg", s.lat_deg)?;
+        if s.lat_deg.abs() > 89.0 {
+            return Err(invalid(
+                f,
+                "site.lat_deg",
+                format!("{} is outside ±89° (NED trajectory is singular at the poles)", s.lat_deg),
+            ));
+        }
+        finite("site.lon_deg", s.lon_deg)?;
+        if !(-180.0..=360.0).contains(&s.lon_deg) {
+            return Err(invalid(f, "site.lon_deg", format!("{} is outside −180..360", s.lon_deg)));
+        }
+        finite("site.height_m", s.height_m)?;
+        if !(-500.0..=20_000.0).contains(&s.height_m) {
+            return Err(invalid(f, "site.height_m", "outside −500..20 000 m (ISA range)"));
+        }
+        match &spec.trajectory {
+            Trajectory::Static(st) => {
+                finite("trajectory.roll_deg", st.roll_deg)?;
+                finite("trajectory.pitch_deg", st.pitch_deg)?;
+                if st.pitch_deg.abs() >= 89.0 {
+                    return Err(invalid(f, "trajectory.pitch_deg", "must be within ±89°"));
+                }
+                finite("trajectory.heading_deg", st.heading_deg)?;
+                let mut end = 0.0;
+                for (i, mv) in st.turntable.iter().enumerate() {
+                    let k = format!("trajectory.turntable[{i}]");
+                    nonneg(&format!("{k}.start_s"), mv.start_s)?;
+                    finite(&format!("{k}.to_deg"), mv.to_deg)?;
+                    positive(&format!("{k}.duration_s"), mv.duration_s)?;
+                    if mv.start_s < end {
+                        return Err(invalid(f, format!("{k}.start_s"), "overlaps the previous move"));
+                    }
+                    end = mv.start_s + mv.duration_s;
+                }
+            }
+            Trajectory::GroundVehicle(gv) => {
+                finite("trajectory.initial_heading_deg", gv.initial_heading_deg)?;
+                let mut speed = 0.0;
+                for (i, seg) in gv.segments.iter().enumerate() {
+                    let k = format!("trajectory.segments[{i}]");
+                    positive(&format!("{k}.duration_s"), seg.duration_s())?;
+                    match *seg {
+                        Segment::Hold { .. } if speed != 0.0 => {
+                            return Err(invalid(
+                                f,
+                                format!("{k}.type"),
+                                "`hold` needs the vehicle stopped (add a `speed` segment to 0)",
+                            ));
+                        }
+                        Segment::Speed { to_m_s, .. } => {
+                            if !(to_m_s.is_finite() && (0.0..=100.0).contains(&to_m_s)) {
+                                return Err(invalid(
+                                    f,
+                                    format!("{k}.to_m_s"),
+                                    format!("{to_m_s} is outside 0..100 m/s"),
+                                ));
+                            }
+                            speed = to_m_s;
+                        }
+                        Segment::Turn { angle_deg, .. } => {
+                            finite(&format!("{k}.angle_deg"), angle_deg)?;
+                            if speed == 0.0 {
+                                return Err(invalid(
+                                    f,
+                                    format!("{k}.type"),
+                                    "a ground vehicle cannot turn while stopped",
+                                ));
+                            }
+                        }
+                        _ => {}
+                    }
+                }
+            }
+        }
+        rate("imu.rate_hz", spec.imu.rate_hz)?;
+        finite("imu.temperature.initial_c", spec.imu.temperature.initial_c)?;
+        finite("imu.temperature.rate_c_per_h", spec.imu.temperature.rate_c_per_h)?;
+        rate("star_tracker.rate_hz", spec.star_tracker.rate_hz)?;
+        for (i, k) in spec.star_tracker.mounting_kappa_deg.iter().enumerate() {
+            finite(&format!("star_tracker.mounting_kappa_deg[{i}]"), *k)?;
+        }
+        windows("star_tracker.outages", &spec.star_tracker.outages)?;
+        rate("gnss.rate_hz", spec.gnss.rate_hz)?;
+        windows("gnss.outages", &spec.gnss.outages)?;
+        let c = &spec.gnss.constellation;
+        if c.planes == 0 || c.per_plane == 0 || c.planes * c.per_plane > msgs::MAX_SATELLITES as u32
+        {
+            return Err(invalid(
+                f,
+                "gnss.constellation.planes",
+                format!("need 1..={} satellites in total", msgs::MAX_SATELLITES),
+            ));
+        }
+        finite("gnss.constellation.inclination_deg", c.inclination_deg)?;
+        finite("gnss.constellation.raan0_deg", c.raan0_deg)?;
+        if !(c.semi_major_axis_m.is_finite() && c.semi_major_axis_m > 7.0e6) {
+            return Err(invalid(f, "gnss.constellation.semi_major_axis_m", "must be > 7000 km"));
+        }
+        rate("odometer.rate_hz", spec.odometer.rate_hz)?;
+        rate("baro.rate_hz", spec.baro.rate_hz)?;
+        rate("truth.rate_hz", spec.truth.rate_hz)?;
+
+        let imu: ImuGrade = load_grade(
+            sensors_dir,
+            f,
+            "imu",
+            &spec.imu.grade,
+            spec.imu.overrides.as_ref(),
+        )?;
+        let gf = sensors_dir.join(format!("{}.toml", spec.imu.grade));
+        let g = &imu.gyro;
+        for (k, v) in [
+            ("imu.gyro.bias_deg_h", g.bias_deg_h),
+            ("imu.gyro.bias_rw_deg_h_per_rt_h", g.bias_rw_deg_h_per_rt_h),
+            ("imu.gyro.arw_deg_per_rt_h", g.arw_deg_per_rt_h),
+            ("imu.gyro.scale_factor_ppm", g.scale_factor_ppm),
+            ("imu.gyro.misalignment_arcsec", g.misalignment_arcsec),
+            ("imu.gyro.temp_coeff_deg_h_per_c", g.temp_coeff_deg_h_per_c),
+            ("imu.gyro.full_scale_deg_s", g.full_scale_deg_s),
+            ("imu.accel.bias_ug", imu.accel.bias_ug),
+            ("imu.accel.bias_rw_ug_per_rt_h", imu.accel.bias_rw_ug_per_rt_h),
+            ("imu.accel.vrw_ug_per_rt_hz", imu.accel.vrw_ug_per_rt_hz),
+            ("imu.accel.scale_factor_ppm", imu.accel.scale_factor_ppm),
+            ("imu.accel.misalignment_arcsec", imu.accel.misalignment_arcsec),
+            ("imu.accel.temp_coeff_ug_per_c", imu.accel.temp_coeff_ug_per_c),
+            ("imu.accel.full_scale_g", imu.accel.full_scale_g),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(invalid(&gf, k, format!("must be finite and ≥ 0, got {v}")));
+            }
+        }
+        finite("imu.reference_temperature_c", imu.reference_temperature_c)?;
+        for (k, bits, fs) in [
+            ("imu.gyro", g.adc_bits, g.full_scale_deg_s),
+            ("imu.accel", imu.accel.adc_bits, imu.accel.full_scale_g),
+        ] {
+            if bits > 32 || (bits > 0 && fs <= 0.0) {
+                return Err(invalid(
+                    &gf,
+                    format!("{k}.adc_bits"),
+                    "needs 1..=32 bits and a full scale > 0 (or 0 bits for none)",
+                ));
+            }
+        }
+
+        let star_tracker: StarTrackerGrade = load_grade(
+            sensors_dir,
+            f,
+            "star_tracker",
+            &spec.star_tracker.grade,
+            spec.star_tracker.overrides.as_ref(),
+        )?;
+        let sf = sensors_dir.join(format!("{}.toml", spec.star_tracker.grade));
+        for (k, v) in [
+            ("star_tracker.sigma_cross_arcsec", star_tracker.sigma_cross_arcsec),
+            ("star_tracker.sigma_roll_arcsec", star_tracker.sigma_roll_arcsec),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(invalid(&sf, k, format!("must be finite and ≥ 0, got {v}")));
+            }
+        }
+        if star_tracker.min_stars > star_tracker.max_stars {
+            return Err(invalid(&sf, "star_tracker.min_stars", "greater than max_stars"));
+        }
+
+        let gnss: GnssGrade = load_grade(
+            sensors_dir,
+            f,
+            "gnss",
+            &spec.gnss.grade,
+            spec.gnss.overrides.as_ref(),
+        )?;
+        let nf = sensors_dir.join(format!("{}.toml", spec.gnss.grade));
+        for (k, v) in [
+            ("gnss.pseudorange_sigma_m", gnss.pseudorange_sigma_m),
+            ("gnss.range_rate_sigma_m_s", gnss.range_rate_sigma_m_s),
+            ("gnss.clock_bias_initial_sigma_m", gnss.clock_bias_initial_sigma_m),
+            ("gnss.clock_drift_initial_sigma_m_s", gnss.clock_drift_initial_sigma_m_s),
+            ("gnss.clock_bias_psd_m2_s", gnss.clock_bias_psd_m2_s),
+            ("gnss.clock_drift_psd_m2_s3", gnss.clock_drift_psd_m2_s3),
+            ("gnss.phase_sigma_cycles", gnss.phase_sigma_cycles),
+            ("gnss.baseline_length_m[0]", gnss.baseline_length_m[0]),
+            ("gnss.baseline_length_m[1]", gnss.baseline_length_m[1]),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(invalid(&nf, k, format!("must be finite and ≥ 0, got {v}")));
+            }
+        }
+        if !(gnss.elevation_mask_deg.is_finite() && (-5.0..80.0).contains(&gnss.elevation_mask_deg))
+        {
+            return Err(invalid(&nf, "gnss.elevation_mask_deg", "outside −5..80°"));
+        }
+        if !(gnss.carrier_frequency_hz.is_finite() && gnss.carrier_frequency_hz > 1e6) {
+            return Err(invalid(&nf, "gnss.carrier_frequency_hz", "must be > 1 MHz"));
+        }
+        for (k, v) in [
+            ("gnss.cn0_zenith_dbhz", gnss.cn0_zenith_dbhz),
+            ("gnss.cn0_horizon_dbhz", gnss.cn0_horizon_dbhz),
+        ] {
+            if !(v.is_finite() && (0.0..=70.0).contains(&v)) {
+                return Err(invalid(&nf, k, "outside 0..70 dB-Hz"));
+            }
+        }
+
+        let odometer: OdometerGrade = load_grade(
+            sensors_dir,
+            f,
+            "odometer",
+            &spec.odometer.grade,
+            spec.odometer.overrides.as_ref(),
+        )?;
+        let of = sensors_dir.join(format!("{}.toml", spec.odometer.grade));
+        if !(odometer.scale_factor_error_ppm.is_finite()
+            && odometer.scale_factor_error_ppm.abs() < 1e5)
+        {
+            return Err(invalid(&of, "odometer.scale_factor_error_ppm", "|value| must be < 1e5"));
+        }
+        if !(odometer.speed_noise_m_s.is_finite() && odometer.speed_noise_m_s >= 0.0) {
+            return Err(invalid(&of, "odometer.speed_noise_m_s", "must be finite and ≥ 0"));
+        }
+        let baro: BaroGrade = load_grade(
+            sensors_dir,
+            f,
+            "baro",
+            &spec.baro.grade,
+            spec.baro.overrides.as_ref(),
+        )?;
+        let bf = sensors_dir.join(format!("{}.toml", spec.baro.grade));
+        for (k, v) in [
+            ("baro.bias_pa", baro.bias_pa),
+            ("baro.bias_rw_pa_per_rt_s", baro.bias_rw_pa_per_rt_s.abs()),
+            ("baro.noise_pa", baro.noise_pa),
+        ] {
+            if !v.is_finite() || (k != "baro.bias_pa" && v < 0.0) {
+                return Err(invalid(&bf, k, format!("must be finite (and ≥ 0), got {v}")));
+            }
+        }
+        Ok(Scenario {
+            file: file.to_path_buf(),
+            spec,
+            start,
+            imu,
+            star_tracker,
+            gnss,
+            odometer,
+            baro,
+        })
+    }
+
+    /// Duration of the run, ns.
+    pub fn duration_ns(&self) -> i64 {
+        (self.spec.scenario.duration_s * 1e9).round() as i64
+    }
+
+    /// GPS time of the scenario epoch (needs `fusion::time`).
+    pub fn epoch_gps(&self) -> fusion::time::GpsTime {
+        let s = &self.start;
+        fusion::time::GpsTime::from_utc(s.year, s.month, s.day, s.hour, s.minute, s.second)
+    }
+}
+
+/// Sample period of a rate validated by [`Scenario::validate`], ns.
+pub fn period_ns(rate_hz: f64) -> i64 {
+    (1e9 / rate_hz).round() as i64
+}
