@@ -106,10 +106,11 @@ impl Strapdown {
         let dt = inc.dt_s;
         let d_theta = inc.delta_angle_rad;
         let d_v = inc.delta_velocity_m_s;
-        if !(dt > 0.0 && dt.is_finite())
-            || !d_theta.iter().all(|x| x.is_finite())
-            || !d_v.iter().all(|x| x.is_finite())
-        {
+        let valid = dt > 0.0
+            && dt.is_finite()
+            && d_theta.iter().all(|x| x.is_finite())
+            && d_v.iter().all(|x| x.is_finite());
+        if !valid {
             self.prev = None;
             return;
         }
