@@ -1,0 +1,429 @@
+//! The system configuration (`config/sextant.toml`): service prefix, what `sextant run` starts,
+//! per-sensor deadlines, solution decimation, recorder settings, and the path of the filter
+//! tuning file (`config/filter.toml`, deserialized into [`fusion::navigator::NavigatorConfig`]).
+//!
+//! Loading is two passes: [`SystemConfig::parse`] checks the syntax and the types (serde, with
+//! `deny_unknown_fields`, so a misspelt key is an error), then [`SystemConfig::validate`] checks
+//! the meaning (ranges, consistency). Every error names the file and the key.
+
+use fusion::navigator::NavigatorConfig;
+use msgs::SensorId;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+/// Errors while loading the configuration.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    /// The file could not be read.
+    #[error("{file}: cannot read: {source}")]
+    Read {
+        /// The file.
+        file: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// The file is not valid TOML or a key has the wrong type, is unknown or missing.
+    #[error("{file}: {message}")]
+    Parse {
+        /// The file.
+        file: PathBuf,
+        /// The parser's message (it names the key and shows the line).
+        message: String,
+    },
+    /// A value is out of range or inconsistent.
+    #[error("{file}: key `{key}`: {message}")]
+    Invalid {
+        /// The file.
+        file: PathBuf,
+        /// The dotted key, e.g. `fusion.deadlines_ms.imu`.
+        key: String,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+/// `[system]`: naming and the other configuration files.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct SystemSection {
+    /// Prefix of every iceoryx2 service name (`<prefix>/imu`, …).
+    pub prefix: String,
+    /// Filter tuning file, relative to the directory of this file.
+    pub filter: PathBuf,
+    /// Default scenario for `sextant run`, relative to the directory of this file.
+    pub scenario: PathBuf,
+}
+
+/// `[run]`: defaults of `sextant run`.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct RunSection {
+    /// Default scenario duration to run, s of simulated time.
+    pub duration_s: f64,
+    /// Upper bound accepted for `--duration`, s of simulated time.
+    pub max_duration_s: f64,
+    /// Default speed-up of simulated time over wall time.
+    pub speed: f64,
+    /// Default output directory.
+    pub out: PathBuf,
+    /// Delay between starting the processes and the first sample (so that every process has
+    /// created its services), s of wall time.
+    pub start_delay_s: f64,
+    /// How long to wait for a process after SIGTERM before SIGKILL, s of wall time.
+    pub stop_timeout_s: f64,
+    /// How many times a driver that died is restarted.
+    pub max_restarts: u32,
+    /// Driver binaries to start (names next to the `sextant` executable).
+    pub drivers: Vec<String>,
+}
+
+/// `[fusion.deadlines_ms]`: per-sensor deadlines in ms of simulated time (divided by the run's
+/// speed-up to get the wall-clock deadline, floored at `fusion.min_wall_deadline_ms`).
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Deadlines {
+    /// IMU deadline, ms.
+    pub imu: f64,
+    /// Star-tracker deadline, ms.
+    pub star_tracker: f64,
+    /// GNSS deadline, ms.
+    pub gnss: f64,
+    /// Odometer deadline, ms.
+    pub odometer: f64,
+    /// Barometer deadline, ms.
+    pub baro: f64,
+}
+
+impl Deadlines {
+    /// Deadline of a sensor, ms of simulated time.
+    pub fn get_ms(&self, sensor: SensorId) -> f64 {
+        match sensor {
+            SensorId::Imu => self.imu,
+            SensorId::StarTracker => self.star_tracker,
+            SensorId::Gnss => self.gnss,
+            SensorId::Odometer => self.odometer,
+            SensorId::Baro => self.baro,
+        }
+    }
+}
+
+/// `[fusion]`: the fusion daemon.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct FusionSection {
+    /// Publish every N-th solution on `<prefix>/nav` (every solution is recorded).
+    pub nav_decimation: u32,
+    /// Period of `<prefix>/status`, s of wall time.
+    pub status_period_s: f64,
+    /// Smallest wall-clock deadline after scaling by the speed-up, ms (scheduling jitter).
+    pub min_wall_deadline_ms: f64,
+    /// Per-sensor deadlines.
+    pub deadlines_ms: Deadlines,
+}
+
+/// `[recorder]`: the MCAP writer.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct RecorderSection {
+    /// Capacity of the queue from the filter thread to the writer thread, records.
+    pub queue_capacity: usize,
+    /// Target uncompressed chunk size, bytes.
+    pub chunk_size_bytes: u64,
+    /// Close the current chunk at least this often, s of wall time (bounds what a crash loses).
+    pub flush_interval_s: f64,
+}
+
+/// The whole system configuration file.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct SystemConfig {
+    /// `[system]`.
+    pub system: SystemSection,
+    /// `[run]`.
+    pub run: RunSection,
+    /// `[fusion]`.
+    pub fusion: FusionSection,
+    /// `[recorder]`.
+    pub recorder: RecorderSection,
+}
+
+/// A loaded and validated configuration with the file it came from.
+#[derive(Debug, Clone)]
+pub struct LoadedConfig {
+    /// The system configuration file.
+    pub path: PathBuf,
+    /// Its content.
+    pub system: SystemConfig,
+    /// The filter tuning file (resolved).
+    pub filter_path: PathBuf,
+    /// The filter tuning.
+    pub navigator: NavigatorConfig,
+}
+
+impl LoadedConfig {
+    /// The default scenario path (resolved against the config file's directory).
+    pub fn scenario_path(&self) -> PathBuf {
+        resolve(&self.path, &self.system.system.scenario)
+    }
+}
+
+fn resolve(config_file: &Path, rel: &Path) -> PathBuf {
+    if rel.is_absolute() {
+        rel.to_path_buf()
+    } else {
+        config_file
+            .parent()
+            .unwrap_or_else(|| Path::new("."))
+            .join(rel)
+    }
+}
+
+fn read(file: &Path) -> Result<String, ConfigError> {
+    std::fs::read_to_string(file).map_err(|source| ConfigError::Read {
+        file: file.to_path_buf(),
+        source,
+    })
+}
+
+fn invalid(file: &Path, key: &str, message: impl Into<String>) -> ConfigError {
+    ConfigError::Invalid {
+        file: file.to_path_buf(),
+        key: key.to_string(),
+        message: message.into(),
+    }
+}
+
+fn positive(file: &Path, key: &str, v: f64) -> Result<(), ConfigError> {
+    if v.is_finite() && v > 0.0 {
+        Ok(())
+    } else {
+        Err(invalid(file, key, format!("must be a finite number > 0, got {v}")))
+    }
+}
+
+impl SystemConfig {
+    /// Parse the TOML text of `file` (syntax, types, unknown and missing keys).
+    pub fn parse(text: &str, file: &Path) -> Result<Self, ConfigError> {
+        toml::from_str(text).map_err(|e| ConfigError::Parse {
+            file: file.to_path_buf(),
+            message: e.to_string(),
+        })
+    }
+
+    /// Check the meaning of the values; the error names the key.
+    pub fn validate(&self, file: &Path) -> Result<(), ConfigError> {
+        let p = &self.system.prefix;
+        if p.is_empty()
+            || p.len() > 64
+            || !p
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-' || c == '/')
+            || p.starts_with('/')
+            || p.ends_with('/')
+        {
+            return Err(invalid(
+                file,
+                "system.prefix",
+                format!("must be 1–64 characters of [A-Za-z0-9_-/], not starting or ending with '/', got {p:?}"),
+            ));
+        }
+        let r = &self.run;
+        positive(file, "run.duration_s", r.duration_s)?;
+        positive(file, "run.max_duration_s", r.max_duration_s)?;
+        if r.duration_s > r.max_duration_s {
+            return Err(invalid(
+                file,
+                "run.duration_s",
+                format!("{} exceeds run.max_duration_s = {}", r.duration_s, r.max_duration_s),
+            ));
+        }
+        positive(file, "run.speed", r.speed)?;
+        if !(r.start_delay_s.is_finite() && (0.0..=60.0).contains(&r.start_delay_s)) {
+            return Err(invalid(file, "run.start_delay_s", "must be within 0..=60 s"));
+        }
+        positive(file, "run.stop_timeout_s", r.stop_timeout_s)?;
+        if r.drivers.is_empty() {
+            return Err(invalid(file, "run.drivers", "must name at least one driver"));
+        }
+        for (i, d) in r.drivers.iter().enumerate() {
+            if d.is_empty() || d.contains('/') {
+                return Err(invalid(
+                    file,
+                    &format!("run.drivers[{i}]"),
+                    format!("must be a binary name without a path, got {d:?}"),
+                ));
+            }
+        }
+        let f = &self.fusion;
+        if f.nav_decimation == 0 {
+            return Err(invalid(file, "fusion.nav_decimation", "must be >= 1"));
+        }
+        positive(file, "fusion.status_period_s", f.status_period_s)?;
+        positive(file, "fusion.min_wall_deadline_ms", f.min_wall_deadline_ms)?;
+        for s in SensorId::ALL {
+            positive(
+                file,
+                &format!("fusion.deadlines_ms.{}", s.name()),
+                f.deadlines_ms.get_ms(s),
+            )?;
+        }
+        let rec = &self.recorder;
+        if !(16..=10_000_000).contains(&rec.queue_capacity) {
+            return Err(invalid(file, "recorder.queue_capacity", "must be within 16..=10000000"));
+        }
+        if !(1024..=1 << 30).contains(&rec.chunk_size_bytes) {
+            return Err(invalid(file, "recorder.chunk_size_bytes", "must be within 1 KiB..=1 GiB"));
+        }
+        positive(file, "recorder.flush_interval_s", rec.flush_interval_s)?;
+        Ok(())
+    }
+
+    /// Wall-clock deadline of a sensor at speed-up `speed`.
+    pub fn wall_deadline(&self, sensor: SensorId, speed: f64) -> Duration {
+        let ms = (self.fusion.deadlines_ms.get_ms(sensor) / speed.max(1e-9))
+            .max(self.fusion.min_wall_deadline_ms);
+        Duration::from_secs_f64(ms / 1000.0)
+    }
+}
+
+/// Parse and validate a filter tuning file.
+pub fn load_navigator_config(file: &Path) -> Result<NavigatorConfig, ConfigError> {
+    let text = read(file)?;
+    parse_navigator_config(&text, file)
+}
+
+/// Parse and validate filter tuning text (`file` is only used in messages).
+pub fn parse_navigator_config(text: &str, file: &Path) -> Result<NavigatorConfig, ConfigError> {
+    let cfg: NavigatorConfig = toml::from_str(text).map_err(|e| ConfigError::Parse {
+        file: file.to_path_buf(),
+        message: e.to_string(),
+    })?;
+    cfg.validate().map_err(|e| ConfigError::Invalid {
+        file: file.to_path_buf(),
+        key: "filter".into(),
+        message: e.to_string(),
+    })?;
+    Ok(cfg)
+}
+
+/// Load the system configuration and the filter tuning it points to.
+pub fn load(file: &Path) -> Result<LoadedConfig, ConfigError> {
+    let text = read(file)?;
+    let system = SystemConfig::parse(&text, file)?;
+    system.validate(file)?;
+    let filter_path = resolve(file, &system.system.filter);
+    let navigator = load_navigator_config(&filter_path)?;
+    Ok(LoadedConfig {
+        path: file.to_path_buf(),
+        system,
+        filter_path,
+        navigator,
+    })
+}
+
+/// The files of `config/` embedded in the binary at build time (path relative to `config/`,
+/// content), used by `sextant run` when no config file exists on disk.
+pub fn embedded_config_files() -> &'static [(&'static str, &'static str)] {
+    include!(concat!(env!("OUT_DIR"), "/embedded_config.rs"))
+}
+
+/// Write the embedded `config/` into `dir` and return the path of its `sextant.toml`.
+pub fn materialize_embedded(dir: &Path) -> Result<PathBuf, ConfigError> {
+    for (rel, text) in embedded_config_files() {
+        let path = dir.join(rel);
+        if let Some(parent) = path.parent() {
+            std::fs::create_dir_all(parent).map_err(|source| ConfigError::Read {
+                file: parent.to_path_buf(),
+                source,
+            })?;
+        }
+        std::fs::write(&path, text).map_err(|source| ConfigError::Read {
+            file: path.clone(),
+            source,
+        })?;
+    }
+    Ok(dir.join("sextant.toml"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const GOOD: &str = include_str!("../../config/sextant.toml");
+
+    fn f() -> PathBuf {
+        PathBuf::from("test/sextant.toml")
+    }
+
+    #[test]
+    fn shipped_config_parses_and_validates() {
+        let c = SystemConfig::parse(GOOD, &f()).unwrap();
+        c.validate(&f()).unwrap();
+        assert_eq!(c.system.prefix, "sextant");
+    }
+
+    #[test]
+    fn unknown_key_is_named() {
+        let text = GOOD.replace("nav_decimation", "nav_decimaton");
+        let e = SystemConfig::parse(&text, &f()).unwrap_err().to_string();
+        assert!(e.contains("nav_decimaton"), "{e}");
+        assert!(e.contains("test/sextant.toml"), "{e}");
+    }
+
+    #[test]
+    fn wrong_type_is_named() {
+        let text = GOOD.replace("speed = 10.0", "speed = \"fast\"");
+        let e = SystemConfig::parse(&text, &f()).unwrap_err().to_string();
+        assert!(e.contains("speed"), "{e}");
+    }
+
+    #[test]
+    fn invalid_value_is_named() {
+        let mut c = SystemConfig::parse(GOOD, &f()).unwrap();
+        c.fusion.deadlines_ms.gnss = -1.0;
+        let e = c.validate(&f()).unwrap_err().to_string();
+        assert!(e.contains("fusion.deadlines_ms.gnss"), "{e}");
+        assert!(e.contains("test/sextant.toml"), "{e}");
+
+        let mut c = SystemConfig::parse(GOOD, &f()).unwrap();
+        c.fusion.nav_decimation = 0;
+        let e = c.validate(&f()).unwrap_err().to_string();
+        assert!(e.contains("fusion.nav_decimation"), "{e}");
+
+        let mut c = SystemConfig::parse(GOOD, &f()).unwrap();
+        c.run.duration_s = c.run.max_duration_s * 2.0;
+        let e = c.validate(&f()).unwrap_err().to_string();
+        assert!(e.contains("run.duration_s"), "{e}");
+
+        let mut c = SystemConfig::parse(GOOD, &f()).unwrap();
+        c.system.prefix = "/bad".into();
+        let e = c.validate(&f()).unwrap_err().to_string();
+        assert!(e.contains("system.prefix"), "{e}");
+    }
+
+    #[test]
+    fn deadlines_scale_with_speed_and_are_floored() {
+        let c = SystemConfig::parse(GOOD, &f()).unwrap();
+        let d1 = c.wall_deadline(SensorId::Gnss, 1.0);
+        let d10 = c.wall_deadline(SensorId::Gnss, 10.0);
+        assert!((d1.as_secs_f64() / d10.as_secs_f64() - 10.0).abs() < 1e-6);
+        let floor = c.wall_deadline(SensorId::Imu, 1e6);
+        assert!((floor.as_secs_f64() * 1000.0 - c.fusion.min_wall_deadline_ms).abs() < 1e-9);
+    }
+
+    #[test]
+    fn missing_file_is_named() {
+        let e = load(Path::new("/nonexistent/sextant.toml")).unwrap_err().to_string();
+        assert!(e.contains("/nonexistent/sextant.toml"), "{e}");
+    }
+
+    #[test]
+    fn embedded_config_contains_the_system_file() {
+        assert!(
+            embedded_config_files()
+                .iter()
+                .any(|(p, _)| *p == "sextant.toml")
+        );
+    }
+}

@@ -1,0 +1,548 @@
+//! The fusion daemon's filter thread: subscribes to every sensor channel and the truth, blocks in
+//! an iceoryx2 WaitSet (one deadline per sensor, intervals for the status and for the stop flag),
+//! pushes samples into the navigator, publishes the solution and the status, and hands every
+//! input and output to the [`Recorder`].
+//!
+//! The navigator is reached through the [`NavEngine`] trait, so that the loop can be tested with
+//! a stand-in before (and independently of) the real filter.
+
+use crate::config::SystemConfig;
+use crate::recorder::{Record, Recorder, RecorderError, RecorderOptions, RecorderStats};
+use fusion::FusionError;
+use fusion::navigator::Navigator;
+use iceoryx2::prelude::*;
+use msgs::ipc::{Bus, IpcError, Sub};
+use msgs::{
+    BaroSample, GnssSample, ImuSample, MAX_SENSORS, Message, NavSolution, OdometerSample,
+    SensorHealth, SensorId, StarTrackerSample, Status, TruthSample,
+};
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+/// What the daemon needs from the fusion engine ([`Navigator`] implements it).
+pub trait NavEngine {
+    /// Feed an IMU sample; the solution once navigating.
+    fn push_imu(&mut self, s: &ImuSample) -> Result<Option<NavSolution>, FusionError>;
+    /// Queue a star-tracker sample.
+    fn push_star_tracker(&mut self, s: &StarTrackerSample) -> Result<(), FusionError>;
+    /// Queue a GNSS sample.
+    fn push_gnss(&mut self, s: &GnssSample) -> Result<(), FusionError>;
+    /// Queue an odometer sample.
+    fn push_odometer(&mut self, s: &OdometerSample) -> Result<(), FusionError>;
+    /// Queue a baro sample.
+    fn push_baro(&mut self, s: &BaroSample) -> Result<(), FusionError>;
+    /// Tell whether a sensor delivers within its deadline.
+    fn set_sensor_alive(&mut self, sensor: usize, alive: bool);
+    /// Per-sensor counters.
+    fn health(&self) -> [SensorHealth; MAX_SENSORS];
+    /// Navigation mode (`msgs::NavMode` as u32).
+    fn mode(&self) -> u32;
+}
+
+impl NavEngine for Navigator {
+    fn push_imu(&mut self, s: &ImuSample) -> Result<Option<NavSolution>, FusionError> {
+        Navigator::push_imu(self, s)
+    }
+    fn push_star_tracker(&mut self, s: &StarTrackerSample) -> Result<(), FusionError> {
+        Navigator::push_star_tracker(self, s)
+    }
+    fn push_gnss(&mut self, s: &GnssSample) -> Result<(), FusionError> {
+        Navigator::push_gnss(self, s)
+    }
+    fn push_odometer(&mut self, s: &OdometerSample) -> Result<(), FusionError> {
+        Navigator::push_odometer(self, s)
+    }
+    fn push_baro(&mut self, s: &BaroSample) -> Result<(), FusionError> {
+        Navigator::push_baro(self, s)
+    }
+    fn set_sensor_alive(&mut self, sensor: usize, alive: bool) {
+        Navigator::set_sensor_alive(self, sensor, alive)
+    }
+    fn health(&self) -> [SensorHealth; MAX_SENSORS] {
+        Navigator::health(self)
+    }
+    fn mode(&self) -> u32 {
+        Navigator::mode(self)
+    }
+}
+
+/// Errors of the daemon.
+#[derive(Debug, thiserror::Error)]
+pub enum DaemonError {
+    /// Shared-memory transport.
+    #[error(transparent)]
+    Ipc(#[from] IpcError),
+    /// Recorder.
+    #[error(transparent)]
+    Recorder(#[from] RecorderError),
+    /// WaitSet creation, attachment or wait.
+    #[error("waitset: {0}")]
+    WaitSet(String),
+}
+
+/// Settings of one daemon run.
+#[derive(Debug, Clone)]
+pub struct DaemonOptions {
+    /// Service-name prefix.
+    pub prefix: String,
+    /// Recording path.
+    pub out: PathBuf,
+    /// Speed-up of simulated time over wall time (scales the deadlines).
+    pub speed: f64,
+    /// The system configuration.
+    pub system: SystemConfig,
+    /// iceoryx2 node name.
+    pub node_name: String,
+}
+
+/// Totals of a finished run.
+#[derive(Debug, Clone, Copy)]
+pub struct DaemonReport {
+    /// IMU samples received.
+    pub imu_received: u64,
+    /// Solutions computed (all recorded).
+    pub solutions: u64,
+    /// Solutions published (after decimation).
+    pub solutions_published: u64,
+    /// Recorder totals.
+    pub recorder: RecorderStats,
+}
+
+struct State<'a, E: NavEngine> {
+    engine: E,
+    recorder: Recorder,
+    nav_pub: msgs::ipc::Pub<NavSolution>,
+    status_pub: msgs::ipc::Pub<Status>,
+    decimation: u64,
+    alive: [bool; 5],
+    seen: [bool; 5],
+    got: [bool; 5],
+    misses: [u32; 5],
+    imu_received: u64,
+    solutions: u64,
+    published: u64,
+    filter_time_ns: i64,
+    errors_logged: u64,
+    stop: &'a AtomicBool,
+}
+
+impl<E: NavEngine> State<'_, E> {
+    fn mark_received(&mut self, sensor: SensorId) {
+        let i = sensor as usize;
+        self.got[i] = true;
+        self.seen[i] = true;
+        if !self.alive[i] {
+            self.alive[i] = true;
+            self.engine.set_sensor_alive(i, true);
+            tracing::info!("{} alive", sensor.name());
+        }
+    }
+
+    fn log_push_error(&mut self, e: FusionError) {
+        self.errors_logged += 1;
+        if self.errors_logged <= 20 || self.errors_logged.is_power_of_two() {
+            tracing::warn!("rejected input ({} so far): {e}", self.errors_logged);
+        }
+    }
+
+    fn drain_aiding<T: Message>(
+        &mut self,
+        sub: &Sub<T>,
+        sensor: SensorId,
+        wrap: fn(T) -> Record,
+        push: fn(&mut E, &T) -> Result<(), FusionError>,
+    ) {
+        loop {
+            match sub.receive() {
+                Ok(Some(s)) => {
+                    let now = msgs::monotonic_ns();
+                    self.mark_received(sensor);
+                    self.recorder.record(wrap(s), now);
+                    if let Err(e) = push(&mut self.engine, &s) {
+                        self.log_push_error(e);
+                    }
+                }
+                Ok(None) => break,
+                Err(e) => {
+                    tracing::error!("{e}");
+                    break;
+                }
+            }
+        }
+    }
+
+    fn drain_imu(&mut self, sub: &Sub<ImuSample>) {
+        loop {
+            match sub.receive() {
+                Ok(Some(s)) => {
+                    let now = msgs::monotonic_ns();
+                    self.imu_received += 1;
+                    self.mark_received(SensorId::Imu);
+                    self.recorder.record(Record::Imu(s), now);
+                    match self.engine.push_imu(&s) {
+                        Ok(Some(mut sol)) => {
+                            self.filter_time_ns = sol.header.time_ns;
+                            self.solutions += 1;
+                            sol.imu_send_mono_ns = s.header.send_mono_ns;
+                            sol.header.seq = self.solutions;
+                            sol.header.send_mono_ns = msgs::monotonic_ns();
+                            if self.solutions % self.decimation == 0 {
+                                match self.nav_pub.send_raw(sol) {
+                                    Ok(()) => self.published += 1,
+                                    Err(e) => tracing::error!("{e}"),
+                                }
+                            }
+                            self.recorder.record(Record::Nav(sol), sol.header.send_mono_ns);
+                        }
+                        Ok(None) => self.filter_time_ns = s.header.time_ns,
+                        Err(e) => self.log_push_error(e),
+                    }
+                }
+                Ok(None) => break,
+                Err(e) => {
+                    tracing::error!("{e}");
+                    break;
+                }
+            }
+        }
+    }
+
+    fn drain_truth(&mut self, sub: &Sub<TruthSample>) {
+        // Truth goes to the recorder only: the filter never sees it.
+        loop {
+            match sub.receive() {
+                Ok(Some(s)) => {
+                    self.recorder.record(Record::Truth(s), msgs::monotonic_ns());
+                }
+                Ok(None) => break,
+                Err(e) => {
+                    tracing::error!("{e}");
+                    break;
+                }
+            }
+        }
+    }
+
+    fn deadline_missed(&mut self, sensor: SensorId) {
+        let i = sensor as usize;
+        if self.got[i] {
+            return; // a sample arrived in the same wake-up
+        }
+        if self.seen[i] {
+            self.misses[i] = self.misses[i].saturating_add(1);
+        }
+        if self.alive[i] {
+            self.alive[i] = false;
+            self.engine.set_sensor_alive(i, false);
+            tracing::warn!("{} silent beyond its deadline", sensor.name());
+        }
+    }
+
+    fn status(&self) -> Status {
+        let mut st = Status {
+            mode: self.engine.mode(),
+            solutions_published: self.published,
+            records_written: self.recorder.written(),
+            records_dropped: self.recorder.dropped(),
+            sensors: self.engine.health(),
+            ..Default::default()
+        };
+        st.header.time_ns = self.filter_time_ns;
+        for s in SensorId::ALL {
+            let i = s as usize;
+            if self.alive[i] {
+                st.alive_mask |= 1 << i;
+            }
+            st.sensors[i].alive = u32::from(self.alive[i]);
+            st.sensors[i].deadline_misses = self.misses[i];
+        }
+        st
+    }
+
+    fn publish_status(&mut self) {
+        let st = self.status();
+        match self.status_pub.send(st) {
+            Ok(stamped) => {
+                self.recorder
+                    .record(Record::Status(Box::new(stamped)), stamped.header.send_mono_ns);
+            }
+            Err(e) => tracing::error!("{e}"),
+        }
+    }
+}
+
+fn ws_err(e: impl std::fmt::Debug) -> DaemonError {
+    DaemonError::WaitSet(format!("{e:?}"))
+}
+
+/// Run the daemon until `stop` is set; then drain what is queued, publish a last status, finish
+/// the recording and return.
+pub fn run<E: NavEngine>(
+    engine: E,
+    opts: &DaemonOptions,
+    stop: &AtomicBool,
+) -> Result<DaemonReport, DaemonError> {
+    let bus = Bus::new(&opts.prefix, &opts.node_name)?;
+    let imu = bus.subscriber::<ImuSample>()?;
+    let star = bus.subscriber::<StarTrackerSample>()?;
+    let gnss = bus.subscriber::<GnssSample>()?;
+    let odo = bus.subscriber::<OdometerSample>()?;
+    let baro = bus.subscriber::<BaroSample>()?;
+    let truth = bus.subscriber::<TruthSample>()?;
+    let nav_pub = bus.publisher::<NavSolution>()?;
+    let status_pub = bus.publisher::<Status>()?;
+    let rc = &opts.system.recorder;
+    let recorder = Recorder::start(
+        &opts.out,
+        &RecorderOptions {
+            queue_capacity: rc.queue_capacity,
+            chunk_size_bytes: rc.chunk_size_bytes,
+            flush_interval: Duration::from_secs_f64(rc.flush_interval_s),
+        },
+    )?;
+    let mut st = State {
+        engine,
+        recorder,
+        nav_pub,
+        status_pub,
+        decimation: u64::from(opts.system.fusion.nav_decimation.max(1)),
+        alive: [false; 5],
+        seen: [false; 5],
+        got: [false; 5],
+        misses: [0; 5],
+        imu_received: 0,
+        solutions: 0,
+        published: 0,
+        filter_time_ns: 0,
+        errors_logged: 0,
+        stop,
+    };
+
+    let ws = WaitSetBuilder::new()
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<ipc::Service>()
+        .map_err(ws_err)?;
+    let dl = |s: SensorId| opts.system.wall_deadline(s, opts.speed);
+    for s in SensorId::ALL {
+        tracing::info!("{} deadline {:?} (wall)", s.name(), dl(s));
+    }
+    let g_imu = ws
+        .attach_deadline(imu.listener(), dl(SensorId::Imu))
+        .map_err(ws_err)?;
+    let g_star = ws
+        .attach_deadline(star.listener(), dl(SensorId::StarTracker))
+        .map_err(ws_err)?;
+    let g_gnss = ws
+        .attach_deadline(gnss.listener(), dl(SensorId::Gnss))
+        .map_err(ws_err)?;
+    let g_odo = ws
+        .attach_deadline(odo.listener(), dl(SensorId::Odometer))
+        .map_err(ws_err)?;
+    let g_baro = ws
+        .attach_deadline(baro.listener(), dl(SensorId::Baro))
+        .map_err(ws_err)?;
+    let _g_truth = ws.attach_notification(truth.listener()).map_err(ws_err)?;
+    let g_status = ws
+        .attach_interval(Duration::from_secs_f64(opts.system.fusion.status_period_s))
+        .map_err(ws_err)?;
+    let _g_stop = ws
+        .attach_interval(Duration::from_millis(100))
+        .map_err(ws_err)?;
+    let deadline_guards = [
+        (SensorId::Imu, &g_imu),
+        (SensorId::StarTracker, &g_star),
+        (SensorId::Gnss, &g_gnss),
+        (SensorId::Odometer, &g_odo),
+        (SensorId::Baro, &g_baro),
+    ];
+    tracing::info!(
+        "fusion running: prefix {}, recording {}",
+        opts.prefix,
+        opts.out.display()
+    );
+    let started = Instant::now();
+
+    let drain_all = |st: &mut State<'_, E>| {
+        st.got = [false; 5];
+        for l in [
+            imu.listener(),
+            star.listener(),
+            gnss.listener(),
+            odo.listener(),
+            baro.listener(),
+            truth.listener(),
+        ] {
+            let _ = l.try_wait(|_| {});
+        }
+        // Aiding first: the navigator buffers it until the inertial solution reaches its time.
+        st.drain_aiding(&star, SensorId::StarTracker, Record::StarTracker, E::push_star_tracker);
+        st.drain_aiding(&gnss, SensorId::Gnss, |s| Record::Gnss(Box::new(s)), E::push_gnss);
+        st.drain_aiding(&odo, SensorId::Odometer, Record::Odometer, E::push_odometer);
+        st.drain_aiding(&baro, SensorId::Baro, Record::Baro, E::push_baro);
+        st.drain_imu(&imu);
+        st.drain_truth(&truth);
+    };
+
+    while !st.stop.load(Ordering::SeqCst) {
+        let mut missed = [false; 5];
+        let mut status_due = false;
+        ws.wait_and_process_once_with_timeout(
+            |id| {
+                for (s, g) in &deadline_guards {
+                    if id.has_missed_deadline(g) {
+                        missed[*s as usize] = true;
+                    }
+                }
+                if id.has_event_from(&g_status) {
+                    status_due = true;
+                }
+                CallbackProgression::Continue
+            },
+            Duration::from_secs(1),
+        )
+        .map_err(ws_err)?;
+        drain_all(&mut st);
+        for s in SensorId::ALL {
+            if missed[s as usize] {
+                st.deadline_missed(s);
+            }
+        }
+        if status_due {
+            st.publish_status();
+        }
+    }
+    tracing::info!(
+        "stopping after {:.1} s (signal {})",
+        started.elapsed().as_secs_f64(),
+        crate::signals::last_signal()
+    );
+    drain_all(&mut st);
+    st.publish_status();
+    let report_base = (st.imu_received, st.solutions, st.published);
+    let State { recorder, .. } = st;
+    let recorder = recorder.finish()?;
+    Ok(DaemonReport {
+        imu_received: report_base.0,
+        solutions: report_base.1,
+        solutions_published: report_base.2,
+        recorder,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::{Arc, Mutex};
+
+    #[derive(Clone, Default)]
+    struct Fake {
+        alive_calls: Arc<Mutex<Vec<(usize, bool)>>>,
+        gnss: Arc<Mutex<u64>>,
+    }
+
+    impl NavEngine for Fake {
+        fn push_imu(&mut self, s: &ImuSample) -> Result<Option<NavSolution>, FusionError> {
+            let mut n = NavSolution::default();
+            n.header.time_ns = s.header.time_ns;
+            n.q_ned_body = [1.0, 0.0, 0.0, 0.0];
+            Ok(Some(n))
+        }
+        fn push_star_tracker(&mut self, _: &StarTrackerSample) -> Result<(), FusionError> {
+            Ok(())
+        }
+        fn push_gnss(&mut self, _: &GnssSample) -> Result<(), FusionError> {
+            *self.gnss.lock().unwrap() += 1;
+            Ok(())
+        }
+        fn push_odometer(&mut self, _: &OdometerSample) -> Result<(), FusionError> {
+            Ok(())
+        }
+        fn push_baro(&mut self, _: &BaroSample) -> Result<(), FusionError> {
+            Ok(())
+        }
+        fn set_sensor_alive(&mut self, sensor: usize, alive: bool) {
+            self.alive_calls.lock().unwrap().push((sensor, alive));
+        }
+        fn health(&self) -> [SensorHealth; MAX_SENSORS] {
+            Default::default()
+        }
+        fn mode(&self) -> u32 {
+            msgs::NavMode::GnssInertial as u32
+        }
+    }
+
+    #[test]
+    fn daemon_fuses_records_and_detects_silence() {
+        let prefix = format!("sextant-test-daemon-{}", std::process::id());
+        let dir = std::env::temp_dir().join(&prefix);
+        std::fs::create_dir_all(&dir).unwrap();
+        let out = dir.join("recording.mcap");
+        let path = std::path::Path::new("sextant.toml");
+        let mut system =
+            SystemConfig::parse(include_str!("../../config/sextant.toml"), path).unwrap();
+        system.fusion.status_period_s = 0.1;
+        system.fusion.deadlines_ms.imu = 50.0;
+        system.fusion.min_wall_deadline_ms = 20.0;
+        system.validate(path).unwrap();
+        let opts = DaemonOptions {
+            prefix: prefix.clone(),
+            out: out.clone(),
+            speed: 1.0,
+            system,
+            node_name: "test-fusion".into(),
+        };
+        let fake = Fake::default();
+        let engine = fake.clone();
+        let stop = Arc::new(AtomicBool::new(false));
+        let stop2 = stop.clone();
+        let daemon = std::thread::spawn(move || run(engine, &opts, &stop2));
+
+        std::thread::sleep(Duration::from_millis(500));
+        let bus = Bus::new(&prefix, "test-drivers").unwrap();
+        let mut imu = bus.publisher::<ImuSample>().unwrap();
+        let mut gnss = bus.publisher::<GnssSample>().unwrap();
+        let mut truth = bus.publisher::<TruthSample>().unwrap();
+        let t0 = 1_400_000_000_000_000_000i64;
+        for k in 0..100i64 {
+            let mut s = ImuSample::default();
+            s.header.time_ns = t0 + k * 5_000_000;
+            imu.send(s).unwrap();
+            let mut t = TruthSample::default();
+            t.header.time_ns = s.header.time_ns;
+            t.q_ned_body = [1.0, 0.0, 0.0, 0.0];
+            truth.send(t).unwrap();
+            if k % 20 == 0 {
+                let mut g = GnssSample::default();
+                g.header.time_ns = s.header.time_ns;
+                gnss.send(g).unwrap();
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        // Silence: the IMU deadline (50 ms) must be missed.
+        std::thread::sleep(Duration::from_millis(400));
+        stop.store(true, Ordering::SeqCst);
+        let report = daemon.join().unwrap().unwrap();
+        assert_eq!(report.imu_received, 100);
+        assert_eq!(report.solutions, 100);
+        assert_eq!(report.recorder.dropped, 0);
+        assert_eq!(*fake.gnss.lock().unwrap(), 5);
+        let calls = fake.alive_calls.lock().unwrap().clone();
+        assert!(calls.contains(&(0, true)), "{calls:?}");
+        assert!(calls.contains(&(0, false)), "{calls:?}");
+        assert!(calls.contains(&(2, true)), "{calls:?}");
+
+        let s = crate::analysis::analyze_recording(&out, &[]).unwrap();
+        assert_eq!(s.messages_per_channel["imu"], 100);
+        assert_eq!(s.messages_per_channel["truth"], 100);
+        assert_eq!(s.messages_per_channel["gnss"], 5);
+        assert_eq!(s.messages_per_channel["nav"], 100);
+        assert!(s.messages_per_channel["status"] >= 3);
+        assert_eq!(s.solutions_matched_with_truth, 100);
+        assert_eq!(s.sequence_gaps_per_channel["imu"], 0);
+        assert!(s.horizontal_error_max_m.unwrap() < 1e-9);
+        assert!(s.latency_p50_us.unwrap() > 0.0);
+        assert_eq!(s.final_mode.as_deref(), Some("gnss-inertial"));
+        assert!(!s.recording_truncated);
+    }
+}

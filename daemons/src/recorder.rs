@@ -1,0 +1,588 @@
+//! The recorder: an MCAP writer on its own thread, fed by the filter thread through a bounded
+//! queue with `try_send`, so that a slow disk never blocks the filter. A record that does not fit
+//! in the queue, or whose write fails, is counted in [`Recorder::dropped`] (reported as
+//! `Status.records_dropped`), never silently lost.
+//!
+//! File layout:
+//! - one channel per service, topic = channel name (`imu`, `star_tracker`, `gnss`, `odometer`,
+//!   `baro`, `truth`, `nav`, `status`), message encoding `json`, schema encoding `jsonschema`
+//!   with [`msgs::channel_schema`];
+//! - the solution also on `nav/location_fix` (`foxglove.LocationFix`) and `nav/pose`
+//!   (`foxglove.PoseInFrame`), see [`crate::foxglove`];
+//! - **log_time = the message's time of validity, GPS ns** (not Unix time), so that a recording
+//!   sorts by time of validity; **publish_time = CLOCK_MONOTONIC when the fusion daemon received
+//!   (or, for its own outputs, produced) the message**, ns;
+//! - MCAP message `sequence` = the header's sequence number (low 32 bits);
+//! - inputs are recorded in the order they were pushed into the navigator, which is what offline
+//!   replay needs to reproduce the live solution;
+//! - zstd chunks, closed at the chunk size and at least every `flush_interval`, so that after a
+//!   crash everything up to the last complete chunk is readable (read with
+//!   `mcap::read::Options::IgnoreEndMagic`).
+
+use crate::foxglove;
+use mcap::{WriteOptions, Writer};
+use msgs::{
+    BaroSample, Channel, GnssSample, ImuSample, NavSolution, OdometerSample, StarTrackerSample,
+    Status, TruthSample,
+};
+use std::collections::BTreeMap;
+use std::fs::File;
+use std::io::BufWriter;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError, sync_channel};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+/// Errors of the recorder.
+#[derive(Debug, thiserror::Error)]
+pub enum RecorderError {
+    /// The output file could not be created.
+    #[error("cannot create recording {path}: {source}")]
+    Create {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// The MCAP writer failed.
+    #[error("MCAP error on {path}: {detail}")]
+    Mcap {
+        /// The file.
+        path: PathBuf,
+        /// The error.
+        detail: String,
+    },
+    /// The writer thread could not be started or panicked.
+    #[error("recorder thread: {0}")]
+    Thread(String),
+}
+
+/// One record: a message of one channel.
+#[derive(Debug, Clone)]
+pub enum Record {
+    /// IMU sample.
+    Imu(ImuSample),
+    /// Star-tracker sample.
+    StarTracker(StarTrackerSample),
+    /// GNSS sample (boxed: it is large).
+    Gnss(Box<GnssSample>),
+    /// Odometer sample.
+    Odometer(OdometerSample),
+    /// Baro sample.
+    Baro(BaroSample),
+    /// Truth sample.
+    Truth(TruthSample),
+    /// Solution.
+    Nav(NavSolution),
+    /// Status (boxed: it is large).
+    Status(Box<Status>),
+}
+
+impl Record {
+    /// The channel of the record.
+    pub fn channel(&self) -> Channel {
+        match self {
+            Record::Imu(_) => Channel::Imu,
+            Record::StarTracker(_) => Channel::StarTracker,
+            Record::Gnss(_) => Channel::Gnss,
+            Record::Odometer(_) => Channel::Odometer,
+            Record::Baro(_) => Channel::Baro,
+            Record::Truth(_) => Channel::Truth,
+            Record::Nav(_) => Channel::Nav,
+            Record::Status(_) => Channel::Status,
+        }
+    }
+
+    fn header(&self) -> &msgs::Header {
+        match self {
+            Record::Imu(m) => &m.header,
+            Record::StarTracker(m) => &m.header,
+            Record::Gnss(m) => &m.header,
+            Record::Odometer(m) => &m.header,
+            Record::Baro(m) => &m.header,
+            Record::Truth(m) => &m.header,
+            Record::Nav(m) => &m.header,
+            Record::Status(m) => &m.header,
+        }
+    }
+
+    fn to_json(&self, buf: &mut Vec<u8>) -> serde_json::Result<()> {
+        buf.clear();
+        match self {
+            Record::Imu(m) => serde_json::to_writer(buf, m),
+            Record::StarTracker(m) => serde_json::to_writer(buf, m),
+            Record::Gnss(m) => serde_json::to_writer(buf, m.as_ref()),
+            Record::Odometer(m) => serde_json::to_writer(buf, m),
+            Record::Baro(m) => serde_json::to_writer(buf, m),
+            Record::Truth(m) => serde_json::to_writer(buf, m),
+            Record::Nav(m) => serde_json::to_writer(buf, m),
+            Record::Status(m) => serde_json::to_writer(buf, m.as_ref()),
+        }
+    }
+}
+
+/// Recorder settings.
+#[derive(Debug, Clone)]
+pub struct RecorderOptions {
+    /// Queue capacity, records.
+    pub queue_capacity: usize,
+    /// Target uncompressed chunk size, bytes.
+    pub chunk_size_bytes: u64,
+    /// Close the current chunk at least this often.
+    pub flush_interval: Duration,
+}
+
+impl Default for RecorderOptions {
+    fn default() -> Self {
+        Self {
+            queue_capacity: 16384,
+            chunk_size_bytes: 1 << 20,
+            flush_interval: Duration::from_secs(1),
+        }
+    }
+}
+
+#[derive(Default)]
+struct Counters {
+    written: AtomicU64,
+    dropped: AtomicU64,
+}
+
+/// Totals of a finished recording.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RecorderStats {
+    /// Messages written (including the Foxglove views of the solution).
+    pub written: u64,
+    /// Records dropped (queue full or write failed).
+    pub dropped: u64,
+}
+
+struct Item {
+    record: Record,
+    receive_mono_ns: u64,
+}
+
+/// Handle of the recorder thread, owned by the filter thread.
+pub struct Recorder {
+    tx: Option<SyncSender<Item>>,
+    counters: Arc<Counters>,
+    thread: Option<JoinHandle<Result<(), RecorderError>>>,
+    path: PathBuf,
+}
+
+struct Sink {
+    writer: Writer<BufWriter<File>>,
+    path: PathBuf,
+    channels: BTreeMap<&'static str, u16>,
+    location_fix: u16,
+    pose: u16,
+    ned_origin: Option<foxglove::NedOrigin>,
+    buf: Vec<u8>,
+    dirty: bool,
+}
+
+impl Sink {
+    fn create(path: &Path, opts: &RecorderOptions) -> Result<Self, RecorderError> {
+        let mcap_err = |e: mcap::McapError| RecorderError::Mcap {
+            path: path.to_path_buf(),
+            detail: e.to_string(),
+        };
+        let file = File::create(path).map_err(|source| RecorderError::Create {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let mut writer = WriteOptions::new()
+            .profile("")
+            .library(concat!("sextant-daemons ", env!("CARGO_PKG_VERSION")))
+            .compression(Some(mcap::Compression::Zstd))
+            .compression_threads(0)
+            .chunk_size(Some(opts.chunk_size_bytes))
+            .create(BufWriter::new(file))
+            .map_err(mcap_err)?;
+        let no_meta = BTreeMap::new();
+        let mut channels = BTreeMap::new();
+        for ch in Channel::ALL {
+            let (name, schema) = msgs::channel_schema(ch);
+            let sid = writer
+                .add_schema(name, "jsonschema", schema.as_bytes())
+                .map_err(mcap_err)?;
+            let cid = writer
+                .add_channel(sid, ch.name(), "json", &no_meta)
+                .map_err(mcap_err)?;
+            channels.insert(ch.name(), cid);
+        }
+        let sid = writer
+            .add_schema(
+                foxglove::LOCATION_FIX_SCHEMA,
+                "jsonschema",
+                foxglove::location_fix_schema().as_bytes(),
+            )
+            .map_err(mcap_err)?;
+        let location_fix = writer
+            .add_channel(sid, foxglove::LOCATION_FIX_TOPIC, "json", &no_meta)
+            .map_err(mcap_err)?;
+        let sid = writer
+            .add_schema(
+                foxglove::POSE_SCHEMA,
+                "jsonschema",
+                foxglove::pose_in_frame_schema().as_bytes(),
+            )
+            .map_err(mcap_err)?;
+        let pose = writer
+            .add_channel(sid, foxglove::POSE_TOPIC, "json", &no_meta)
+            .map_err(mcap_err)?;
+        // Make the header, schemas and channels durable at once.
+        writer.flush().map_err(mcap_err)?;
+        Ok(Self {
+            writer,
+            path: path.to_path_buf(),
+            channels,
+            location_fix,
+            pose,
+            ned_origin: None,
+            buf: Vec::with_capacity(16 * 1024),
+            dirty: false,
+        })
+    }
+
+    fn err(&self, e: impl std::fmt::Display) -> RecorderError {
+        RecorderError::Mcap {
+            path: self.path.clone(),
+            detail: e.to_string(),
+        }
+    }
+
+    fn write_json(
+        &mut self,
+        channel_id: u16,
+        seq: u64,
+        time_ns: i64,
+        receive_mono_ns: u64,
+    ) -> Result<(), RecorderError> {
+        let header = mcap::records::MessageHeader {
+            channel_id,
+            sequence: seq as u32,
+            log_time: time_ns.max(0) as u64,
+            publish_time: receive_mono_ns,
+        };
+        self.writer
+            .write_to_known_channel(&header, &self.buf)
+            .map_err(|e| RecorderError::Mcap {
+                path: self.path.clone(),
+                detail: e.to_string(),
+            })?;
+        self.dirty = true;
+        Ok(())
+    }
+
+    /// Write one record; returns the number of messages written.
+    fn write(&mut self, item: &Item) -> Result<u64, RecorderError> {
+        let ch = item.record.channel();
+        let cid = *self
+            .channels
+            .get(ch.name())
+            .ok_or_else(|| self.err(format!("no channel {}", ch.name())))?;
+        let h = *item.record.header();
+        let mut buf = std::mem::take(&mut self.buf);
+        let r = item.record.to_json(&mut buf);
+        self.buf = buf;
+        r.map_err(|e| self.err(e))?;
+        self.write_json(cid, h.seq, h.time_ns, item.receive_mono_ns)?;
+        let mut n = 1;
+        if let Record::Nav(nav) = &item.record {
+            let origin = *self
+                .ned_origin
+                .get_or_insert_with(|| foxglove::NedOrigin::at(nav));
+            self.buf.clear();
+            serde_json::to_writer(&mut self.buf, &foxglove::location_fix(nav))
+                .map_err(|e| self.err(e))?;
+            self.write_json(self.location_fix, h.seq, h.time_ns, item.receive_mono_ns)?;
+            self.buf.clear();
+            serde_json::to_writer(&mut self.buf, &foxglove::pose_in_frame(nav, &origin))
+                .map_err(|e| self.err(e))?;
+            self.write_json(self.pose, h.seq, h.time_ns, item.receive_mono_ns)?;
+            n += 2;
+        }
+        Ok(n)
+    }
+
+    fn flush(&mut self) -> Result<(), RecorderError> {
+        if self.dirty {
+            self.dirty = false;
+            self.writer.flush().map_err(|e| self.err(e))?;
+        }
+        Ok(())
+    }
+
+    fn finish(mut self) -> Result<(), RecorderError> {
+        self.writer.finish().map_err(|e| self.err(e))?;
+        let path = self.path.clone();
+        let io_err = |e: std::io::Error| RecorderError::Mcap {
+            path: path.clone(),
+            detail: e.to_string(),
+        };
+        let mut inner = self.writer.into_inner();
+        std::io::Write::flush(&mut inner).map_err(io_err)?;
+        inner.get_ref().sync_all().map_err(io_err)?;
+        Ok(())
+    }
+}
+
+fn run(
+    mut sink: Sink,
+    rx: Receiver<Item>,
+    counters: Arc<Counters>,
+    flush_interval: Duration,
+) -> Result<(), RecorderError> {
+    let mut last_flush = Instant::now();
+    let mut warned = false;
+    loop {
+        match rx.recv_timeout(flush_interval) {
+            Ok(item) => match sink.write(&item) {
+                Ok(n) => {
+                    counters.written.fetch_add(n, Ordering::Relaxed);
+                }
+                Err(e) => {
+                    counters.dropped.fetch_add(1, Ordering::Relaxed);
+                    if !warned {
+                        tracing::error!("recorder: {e} (further failures only counted)");
+                        warned = true;
+                    }
+                }
+            },
+            Err(RecvTimeoutError::Timeout) => {}
+            Err(RecvTimeoutError::Disconnected) => break,
+        }
+        if last_flush.elapsed() >= flush_interval {
+            last_flush = Instant::now();
+            if let Err(e) = sink.flush() {
+                tracing::error!("recorder: flush failed: {e}");
+            }
+        }
+    }
+    sink.finish()
+}
+
+impl Recorder {
+    /// Create the MCAP file at `path` (header, schemas, channels) and start the writer thread.
+    pub fn start(path: &Path, opts: &RecorderOptions) -> Result<Self, RecorderError> {
+        let sink = Sink::create(path, opts)?;
+        let (tx, rx) = sync_channel(opts.queue_capacity);
+        let counters = Arc::new(Counters::default());
+        let c = counters.clone();
+        let flush = opts.flush_interval;
+        let thread = std::thread::Builder::new()
+            .name("recorder".into())
+            .spawn(move || run(sink, rx, c, flush))
+            .map_err(|e| RecorderError::Thread(e.to_string()))?;
+        Ok(Self {
+            tx: Some(tx),
+            counters,
+            thread: Some(thread),
+            path: path.to_path_buf(),
+        })
+    }
+
+    /// Queue a record without blocking; a full queue counts a drop. Returns false when dropped.
+    pub fn record(&self, record: Record, receive_mono_ns: u64) -> bool {
+        let Some(tx) = &self.tx else {
+            self.counters.dropped.fetch_add(1, Ordering::Relaxed);
+            return false;
+        };
+        match tx.try_send(Item {
+            record,
+            receive_mono_ns,
+        }) {
+            Ok(()) => true,
+            Err(TrySendError::Full(_)) | Err(TrySendError::Disconnected(_)) => {
+                self.counters.dropped.fetch_add(1, Ordering::Relaxed);
+                false
+            }
+        }
+    }
+
+    /// Messages written so far.
+    pub fn written(&self) -> u64 {
+        self.counters.written.load(Ordering::Relaxed)
+    }
+
+    /// Records dropped so far.
+    pub fn dropped(&self) -> u64 {
+        self.counters.dropped.load(Ordering::Relaxed)
+    }
+
+    /// The recording's path.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Write what is queued, finish the file (summary and index) and stop the thread.
+    pub fn finish(mut self) -> Result<RecorderStats, RecorderError> {
+        self.stop()
+    }
+
+    fn stop(&mut self) -> Result<RecorderStats, RecorderError> {
+        self.tx = None;
+        if let Some(t) = self.thread.take() {
+            t.join()
+                .map_err(|_| RecorderError::Thread("writer thread panicked".into()))??;
+        }
+        Ok(RecorderStats {
+            written: self.written(),
+            dropped: self.dropped(),
+        })
+    }
+}
+
+impl Drop for Recorder {
+    fn drop(&mut self) {
+        if self.thread.is_some()
+            && let Err(e) = self.stop()
+        {
+            tracing::error!("recorder: {e}");
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use mcap::MessageStream;
+
+    fn tmp(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("sextant-rec-{}-{name}", std::process::id()));
+        std::fs::create_dir_all(&d).unwrap();
+        d.join("recording.mcap")
+    }
+
+    fn sample_records() -> Vec<Record> {
+        let mut v = Vec::new();
+        for k in 1..=5i64 {
+            let mut imu = ImuSample::default();
+            imu.header.time_ns = k * 5_000_000;
+            imu.header.seq = k as u64;
+            v.push(Record::Imu(imu));
+            let mut nav = NavSolution::default();
+            nav.header = imu.header;
+            nav.q_ned_body = [1.0, 0.0, 0.0, 0.0];
+            v.push(Record::Nav(nav));
+        }
+        v.push(Record::StarTracker(StarTrackerSample::default()));
+        v.push(Record::Gnss(Box::default()));
+        v.push(Record::Odometer(OdometerSample::default()));
+        v.push(Record::Baro(BaroSample::default()));
+        v.push(Record::Truth(TruthSample::default()));
+        v.push(Record::Status(Box::default()));
+        v
+    }
+
+    #[test]
+    fn recording_reads_back_with_schemas_in_order() {
+        let path = tmp("roundtrip");
+        let rec = Recorder::start(&path, &RecorderOptions::default()).unwrap();
+        let records = sample_records();
+        for (i, r) in records.iter().enumerate() {
+            assert!(rec.record(r.clone(), 1000 + i as u64));
+        }
+        let stats = rec.finish().unwrap();
+        assert_eq!(stats.dropped, 0);
+        assert_eq!(stats.written, records.len() as u64 + 2 * 5);
+
+        let bytes = std::fs::read(&path).unwrap();
+        let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
+        let topics: Vec<_> = summary.channels.values().map(|c| c.topic.clone()).collect();
+        for ch in Channel::ALL {
+            assert!(topics.iter().any(|t| t == ch.name()), "{topics:?}");
+        }
+        for c in summary.channels.values() {
+            let s = c.schema.as_ref().expect("schema");
+            assert_eq!(s.encoding, "jsonschema");
+            assert_eq!(c.message_encoding, "json");
+            let _: serde_json::Value = serde_json::from_slice(&s.data).unwrap();
+        }
+        let msgs: Vec<_> = MessageStream::new(&bytes)
+            .unwrap()
+            .collect::<Result<_, _>>()
+            .unwrap();
+        assert_eq!(msgs.len() as u64, stats.written);
+        // Order of the sextant channels is the order of recording.
+        let order: Vec<_> = msgs
+            .iter()
+            .filter(|m| Channel::from_name(&m.channel.topic).is_some())
+            .map(|m| m.channel.topic.clone())
+            .collect();
+        let expected: Vec<_> = records.iter().map(|r| r.channel().name().to_string()).collect();
+        assert_eq!(order, expected);
+        // Messages validate against their schemas; log_time is GPS ns, publish_time receive.
+        for m in &msgs {
+            let schema: serde_json::Value =
+                serde_json::from_slice(&m.channel.schema.as_ref().unwrap().data).unwrap();
+            let v: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
+            let validator = jsonschema::validator_for(&schema).unwrap();
+            assert!(validator.is_valid(&v), "{}: {v}", m.channel.topic);
+        }
+        let first = &msgs[0];
+        assert_eq!(first.channel.topic, "imu");
+        assert_eq!(first.log_time, 5_000_000);
+        assert_eq!(first.publish_time, 1000);
+    }
+
+    #[test]
+    fn flushed_chunks_survive_a_crash() {
+        let path = tmp("crash");
+        let opts = RecorderOptions {
+            flush_interval: Duration::from_millis(10),
+            ..Default::default()
+        };
+        let rec = Recorder::start(&path, &opts).unwrap();
+        for r in sample_records() {
+            rec.record(r, 1);
+        }
+        // Wait for a flush, then "crash": forget the recorder so finish() never runs.
+        let t0 = Instant::now();
+        while rec.written() < 10 && t0.elapsed() < Duration::from_secs(5) {
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        std::thread::sleep(Duration::from_millis(100));
+        let bytes = std::fs::read(&path).unwrap();
+        let n = MessageStream::new_with_options(&bytes, mcap::read::Options::IgnoreEndMagic.into())
+            .unwrap()
+            .take_while(|m| m.is_ok())
+            .count();
+        assert!(n >= 10, "{n} messages readable");
+        drop(rec);
+    }
+
+    #[test]
+    fn full_queue_counts_drops_and_never_blocks() {
+        let path = tmp("full");
+        let opts = RecorderOptions {
+            queue_capacity: 1,
+            ..Default::default()
+        };
+        let rec = Recorder::start(&path, &opts).unwrap();
+        let t0 = Instant::now();
+        let mut dropped = 0;
+        for _ in 0..10_000 {
+            if !rec.record(Record::Gnss(Box::default()), 0) {
+                dropped += 1;
+            }
+        }
+        assert!(t0.elapsed() < Duration::from_secs(5));
+        assert_eq!(rec.dropped(), dropped);
+        let stats = rec.finish().unwrap();
+        assert_eq!(stats.written + stats.dropped, 10_000);
+        assert!(stats.dropped > 0);
+    }
+
+    #[test]
+    fn unwritable_path_is_an_error_naming_it() {
+        let e = Recorder::start(Path::new("/nonexistent-dir/x.mcap"), &RecorderOptions::default())
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(e.contains("/nonexistent-dir/x.mcap"), "{e}");
+    }
+}
