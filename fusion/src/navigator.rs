@@ -2,84 +2,1457 @@
 //! the error-state Kalman filter, buffering of aiding samples until the inertial solution reaches
 //! their time of validity, navigation modes and per-sensor health.
 //!
-//! OWNER: filter helper. The public signatures below are the contract the fusion daemon and the
-//! offline tools build against; bodies are the filter helper's.
+//! # Life cycle
+//! `Initializing` (no IMU yet) → `Aligning`: IMU increments are averaged for
+//! [`NavigatorConfig::alignment_s`] (paper 003 static alignment, [`crate::alignment`]) while the
+//! first valid GNSS fix (or [`NavigatorConfig::initial_position`]) gives the position →
+//! navigating: strapdown ([`crate::strapdown`]) plus the 15-state error-state EKF
+//! ([`crate::ekf`]), mode from the aiding actually fused within its deadline.
+//!
+//! # Delayed fusion
+//! Aiding samples are queued in fixed-capacity, time-ordered ring buffers (no allocation) and
+//! fused when the IMU time reaches their time of validity. The simulator puts every sample on
+//! the IMU time grid; a sample whose time falls between two IMU epochs is fused at the first IMU
+//! epoch ≥ its time (an approximation of at most one IMU interval, ≤ 5 ms at 200 Hz). A sample
+//! that arrives after the IMU has passed its time, but within
+//! [`NavigatorConfig::buffer_window_s`], is evaluated against the inertial state stored for that
+//! epoch (a short state history that every correction also updates), and its correction is
+//! applied to the current state (the error state changes negligibly over the window).
+//! Older samples are counted in `dropped_late` and never fused.
+//!
+//! # Input validation
+//! Every sample is checked (NaN/inf, impossible magnitudes, time not increasing, duplicated
+//! sequence number); a bad one is counted in `rejected_invalid`, returned as an error and never
+//! touches the filter. Nothing here panics on input, allocates per sample, reads a clock or
+//! does I/O.
 
 use crate::FusionError;
-use msgs::{
-    BaroSample, GnssSample, ImuSample, NavSolution, OdometerSample, SensorHealth, StarTrackerSample,
-    MAX_SENSORS,
+use crate::alignment::{self, Accumulator};
+use crate::attitude::{quat_from_wire, quat_to_wire, rpy_from_q_n_b};
+use crate::celestial::EarthOrientation;
+use crate::earth::{self, Ellipsoid, Geodetic, GravityModel, PZ90, WGS84};
+use crate::ekf::{
+    self, Covariance, ErrorStateEkf, GateTable, Measurement, ProcessNoise, StateVector, idx,
 };
+use crate::strapdown::{ImuIncrement, Integrator, MechanizationConfig, NavState, Strapdown, q_e_n};
+use crate::time::GpsTime;
+use msgs::{
+    BaroSample, GnssSample, Header, ImuSample, MAX_IMU_CHANNELS, MAX_SATELLITES, MAX_SENSORS,
+    NavMode, NavSolution, OdometerSample, SensorHealth, SensorId, StarTrackerSample,
+};
+use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
-/// Everything the navigator needs to know, from the `[filter]` (and related) tables of the
-/// system config. Deserialized from TOML; `validate` checks its meaning.
-#[derive(Debug, Clone, PartialEq, serde::Deserialize, serde::Serialize)]
+const DEG: f64 = std::f64::consts::PI / 180.0;
+/// Standard gravity, m/s² (unit conversions only).
+const G0: f64 = 9.806_65;
+
+/// Reference ellipsoid selection.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum EllipsoidName {
+    /// WGS-84 (default).
+    #[default]
+    Wgs84,
+    /// PZ-90.11.
+    Pz90,
+}
+
+impl EllipsoidName {
+    /// The ellipsoid constants.
+    pub fn ellipsoid(self) -> Ellipsoid {
+        match self {
+            Self::Wgs84 => WGS84,
+            Self::Pz90 => PZ90,
+        }
+    }
+}
+
+/// IMU error specification (1-σ values, datasheet units as in the key names).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ImuSpec {
+    /// Gyro bias (turn-on / in-run), °/h: initial σ of the gyro bias states.
+    pub gyro_bias_deg_h: f64,
+    /// Angle random walk, °/√h.
+    pub arw_deg_sqrt_h: f64,
+    /// Accelerometer bias, µg: initial σ of the accelerometer bias states.
+    pub accel_bias_ug: f64,
+    /// Velocity random walk, µg/√Hz.
+    pub vrw_ug_sqrt_hz: f64,
+    /// Gyro bias random walk, °/h/√h.
+    pub gyro_bias_rw_deg_h_sqrt_h: f64,
+    /// Accelerometer bias random walk, µg/√h.
+    pub accel_bias_rw_ug_sqrt_h: f64,
+    /// Largest plausible angular rate, rad/s (input validation).
+    pub max_rate_rad_s: f64,
+    /// Largest plausible specific force, m/s² (input validation).
+    pub max_specific_force_m_s2: f64,
+}
+
+impl Default for ImuSpec {
+    fn default() -> Self {
+        Self {
+            gyro_bias_deg_h: 0.01,
+            arw_deg_sqrt_h: 0.002,
+            accel_bias_ug: 50.0,
+            vrw_ug_sqrt_hz: 20.0,
+            gyro_bias_rw_deg_h_sqrt_h: 0.002,
+            accel_bias_rw_ug_sqrt_h: 5.0,
+            max_rate_rad_s: 10.0,
+            max_specific_force_m_s2: 300.0,
+        }
+    }
+}
+
+impl ImuSpec {
+    /// Gyro bias σ, rad/s.
+    pub fn gyro_bias_rad_s(&self) -> f64 {
+        self.gyro_bias_deg_h * DEG / 3600.0
+    }
+    /// Accelerometer bias σ, m/s².
+    pub fn accel_bias_m_s2(&self) -> f64 {
+        self.accel_bias_ug * 1e-6 * G0
+    }
+    /// Noise densities in SI units.
+    pub fn process_noise(&self) -> ProcessNoise {
+        ProcessNoise {
+            arw_rad_sqrt_s: self.arw_deg_sqrt_h * DEG / 60.0,
+            vrw_m_s_sqrt_s: self.vrw_ug_sqrt_hz * 1e-6 * G0,
+            gyro_bias_rw_rad_s_sqrt_s: self.gyro_bias_rw_deg_h_sqrt_h * DEG / 3600.0 / 60.0,
+            accel_bias_rw_m_s2_sqrt_s: self.accel_bias_rw_ug_sqrt_h * 1e-6 * G0 / 60.0,
+        }
+    }
+}
+
+/// Initial uncertainties of the filter after coarse alignment.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct InitialUncertainty {
+    /// Position σ per axis when the position comes from configuration, m (a GNSS fix brings its
+    /// own covariance).
+    pub position_sigma_m: f64,
+    /// Velocity σ per axis (the vehicle is static during alignment), m/s.
+    pub velocity_sigma_m_s: f64,
+    /// Lower bound of the roll/pitch σ, deg (the closed-form alignment σ is used when larger).
+    pub level_sigma_min_deg: f64,
+    /// Lower bound of the heading σ, deg.
+    pub heading_sigma_min_deg: f64,
+}
+
+impl Default for InitialUncertainty {
+    fn default() -> Self {
+        Self {
+            position_sigma_m: 10.0,
+            velocity_sigma_m_s: 0.05,
+            level_sigma_min_deg: 0.005,
+            heading_sigma_min_deg: 0.05,
+        }
+    }
+}
+
+/// Which measurement updates are used.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct UpdateSwitches {
+    /// GNSS position (loose coupling).
+    pub gnss_position: bool,
+    /// GNSS velocity (loose coupling).
+    pub gnss_velocity: bool,
+    /// Star-tracker attitude.
+    pub star_tracker: bool,
+    /// Baro altitude.
+    pub baro: bool,
+    /// Odometer speed along body x.
+    pub odometer: bool,
+    /// Non-holonomic constraints with the odometer (ground vehicles).
+    pub nonholonomic: bool,
+    /// Zero-velocity updates while static.
+    pub zupt: bool,
+}
+
+impl Default for UpdateSwitches {
+    fn default() -> Self {
+        Self {
+            gnss_position: true,
+            gnss_velocity: true,
+            star_tracker: true,
+            baro: true,
+            odometer: true,
+            nonholonomic: true,
+            zupt: true,
+        }
+    }
+}
+
+/// Noise and scheduling of the aiding measurements that carry no covariance of their own.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct AidingNoise {
+    /// Baro height σ, m. The baro bias is not a state yet: this σ must cover it.
+    pub baro_sigma_m: f64,
+    /// Minimum time between two fused baro samples, s (limits the time-correlated error's
+    /// weight; the samples in between are not fused).
+    pub baro_min_interval_s: f64,
+    /// Odometer speed white-noise σ, m/s.
+    pub odometer_sigma_m_s: f64,
+    /// Odometer scale-factor σ (not a state yet; added as `σ·|speed|`), dimensionless.
+    pub odometer_scale_sigma: f64,
+    /// Non-holonomic constraint σ (lateral and vertical body velocity), m/s.
+    pub nhc_sigma_m_s: f64,
+    /// Zero-velocity update σ per axis, m/s.
+    pub zupt_sigma_m_s: f64,
+    /// Minimum time between two zero-velocity updates, s.
+    pub zupt_interval_s: f64,
+    /// The IMU must look static this long before zero-velocity updates start, s.
+    pub zupt_window_s: f64,
+    /// Static test: |angular rate| below this, rad/s.
+    pub zupt_max_rate_rad_s: f64,
+    /// Static test: | |specific force| − g | below this, m/s².
+    pub zupt_max_accel_dev_m_s2: f64,
+    /// Static test: estimated speed below this, m/s (guards against constant-velocity motion,
+    /// which an IMU cannot tell from rest).
+    pub zupt_max_speed_m_s: f64,
+}
+
+impl Default for AidingNoise {
+    fn default() -> Self {
+        Self {
+            baro_sigma_m: 2.0,
+            baro_min_interval_s: 1.0,
+            odometer_sigma_m_s: 0.05,
+            odometer_scale_sigma: 0.002,
+            nhc_sigma_m_s: 0.05,
+            zupt_sigma_m_s: 0.005,
+            zupt_interval_s: 0.1,
+            zupt_window_s: 1.0,
+            zupt_max_rate_rad_s: 0.002,
+            zupt_max_accel_dev_m_s2: 0.05,
+            zupt_max_speed_m_s: 0.3,
+        }
+    }
+}
+
+/// An aiding source counts for the navigation mode while it has been fused within this age of
+/// the IMU time, s.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Deadlines {
+    /// GNSS, s.
+    pub gnss_s: f64,
+    /// Star tracker, s.
+    pub star_tracker_s: f64,
+    /// Odometer, s.
+    pub odometer_s: f64,
+    /// Baro, s.
+    pub baro_s: f64,
+}
+
+impl Default for Deadlines {
+    fn default() -> Self {
+        Self {
+            gnss_s: 2.0,
+            star_tracker_s: 2.0,
+            odometer_s: 1.0,
+            baro_s: 3.0,
+        }
+    }
+}
+
+/// A configured initial position (used for alignment when no GNSS fix is wanted or available).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields)]
+pub struct InitialPosition {
+    /// Geodetic latitude, deg.
+    pub lat_deg: f64,
+    /// Longitude, deg.
+    pub lon_deg: f64,
+    /// Height above the ellipsoid, m.
+    pub height_m: f64,
+}
+
+/// Everything the navigator needs to know, from the filter tuning file (`config/filter.toml`).
+/// Deserialized from TOML (unknown keys are errors; omitted keys take the defaults, which
+/// match `config/filter.toml`); `validate` checks its meaning.
+#[derive(Debug, Clone, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields, default)]
 pub struct NavigatorConfig {
     /// Static coarse-alignment time before navigation starts, s.
     pub alignment_s: f64,
+    /// Reference ellipsoid for the mechanization and the outputs.
+    pub ellipsoid: EllipsoidName,
+    /// Gravity model of the mechanization.
+    pub gravity: GravityModel,
+    /// Integrator of the mechanization.
+    pub integrator: Integrator,
+    /// Coning and sculling corrections.
+    pub coning_sculling: bool,
+    /// Probability of the chi-square innovation gate (e.g. 0.999; 1 disables gating).
+    pub gate_probability: f64,
+    /// How far behind the IMU time a sample may arrive and still be fused, s (≤ 2).
+    pub buffer_window_s: f64,
+    /// Initial position for alignment; when absent, the first valid GNSS fix is used.
+    pub initial_position: Option<InitialPosition>,
+    /// Earth orientation parameters (UT1 − UTC, polar motion) for the star-tracker model.
+    pub eop: EarthOrientation,
+    /// IMU error specification.
+    pub imu: ImuSpec,
+    /// Initial uncertainties.
+    pub initial: InitialUncertainty,
+    /// Enabled measurement updates.
+    pub updates: UpdateSwitches,
+    /// Aiding noise and scheduling.
+    pub aiding: AidingNoise,
+    /// Aiding deadlines for the navigation mode.
+    pub deadlines: Deadlines,
+}
+
+impl Default for NavigatorConfig {
+    fn default() -> Self {
+        Self {
+            alignment_s: 120.0,
+            ellipsoid: EllipsoidName::Wgs84,
+            gravity: GravityModel::J2,
+            integrator: Integrator::Rk4,
+            coning_sculling: true,
+            gate_probability: 0.999,
+            buffer_window_s: 1.0,
+            initial_position: None,
+            eop: EarthOrientation::default(),
+            imu: ImuSpec::default(),
+            initial: InitialUncertainty::default(),
+            updates: UpdateSwitches::default(),
+            aiding: AidingNoise::default(),
+            deadlines: Deadlines::default(),
+        }
+    }
+}
+
+fn check(ok: bool, key: &str, what: &str) -> Result<(), FusionError> {
+    if ok {
+        Ok(())
+    } else {
+        Err(FusionError::Config(format!("filter.{key} {what}")))
+    }
+}
+
+fn pos(x: f64) -> bool {
+    x.is_finite() && x > 0.0
+}
+
+fn nonneg(x: f64) -> bool {
+    x.is_finite() && x >= 0.0
 }
 
 impl NavigatorConfig {
     /// Check the meaning of the values (ranges, consistency); the error names the key.
     pub fn validate(&self) -> Result<(), FusionError> {
-        if !(self.alignment_s.is_finite() && self.alignment_s >= 0.0) {
-            return Err(FusionError::Config("filter.alignment_s must be >= 0".into()));
+        check(
+            nonneg(self.alignment_s) && self.alignment_s <= 3600.0,
+            "alignment_s",
+            "must be in [0, 3600] s",
+        )?;
+        check(
+            self.gate_probability.is_finite()
+                && self.gate_probability > 0.5
+                && self.gate_probability <= 1.0,
+            "gate_probability",
+            "must be in (0.5, 1]",
+        )?;
+        check(
+            nonneg(self.buffer_window_s) && self.buffer_window_s <= 2.0,
+            "buffer_window_s",
+            "must be in [0, 2] s",
+        )?;
+        if let Some(p) = &self.initial_position {
+            check(
+                p.lat_deg.is_finite() && p.lat_deg.abs() <= 90.0,
+                "initial_position.lat_deg",
+                "must be in [-90, 90]",
+            )?;
+            check(
+                p.lon_deg.is_finite() && p.lon_deg.abs() <= 360.0,
+                "initial_position.lon_deg",
+                "must be in [-360, 360]",
+            )?;
+            check(
+                p.height_m.is_finite() && (-1000.0..=100_000.0).contains(&p.height_m),
+                "initial_position.height_m",
+                "must be in [-1000, 100000] m",
+            )?;
         }
+        check(
+            self.eop.dut1_s.is_finite() && self.eop.dut1_s.abs() <= 0.9,
+            "eop.dut1_s",
+            "must be in [-0.9, 0.9] s",
+        )?;
+        check(
+            self.eop.xp_rad.is_finite() && self.eop.xp_rad.abs() < 1e-5,
+            "eop.xp_rad",
+            "must be a finite polar motion below 1e-5 rad",
+        )?;
+        check(
+            self.eop.yp_rad.is_finite() && self.eop.yp_rad.abs() < 1e-5,
+            "eop.yp_rad",
+            "must be a finite polar motion below 1e-5 rad",
+        )?;
+        let i = &self.imu;
+        for (v, k) in [
+            (i.gyro_bias_deg_h, "imu.gyro_bias_deg_h"),
+            (i.arw_deg_sqrt_h, "imu.arw_deg_sqrt_h"),
+            (i.accel_bias_ug, "imu.accel_bias_ug"),
+            (i.vrw_ug_sqrt_hz, "imu.vrw_ug_sqrt_hz"),
+            (i.max_rate_rad_s, "imu.max_rate_rad_s"),
+            (i.max_specific_force_m_s2, "imu.max_specific_force_m_s2"),
+            (self.initial.position_sigma_m, "initial.position_sigma_m"),
+            (
+                self.initial.velocity_sigma_m_s,
+                "initial.velocity_sigma_m_s",
+            ),
+            (
+                self.initial.level_sigma_min_deg,
+                "initial.level_sigma_min_deg",
+            ),
+            (
+                self.initial.heading_sigma_min_deg,
+                "initial.heading_sigma_min_deg",
+            ),
+            (self.aiding.baro_sigma_m, "aiding.baro_sigma_m"),
+            (self.aiding.odometer_sigma_m_s, "aiding.odometer_sigma_m_s"),
+            (self.aiding.nhc_sigma_m_s, "aiding.nhc_sigma_m_s"),
+            (self.aiding.zupt_sigma_m_s, "aiding.zupt_sigma_m_s"),
+            (
+                self.aiding.zupt_max_rate_rad_s,
+                "aiding.zupt_max_rate_rad_s",
+            ),
+            (
+                self.aiding.zupt_max_accel_dev_m_s2,
+                "aiding.zupt_max_accel_dev_m_s2",
+            ),
+            (self.aiding.zupt_max_speed_m_s, "aiding.zupt_max_speed_m_s"),
+            (self.deadlines.gnss_s, "deadlines.gnss_s"),
+            (self.deadlines.star_tracker_s, "deadlines.star_tracker_s"),
+            (self.deadlines.odometer_s, "deadlines.odometer_s"),
+            (self.deadlines.baro_s, "deadlines.baro_s"),
+        ] {
+            check(pos(v), k, "must be a finite number > 0")?;
+        }
+        for (v, k) in [
+            (i.gyro_bias_rw_deg_h_sqrt_h, "imu.gyro_bias_rw_deg_h_sqrt_h"),
+            (i.accel_bias_rw_ug_sqrt_h, "imu.accel_bias_rw_ug_sqrt_h"),
+            (
+                self.aiding.baro_min_interval_s,
+                "aiding.baro_min_interval_s",
+            ),
+            (
+                self.aiding.odometer_scale_sigma,
+                "aiding.odometer_scale_sigma",
+            ),
+            (self.aiding.zupt_interval_s, "aiding.zupt_interval_s"),
+            (self.aiding.zupt_window_s, "aiding.zupt_window_s"),
+        ] {
+            check(nonneg(v), k, "must be a finite number >= 0")?;
+        }
+        check(
+            i.max_specific_force_m_s2 > 2.0 * G0,
+            "imu.max_specific_force_m_s2",
+            "must exceed 2 g",
+        )?;
         Ok(())
+    }
+
+    /// Mechanization settings derived from this configuration.
+    pub fn mechanization(&self) -> MechanizationConfig {
+        MechanizationConfig {
+            ellipsoid: self.ellipsoid.ellipsoid(),
+            gravity: self.gravity,
+            integrator: self.integrator,
+            coning_sculling: self.coning_sculling,
+        }
     }
 }
 
+/// Time-ordered ring buffer of fixed capacity (no allocation).
+#[derive(Debug, Clone)]
+struct TimeQueue<T: Copy + Default, const CAP: usize> {
+    buf: [(i64, T); CAP],
+    head: usize,
+    len: usize,
+}
+
+impl<T: Copy + Default, const CAP: usize> TimeQueue<T, CAP> {
+    fn new() -> Self {
+        Self {
+            buf: [(0, T::default()); CAP],
+            head: 0,
+            len: 0,
+        }
+    }
+    fn slot(&self, i: usize) -> usize {
+        (self.head + i) % CAP
+    }
+    /// Insert keeping time order; when full, the oldest entry is evicted and returned.
+    fn insert(&mut self, t: i64, v: T) -> Option<(i64, T)> {
+        let evicted = if self.len == CAP {
+            let e = self.buf[self.head];
+            self.head = (self.head + 1) % CAP;
+            self.len -= 1;
+            Some(e)
+        } else {
+            None
+        };
+        let mut i = self.len;
+        self.len += 1;
+        while i > 0 && self.buf[self.slot(i - 1)].0 > t {
+            let (a, b) = (self.slot(i), self.slot(i - 1));
+            self.buf[a] = self.buf[b];
+            i -= 1;
+        }
+        let s = self.slot(i);
+        self.buf[s] = (t, v);
+        evicted
+    }
+    /// Remove and return the oldest entry if its time is ≤ `t`.
+    fn pop_due(&mut self, t: i64) -> Option<(i64, T)> {
+        if self.len > 0 && self.buf[self.head].0 <= t {
+            let e = self.buf[self.head];
+            self.head = (self.head + 1) % CAP;
+            self.len -= 1;
+            Some(e)
+        } else {
+            None
+        }
+    }
+    fn clear(&mut self) {
+        self.len = 0;
+    }
+}
+
+/// GNSS fix as queued (raw satellites are not used by the loose coupling).
+#[derive(Debug, Clone, Copy, Default)]
+struct GnssFix {
+    pos: Vector3<f64>,
+    vel: Vector3<f64>,
+    pos_cov: Matrix3<f64>,
+    vel_cov: Matrix3<f64>,
+    vel_valid: bool,
+}
+
+#[derive(Debug, Clone, Copy, Default)]
+struct StarObs {
+    q: [f64; 4],
+    sigma_cross: f64,
+    sigma_roll: f64,
+}
+
+/// State history entry for late samples.
+#[derive(Debug, Clone, Copy)]
+struct HistEntry {
+    t: i64,
+    nav: NavState,
+}
+
+const HIST_CAP: usize = 512;
+const GNSS_CAP: usize = 32;
+const STAR_CAP: usize = 64;
+const ODO_CAP: usize = 256;
+const BARO_CAP: usize = 128;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Phase {
+    Initializing,
+    Aligning,
+    Navigating,
+}
+
+/// Counters of the zero-velocity updates (not a sensor slot of `msgs::Status`).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ZuptHealth {
+    /// Zero-velocity updates fused.
+    pub fused: u64,
+    /// Zero-velocity updates rejected by the gate.
+    pub rejected_gate: u64,
+    /// NIS of the last one.
+    pub last_nis: f64,
+}
+
 /// The fusion engine.
+#[derive(Debug, Clone)]
 pub struct Navigator {
     config: NavigatorConfig,
+    ell: Ellipsoid,
+    gates: GateTable,
+    c_s_b: Matrix3<f64>,
+    phase: Phase,
+    align: Accumulator,
+    init_fix: Option<(Vector3<f64>, Matrix3<f64>)>,
+    strapdown: Strapdown,
+    nav: NavState,
+    ekf: ErrorStateEkf,
+    time_ns: i64,
+    last_seq: [Option<u64>; MAX_SENSORS],
+    last_time: [Option<i64>; MAX_SENSORS],
+    health: [SensorHealth; MAX_SENSORS],
+    last_fused_ns: [Option<i64>; MAX_SENSORS],
+    gnss_q: TimeQueue<GnssFix, GNSS_CAP>,
+    star_q: TimeQueue<StarObs, STAR_CAP>,
+    odo_q: TimeQueue<f64, ODO_CAP>,
+    baro_q: TimeQueue<f64, BARO_CAP>,
+    hist: [HistEntry; HIST_CAP],
+    hist_head: usize,
+    hist_len: usize,
+    last_baro_fused: Option<i64>,
+    last_odo: Option<(i64, f64)>,
+    static_since: Option<i64>,
+    last_zupt: Option<i64>,
+    zupt: ZuptHealth,
+    solutions: u64,
+    mode: NavMode,
+    aiding_mask: u32,
+}
+
+/// Slot of a sensor in the health array.
+const fn sid(s: SensorId) -> usize {
+    s as usize
 }
 
 impl Navigator {
     /// A navigator waiting for its first IMU sample.
     pub fn new(config: NavigatorConfig) -> Result<Self, FusionError> {
         config.validate()?;
-        Ok(Self { config })
+        let ell = config.ellipsoid.ellipsoid();
+        let nav = NavState {
+            r_e: Vector3::new(ell.a_m, 0.0, 0.0),
+            v_e: Vector3::zeros(),
+            q_e_b: UnitQuaternion::identity(),
+        };
+        Ok(Self {
+            gates: GateTable::new(config.gate_probability),
+            // Nominal star-tracker mount (HELPERS.md): 180° about body x.
+            c_s_b: Matrix3::new(1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, -1.0),
+            phase: Phase::Initializing,
+            align: Accumulator::default(),
+            init_fix: None,
+            strapdown: Strapdown::new(config.mechanization()),
+            nav,
+            ekf: ErrorStateEkf::new(Covariance::identity(), config.imu.process_noise()),
+            time_ns: 0,
+            last_seq: [None; MAX_SENSORS],
+            last_time: [None; MAX_SENSORS],
+            health: [SensorHealth::default(); MAX_SENSORS],
+            last_fused_ns: [None; MAX_SENSORS],
+            gnss_q: TimeQueue::new(),
+            star_q: TimeQueue::new(),
+            odo_q: TimeQueue::new(),
+            baro_q: TimeQueue::new(),
+            hist: [HistEntry { t: 0, nav }; HIST_CAP],
+            hist_head: 0,
+            hist_len: 0,
+            last_baro_fused: None,
+            last_odo: None,
+            static_since: None,
+            last_zupt: None,
+            zupt: ZuptHealth::default(),
+            solutions: 0,
+            mode: NavMode::Initializing,
+            aiding_mask: 0,
+            ell,
+            config,
+        })
     }
+
     /// Feed one IMU sample (in time order). Returns the solution at its time once navigating
     /// (None while initializing/aligning). Buffered aiding samples whose time of validity is
     /// reached are fused before the solution is formed. Allocates nothing.
     pub fn push_imu(&mut self, s: &ImuSample) -> Result<Option<NavSolution>, FusionError> {
-        let _ = (s, &self.config);
-        unimplemented!("filter helper")
+        let id = sid(SensorId::Imu);
+        self.health[id].received += 1;
+        if let Err(e) = self
+            .validate_header("imu", id, &s.header)
+            .and_then(|_| self.validate_imu(s))
+        {
+            self.health[id].rejected_invalid += 1;
+            return Err(e);
+        }
+        let prev_t = self.last_time[id];
+        self.accept_header(id, &s.header);
+        let t = s.header.time_ns;
+        let dth = Vector3::from(s.delta_angle_rad);
+        let dv = Vector3::from(s.delta_velocity_m_s);
+        match self.phase {
+            Phase::Initializing => {
+                self.phase = Phase::Aligning;
+                self.mode = NavMode::Aligning;
+                self.time_ns = t;
+                self.align.add(&dth, &dv, s.dt_s);
+                self.health[id].fused += 1;
+                self.consume_during_alignment(t);
+                self.try_finish_alignment(t);
+            }
+            Phase::Aligning => {
+                self.time_ns = t;
+                self.align.add(&dth, &dv, s.dt_s);
+                self.health[id].fused += 1;
+                self.consume_during_alignment(t);
+                self.try_finish_alignment(t);
+            }
+            Phase::Navigating => {
+                // The increment covers dt_s; after missing samples, stretch it over the gap.
+                let gap_s = prev_t.map_or(s.dt_s, |p| (t - p) as f64 * 1e-9);
+                let (scale, dt) = if gap_s > 1.5 * s.dt_s {
+                    self.strapdown.reset_history();
+                    (gap_s / s.dt_s, gap_s)
+                } else {
+                    (1.0, s.dt_s)
+                };
+                let inc = ImuIncrement {
+                    dt_s: dt,
+                    delta_angle_rad: dth * scale - self.ekf.gyro_bias_rad_s * dt,
+                    delta_velocity_m_s: dv * scale - self.ekf.accel_bias_m_s2 * dt,
+                };
+                self.strapdown.step(&mut self.nav, &inc);
+                let f_b = inc.delta_velocity_m_s / dt;
+                self.ekf.predict(&self.ell, &self.nav, &f_b, dt);
+                self.time_ns = t;
+                self.health[id].fused += 1;
+                self.push_history();
+                self.update_static_detector(t, &inc);
+                self.fuse_due(t);
+                self.maybe_zupt(t);
+            }
+        }
+        if self.phase != Phase::Navigating {
+            return Ok(None);
+        }
+        self.update_mode(t);
+        Ok(Some(self.solution(s)))
     }
+
     /// Queue a star-tracker sample for fusion at its time of validity.
     pub fn push_star_tracker(&mut self, s: &StarTrackerSample) -> Result<(), FusionError> {
-        let _ = s;
-        unimplemented!("filter helper")
+        let id = sid(SensorId::StarTracker);
+        self.health[id].received += 1;
+        if let Err(e) = self
+            .validate_header("star_tracker", id, &s.header)
+            .and_then(|_| {
+                let bad = |r: &str| invalid("star_tracker", &s.header, r);
+                if !s.q_sensor_icrf.iter().all(|x| x.is_finite()) {
+                    return Err(bad("non-finite quaternion"));
+                }
+                let n = s.q_sensor_icrf.iter().map(|x| x * x).sum::<f64>().sqrt();
+                if s.valid != 0 && (n - 1.0).abs() > 1e-3 {
+                    return Err(bad("quaternion is not unit norm"));
+                }
+                if s.valid != 0
+                    && !(pos(s.sigma_cross_rad)
+                        && pos(s.sigma_roll_rad)
+                        && s.sigma_cross_rad < 0.1
+                        && s.sigma_roll_rad < 0.1)
+                {
+                    return Err(bad("sigmas must be finite, > 0 and < 0.1 rad"));
+                }
+                Ok(())
+            })
+        {
+            self.health[id].rejected_invalid += 1;
+            return Err(e);
+        }
+        self.accept_header(id, &s.header);
+        if s.valid != 0 {
+            let obs = StarObs {
+                q: s.q_sensor_icrf,
+                sigma_cross: s.sigma_cross_rad,
+                sigma_roll: s.sigma_roll_rad,
+            };
+            if self.too_late(s.header.time_ns) {
+                self.health[id].dropped_late += 1;
+            } else if self.star_q.insert(s.header.time_ns, obs).is_some() {
+                self.health[id].dropped_late += 1;
+            }
+        }
+        Ok(())
     }
+
     /// Queue a GNSS sample.
     pub fn push_gnss(&mut self, s: &GnssSample) -> Result<(), FusionError> {
-        let _ = s;
-        unimplemented!("filter helper")
+        let id = sid(SensorId::Gnss);
+        self.health[id].received += 1;
+        let fix = match self
+            .validate_header("gnss", id, &s.header)
+            .and_then(|_| validate_gnss(s))
+        {
+            Ok(f) => f,
+            Err(e) => {
+                self.health[id].rejected_invalid += 1;
+                return Err(e);
+            }
+        };
+        self.accept_header(id, &s.header);
+        if let Some(fix) = fix {
+            if self.too_late(s.header.time_ns) {
+                self.health[id].dropped_late += 1;
+            } else if self.gnss_q.insert(s.header.time_ns, fix).is_some() {
+                self.health[id].dropped_late += 1;
+            }
+        }
+        Ok(())
     }
+
     /// Queue an odometer sample.
     pub fn push_odometer(&mut self, s: &OdometerSample) -> Result<(), FusionError> {
-        let _ = s;
-        unimplemented!("filter helper")
+        let id = sid(SensorId::Odometer);
+        self.health[id].received += 1;
+        if let Err(e) = self
+            .validate_header("odometer", id, &s.header)
+            .and_then(|_| {
+                let bad = |r: &str| invalid("odometer", &s.header, r);
+                if !(s.dt_s.is_finite() && s.dt_s > 0.0 && s.dt_s <= 10.0) {
+                    return Err(bad("interval must be in (0, 10] s"));
+                }
+                if !(s.speed_m_s.is_finite() && s.speed_m_s.abs() < 200.0) {
+                    return Err(bad("speed must be finite and below 200 m/s"));
+                }
+                if !s.distance_m.is_finite() {
+                    return Err(bad("non-finite distance"));
+                }
+                Ok(())
+            })
+        {
+            self.health[id].rejected_invalid += 1;
+            return Err(e);
+        }
+        self.accept_header(id, &s.header);
+        if self.too_late(s.header.time_ns) {
+            self.health[id].dropped_late += 1;
+        } else if self.odo_q.insert(s.header.time_ns, s.speed_m_s).is_some() {
+            self.health[id].dropped_late += 1;
+        }
+        Ok(())
     }
+
     /// Queue a baro sample.
     pub fn push_baro(&mut self, s: &BaroSample) -> Result<(), FusionError> {
-        let _ = s;
-        unimplemented!("filter helper")
+        let id = sid(SensorId::Baro);
+        self.health[id].received += 1;
+        if let Err(e) = self.validate_header("baro", id, &s.header).and_then(|_| {
+            let bad = |r: &str| invalid("baro", &s.header, r);
+            if !(s.pressure_pa.is_finite() && (1_000.0..=120_000.0).contains(&s.pressure_pa)) {
+                return Err(bad("pressure must be in [1000, 120000] Pa"));
+            }
+            if !(s.temperature_c.is_finite() && (-120.0..=100.0).contains(&s.temperature_c)) {
+                return Err(bad("temperature must be in [-120, 100] °C"));
+            }
+            Ok(())
+        }) {
+            self.health[id].rejected_invalid += 1;
+            return Err(e);
+        }
+        self.accept_header(id, &s.header);
+        let h = crate::atmosphere::isa_altitude_m(s.pressure_pa);
+        if !h.is_finite() {
+            // Counted as invalid, but the header has been accepted (time and seq advance).
+            self.health[id].rejected_invalid += 1;
+            return Err(invalid("baro", &s.header, "pressure gives no ISA altitude"));
+        }
+        if self.too_late(s.header.time_ns) {
+            self.health[id].dropped_late += 1;
+        } else if self.baro_q.insert(s.header.time_ns, h).is_some() {
+            self.health[id].dropped_late += 1;
+        }
+        Ok(())
     }
+
     /// Tell the navigator whether a sensor (index = `msgs::SensorId`) is delivering within its
     /// deadline (decided by the daemon, which owns the clock).
     pub fn set_sensor_alive(&mut self, sensor: usize, alive: bool) {
-        let _ = (sensor, alive);
-        unimplemented!("filter helper")
+        if let Some(h) = self.health.get_mut(sensor) {
+            if h.alive != 0 && !alive {
+                h.deadline_misses = h.deadline_misses.saturating_add(1);
+            }
+            h.alive = u32::from(alive);
+        }
     }
+
     /// Per-sensor health counters, indexed by `msgs::SensorId`.
     pub fn health(&self) -> [SensorHealth; MAX_SENSORS] {
-        unimplemented!("filter helper")
+        self.health
     }
+
     /// Current mode (`msgs::NavMode` as u32).
     pub fn mode(&self) -> u32 {
-        unimplemented!("filter helper")
+        self.mode as u32
     }
+
+    /// Zero-velocity update counters.
+    pub fn zupt_health(&self) -> ZuptHealth {
+        self.zupt
+    }
+
+    /// The configuration in use.
+    pub fn config(&self) -> &NavigatorConfig {
+        &self.config
+    }
+
+    /// Current inertial state (ECEF), valid once navigating.
+    pub fn nav_state(&self) -> &NavState {
+        &self.nav
+    }
+
+    /// Current error-state covariance (layout in [`crate::ekf`]).
+    pub fn covariance(&self) -> &Covariance {
+        &self.ekf.p
+    }
+
+    /// Estimated gyro bias (body, rad/s) and accelerometer bias (body, m/s²).
+    pub fn biases(&self) -> (Vector3<f64>, Vector3<f64>) {
+        (self.ekf.gyro_bias_rad_s, self.ekf.accel_bias_m_s2)
+    }
+
+    /// True once alignment is complete and the filter runs.
+    pub fn is_navigating(&self) -> bool {
+        self.phase == Phase::Navigating
+    }
+
+    /// Time of the last IMU sample processed, GPS ns (0 before the first).
+    pub fn time_ns(&self) -> i64 {
+        self.time_ns
+    }
+
+    // ---------------------------------------------------------------- validation
+
+    fn validate_header(
+        &self,
+        sensor: &'static str,
+        id: usize,
+        h: &Header,
+    ) -> Result<(), FusionError> {
+        if h.time_ns < 0 {
+            return Err(invalid(sensor, h, "negative time of validity"));
+        }
+        if let Some(prev) = self.last_time[id]
+            && h.time_ns <= prev
+        {
+            return Err(FusionError::TimeNotIncreasing {
+                sensor,
+                time_ns: h.time_ns,
+                previous_ns: prev,
+            });
+        }
+        if self.last_seq[id] == Some(h.seq) {
+            return Err(invalid(sensor, h, "duplicated sequence number"));
+        }
+        Ok(())
+    }
+
+    fn accept_header(&mut self, id: usize, h: &Header) {
+        self.last_time[id] = Some(h.time_ns);
+        self.last_seq[id] = Some(h.seq);
+        self.health[id].last_time_ns = h.time_ns;
+    }
+
+    fn validate_imu(&self, s: &ImuSample) -> Result<(), FusionError> {
+        let bad = |r: &str| invalid("imu", &s.header, r);
+        if !(s.dt_s.is_finite() && s.dt_s > 0.0 && s.dt_s <= 1.0) {
+            return Err(bad("interval dt_s must be in (0, 1] s"));
+        }
+        let dth = Vector3::from(s.delta_angle_rad);
+        let dv = Vector3::from(s.delta_velocity_m_s);
+        if !(dth.iter().all(|x| x.is_finite()) && dv.iter().all(|x| x.is_finite())) {
+            return Err(bad("non-finite increment"));
+        }
+        if dth.norm() > self.config.imu.max_rate_rad_s * s.dt_s {
+            return Err(bad("angular rate above imu.max_rate_rad_s"));
+        }
+        if dv.norm() > self.config.imu.max_specific_force_m_s2 * s.dt_s {
+            return Err(bad("specific force above imu.max_specific_force_m_s2"));
+        }
+        if s.n_channels as usize > MAX_IMU_CHANNELS {
+            return Err(bad("n_channels above MAX_IMU_CHANNELS"));
+        }
+        Ok(())
+    }
+
+    fn too_late(&self, t: i64) -> bool {
+        self.phase == Phase::Navigating
+            && t < self.time_ns - (self.config.buffer_window_s * 1e9) as i64
+    }
+
+    // ---------------------------------------------------------------- alignment
+
+    fn consume_during_alignment(&mut self, t: i64) {
+        while let Some((_, fix)) = self.gnss_q.pop_due(t) {
+            if self.init_fix.is_none() {
+                self.init_fix = Some((fix.pos, fix.pos_cov));
+            }
+        }
+        // Other aiding is not used before navigation starts.
+        while self.star_q.pop_due(t).is_some() {}
+        while self.odo_q.pop_due(t).is_some() {}
+        while self.baro_q.pop_due(t).is_some() {}
+    }
+
+    fn try_finish_alignment(&mut self, t: i64) {
+        if self.align.duration_s() + 1e-9 < self.config.alignment_s {
+            return;
+        }
+        let (r_e, pos_cov) = if let Some(p) = &self.config.initial_position {
+            let g = Geodetic {
+                lat_rad: p.lat_deg * DEG,
+                lon_rad: p.lon_deg * DEG,
+                height_m: p.height_m,
+            };
+            let s2 = self.config.initial.position_sigma_m.powi(2);
+            (
+                earth::geodetic_to_ecef(&self.ell, &g),
+                Matrix3::identity() * s2,
+            )
+        } else if let Some(f) = self.init_fix {
+            f
+        } else {
+            return; // keep averaging until a position is known
+        };
+        let geo = earth::ecef_to_geodetic(&self.ell, &r_e);
+        let f_b = self.align.mean_specific_force_m_s2();
+        let w_b = self.align.mean_rate_rad_s();
+        let a = match alignment::coarse_align(&f_b, &w_b, geo.lat_rad, self.ell.omega_ie_rad_s) {
+            Ok(a) => a,
+            Err(_) => {
+                // Not static (or polar): start the window again.
+                self.align.reset();
+                return;
+            }
+        };
+        let imu = &self.config.imu;
+        let noise = imu.process_noise();
+        let (s_level, s_head) = alignment::expected_sigmas(
+            imu.gyro_bias_rad_s(),
+            imu.accel_bias_m_s2(),
+            noise.arw_rad_sqrt_s,
+            noise.vrw_m_s_sqrt_s,
+            self.align.duration_s(),
+            geo.lat_rad,
+            self.ell.omega_ie_rad_s,
+            f_b.norm(),
+        );
+        let s_level = s_level.max(self.config.initial.level_sigma_min_deg * DEG);
+        let s_head = s_head.max(self.config.initial.heading_sigma_min_deg * DEG);
+        let q_e_n = q_e_n(geo.lat_rad, geo.lon_rad);
+        let c_e_n = q_e_n.to_rotation_matrix().into_inner();
+        self.nav = NavState {
+            r_e,
+            v_e: Vector3::zeros(),
+            q_e_b: q_e_n * a.q_n_b,
+        };
+        let mut p0 = Covariance::zeros();
+        p0.fixed_view_mut::<3, 3>(idx::POS, idx::POS)
+            .copy_from(&pos_cov);
+        let sv = self.config.initial.velocity_sigma_m_s.powi(2);
+        p0.fixed_view_mut::<3, 3>(idx::VEL, idx::VEL)
+            .copy_from(&(Matrix3::identity() * sv));
+        let att_n = Matrix3::from_diagonal(&Vector3::new(
+            s_level * s_level,
+            s_level * s_level,
+            s_head * s_head,
+        ));
+        p0.fixed_view_mut::<3, 3>(idx::ATT, idx::ATT)
+            .copy_from(&(c_e_n * att_n * c_e_n.transpose()));
+        let sbg = imu.gyro_bias_rad_s().powi(2);
+        let sba = imu.accel_bias_m_s2().powi(2);
+        for k in 0..3 {
+            p0[(idx::BG + k, idx::BG + k)] = sbg;
+            p0[(idx::BA + k, idx::BA + k)] = sba;
+        }
+        self.ekf = ErrorStateEkf::new(p0, noise);
+        self.strapdown = Strapdown::new(self.config.mechanization());
+        self.phase = Phase::Navigating;
+        self.time_ns = t;
+        self.hist_len = 0;
+        self.push_history();
+        // Aiding queued up to now belongs to the alignment period.
+        self.gnss_q.clear();
+    }
+
+    // ---------------------------------------------------------------- history
+
+    fn push_history(&mut self) {
+        let i = (self.hist_head + self.hist_len) % HIST_CAP;
+        self.hist[i] = HistEntry {
+            t: self.time_ns,
+            nav: self.nav,
+        };
+        if self.hist_len == HIST_CAP {
+            self.hist_head = (self.hist_head + 1) % HIST_CAP;
+        } else {
+            self.hist_len += 1;
+        }
+    }
+
+    /// Index of the first stored epoch with time ≥ `t`, None when older than the history.
+    fn history_at(&self, t: i64) -> Option<usize> {
+        if self.hist_len == 0 {
+            return None;
+        }
+        let mut found = None;
+        for k in (0..self.hist_len).rev() {
+            let i = (self.hist_head + k) % HIST_CAP;
+            if self.hist[i].t >= t {
+                found = Some(i);
+            } else {
+                return found;
+            }
+        }
+        // Every stored epoch is ≥ t: only acceptable when t is not before the oldest one's
+        // interval (the first epoch after navigation start).
+        if k_oldest_covers(&self.hist[self.hist_head], t) {
+            found
+        } else {
+            None
+        }
+    }
+
+    /// Apply an accepted correction to the current state, the biases and the history.
+    fn correct(&mut self, dx: &StateVector) {
+        self.ekf.apply_correction(&mut self.nav, dx);
+        let dr: Vector3<f64> = dx.fixed_rows::<3>(idx::POS).into_owned();
+        let dv: Vector3<f64> = dx.fixed_rows::<3>(idx::VEL).into_owned();
+        let dq = UnitQuaternion::from_scaled_axis(dx.fixed_rows::<3>(idx::ATT).into_owned());
+        for k in 0..self.hist_len {
+            let e = &mut self.hist[(self.hist_head + k) % HIST_CAP].nav;
+            e.r_e += dr;
+            e.v_e += dv;
+            e.q_e_b = dq * e.q_e_b;
+        }
+    }
+
+    // ---------------------------------------------------------------- fusion
+
+    fn fuse_due(&mut self, t: i64) {
+        while let Some((ts, fix)) = self.gnss_q.pop_due(t) {
+            self.fuse_gnss(ts, &fix);
+        }
+        while let Some((ts, obs)) = self.star_q.pop_due(t) {
+            self.fuse_star(ts, &obs);
+        }
+        while let Some((ts, speed)) = self.odo_q.pop_due(t) {
+            self.fuse_odometer(ts, speed);
+        }
+        while let Some((ts, h)) = self.baro_q.pop_due(t) {
+            self.fuse_baro(ts, h);
+        }
+    }
+
+    /// Run one gated update; returns Some(accepted) or None when the sample is too old.
+    fn run_update<const M: usize>(&mut self, id: Option<usize>, m: &Measurement<M>) -> bool {
+        let out = ekf::update(&self.ekf.p, m, self.gates.threshold(M));
+        if let Some(id) = id {
+            self.health[id].last_nis = out.residual.nis;
+            if out.residual.rejected {
+                self.health[id].rejected_gate += 1;
+            }
+        } else {
+            self.zupt.last_nis = out.residual.nis;
+            if out.residual.rejected {
+                self.zupt.rejected_gate += 1;
+            } else {
+                self.zupt.fused += 1;
+            }
+        }
+        if out.residual.rejected {
+            return false;
+        }
+        self.ekf.p = out.p;
+        self.correct(&out.dx);
+        true
+    }
+
+    fn mark_fused(&mut self, id: usize, ts: i64) {
+        self.health[id].fused += 1;
+        self.last_fused_ns[id] = Some(self.last_fused_ns[id].map_or(ts, |p| p.max(ts)));
+    }
+
+    fn fuse_gnss(&mut self, ts: i64, fix: &GnssFix) {
+        let id = sid(SensorId::Gnss);
+        let Some(hi) = self.history_at(ts) else {
+            self.health[id].dropped_late += 1;
+            return;
+        };
+        let mut fused = false;
+        if self.config.updates.gnss_position {
+            let m = ekf::gnss_position(&self.hist[hi].nav, &fix.pos, &fix.pos_cov);
+            fused |= self.run_update(Some(id), &m);
+        }
+        if self.config.updates.gnss_velocity && fix.vel_valid {
+            let m = ekf::gnss_velocity(&self.hist[hi].nav, &fix.vel, &fix.vel_cov);
+            fused |= self.run_update(Some(id), &m);
+        }
+        if fused {
+            self.mark_fused(id, ts);
+        }
+    }
+
+    fn fuse_star(&mut self, ts: i64, obs: &StarObs) {
+        let id = sid(SensorId::StarTracker);
+        if !self.config.updates.star_tracker {
+            return;
+        }
+        let Some(hi) = self.history_at(ts) else {
+            self.health[id].dropped_late += 1;
+            return;
+        };
+        let c_e_i = crate::celestial::c_e_i(GpsTime { ns: ts }, &self.config.eop);
+        let q = quat_from_wire(&obs.q);
+        let m = ekf::star_attitude(
+            &self.hist[hi].nav,
+            &q,
+            &c_e_i,
+            &self.c_s_b,
+            obs.sigma_cross,
+            obs.sigma_roll,
+        );
+        if self.run_update(Some(id), &m) {
+            self.mark_fused(id, ts);
+        }
+    }
+
+    fn fuse_odometer(&mut self, ts: i64, speed: f64) {
+        let id = sid(SensorId::Odometer);
+        self.last_odo = Some((ts, speed));
+        if !self.config.updates.odometer {
+            return;
+        }
+        let Some(hi) = self.history_at(ts) else {
+            self.health[id].dropped_late += 1;
+            return;
+        };
+        let a = &self.config.aiding;
+        let sigma =
+            (a.odometer_sigma_m_s.powi(2) + (a.odometer_scale_sigma * speed).powi(2)).sqrt();
+        let nav = self.hist[hi].nav;
+        let ok = if self.config.updates.nonholonomic {
+            let m = ekf::odometer_nhc(&nav, speed, sigma, a.nhc_sigma_m_s);
+            self.run_update(Some(id), &m)
+        } else {
+            let m = ekf::odometer_speed(&nav, speed, sigma);
+            self.run_update(Some(id), &m)
+        };
+        if ok {
+            self.mark_fused(id, ts);
+        }
+    }
+
+    fn fuse_baro(&mut self, ts: i64, height_m: f64) {
+        let id = sid(SensorId::Baro);
+        if !self.config.updates.baro {
+            return;
+        }
+        let min_dt = (self.config.aiding.baro_min_interval_s * 1e9) as i64;
+        if let Some(last) = self.last_baro_fused
+            && ts - last < min_dt
+        {
+            return;
+        }
+        let Some(hi) = self.history_at(ts) else {
+            self.health[id].dropped_late += 1;
+            return;
+        };
+        let m = ekf::baro_height(
+            &self.hist[hi].nav,
+            &self.ell,
+            height_m,
+            self.config.aiding.baro_sigma_m,
+        );
+        self.last_baro_fused = Some(ts);
+        if self.run_update(Some(id), &m) {
+            self.mark_fused(id, ts);
+        }
+    }
+
+    fn update_static_detector(&mut self, t: i64, inc: &ImuIncrement) {
+        let a = &self.config.aiding;
+        let w = inc.delta_angle_rad.norm() / inc.dt_s;
+        let f = inc.delta_velocity_m_s.norm() / inc.dt_s;
+        let g = earth::gravity_ecef(&self.ell, self.config.gravity, &self.nav.r_e).norm();
+        if w < a.zupt_max_rate_rad_s && (f - g).abs() < a.zupt_max_accel_dev_m_s2 {
+            if self.static_since.is_none() {
+                self.static_since = Some(t);
+            }
+        } else {
+            self.static_since = None;
+        }
+    }
+
+    fn maybe_zupt(&mut self, t: i64) {
+        let a = self.config.aiding;
+        if !self.config.updates.zupt {
+            return;
+        }
+        let Some(since) = self.static_since else {
+            return;
+        };
+        if ((t - since) as f64) * 1e-9 < a.zupt_window_s {
+            return;
+        }
+        if let Some(last) = self.last_zupt
+            && ((t - last) as f64) * 1e-9 < a.zupt_interval_s
+        {
+            return;
+        }
+        if self.nav.v_e.norm() > a.zupt_max_speed_m_s {
+            return;
+        }
+        // A recent odometer sample saying the vehicle moves vetoes the update.
+        if let Some((to, v)) = self.last_odo
+            && ((t - to) as f64) * 1e-9 < 1.0
+            && v.abs() > 0.02
+        {
+            return;
+        }
+        self.last_zupt = Some(t);
+        let m = ekf::zero_velocity(&self.nav, a.zupt_sigma_m_s);
+        self.run_update(None, &m);
+    }
+
+    fn update_mode(&mut self, t: i64) {
+        let d = &self.config.deadlines;
+        let recent = |s: SensorId, dl: f64| -> bool {
+            self.last_fused_ns[sid(s)].is_some_and(|f| ((t - f) as f64) * 1e-9 <= dl)
+        };
+        let star = recent(SensorId::StarTracker, d.star_tracker_s);
+        let gnss = recent(SensorId::Gnss, d.gnss_s);
+        let odo = recent(SensorId::Odometer, d.odometer_s);
+        let baro = recent(SensorId::Baro, d.baro_s);
+        let zupt = self
+            .last_zupt
+            .is_some_and(|z| ((t - z) as f64) * 1e-9 <= 1.0)
+            && self.static_since.is_some();
+        let mut mask = 0u32;
+        for (on, s) in [
+            (star, SensorId::StarTracker),
+            (gnss, SensorId::Gnss),
+            (odo, SensorId::Odometer),
+            (baro, SensorId::Baro),
+        ] {
+            if on {
+                mask |= 1 << (s as u32);
+            }
+        }
+        self.aiding_mask = mask;
+        self.mode = match (gnss, star) {
+            (true, true) => NavMode::GnssAstroInertial,
+            (true, false) => NavMode::GnssInertial,
+            (false, true) => NavMode::AstroInertial,
+            (false, false) if odo || baro || zupt => NavMode::DeadReckoning,
+            _ => NavMode::FreeInertial,
+        };
+    }
+
+    fn solution(&mut self, s: &ImuSample) -> NavSolution {
+        let geo = earth::ecef_to_geodetic(&self.ell, &self.nav.r_e);
+        let q_e_n = q_e_n(geo.lat_rad, geo.lon_rad);
+        let c_n_e = q_e_n.to_rotation_matrix().into_inner().transpose();
+        let q_n_b = q_e_n.inverse() * self.nav.q_e_b;
+        let v_ned = c_n_e * self.nav.v_e;
+        let rpy = rpy_from_q_n_b(&q_n_b);
+        let p = &self.ekf.p;
+        let sig = |k: usize| -> [f64; 3] {
+            let b: Matrix3<f64> = p.fixed_view::<3, 3>(k, k).into_owned();
+            let d = (c_n_e * b * c_n_e.transpose()).diagonal();
+            [
+                d.x.max(0.0).sqrt(),
+                d.y.max(0.0).sqrt(),
+                d.z.max(0.0).sqrt(),
+            ]
+        };
+        self.solutions += 1;
+        NavSolution {
+            header: Header {
+                time_ns: self.time_ns,
+                seq: self.solutions,
+                status: 0,
+                reserved: 0,
+                send_mono_ns: 0,
+            },
+            mode: self.mode as u32,
+            aiding_mask: self.aiding_mask,
+            lat_rad: geo.lat_rad,
+            lon_rad: geo.lon_rad,
+            height_m: geo.height_m,
+            pos_ecef_m: self.nav.r_e.into(),
+            vel_ned_m_s: v_ned.into(),
+            q_ned_body: quat_to_wire(&q_n_b),
+            roll_pitch_heading_rad: rpy.into(),
+            pos_sigma_ned_m: sig(idx::POS),
+            vel_sigma_ned_m_s: sig(idx::VEL),
+            att_sigma_ned_rad: sig(idx::ATT),
+            gyro_bias_rad_s: self.ekf.gyro_bias_rad_s.into(),
+            accel_bias_m_s2: self.ekf.accel_bias_m_s2.into(),
+            imu_send_mono_ns: s.header.send_mono_ns,
+        }
+    }
+}
+
+/// The oldest history epoch also stands for sample times inside the IMU interval before it
+/// (≤ 1 s: the longest accepted IMU interval).
+fn k_oldest_covers(oldest: &HistEntry, t: i64) -> bool {
+    oldest.t - t <= 1_000_000_000
+}
+
+fn invalid(sensor: &'static str, h: &Header, reason: &str) -> FusionError {
+    FusionError::InvalidSample {
+        sensor,
+        time_ns: h.time_ns,
+        reason: reason.to_string(),
+    }
+}
+
+fn matrix_from_row_major(a: &[f64; 9]) -> Matrix3<f64> {
+    Matrix3::from_row_slice(a)
+}
+
+/// Check a GNSS sample; Ok(None) when it carries no valid fix (not an error).
+fn validate_gnss(s: &GnssSample) -> Result<Option<GnssFix>, FusionError> {
+    let bad = |r: &str| invalid("gnss", &s.header, r);
+    if s.n_satellites as usize > MAX_SATELLITES {
+        return Err(bad("n_satellites above MAX_SATELLITES"));
+    }
+    if s.fix_valid == 0 {
+        return Ok(None);
+    }
+    let p = Vector3::from(s.pos_ecef_m);
+    let v = Vector3::from(s.vel_ecef_m_s);
+    if !(p.iter().all(|x| x.is_finite()) && v.iter().all(|x| x.is_finite())) {
+        return Err(bad("non-finite position or velocity"));
+    }
+    let r = p.norm();
+    if !(6.30e6..=6.48e6).contains(&r) {
+        return Err(bad(
+            "position is not near the Earth's surface (|r| outside 6300–6480 km)",
+        ));
+    }
+    if v.norm() > 2_000.0 {
+        return Err(bad("velocity above 2000 m/s"));
+    }
+    let pc = matrix_from_row_major(&s.pos_cov_ecef_m2);
+    let vc = matrix_from_row_major(&s.vel_cov_ecef_m2_s2);
+    if !(pc.iter().all(|x| x.is_finite()) && vc.iter().all(|x| x.is_finite())) {
+        return Err(bad("non-finite covariance"));
+    }
+    let pc = ekf::symmetrize(&pc);
+    if nalgebra::Cholesky::new(pc).is_none() || pc.diagonal().max() > 1e8 {
+        return Err(bad("position covariance not positive definite or absurd"));
+    }
+    let vc = ekf::symmetrize(&vc);
+    let vel_valid = if vc.iter().all(|x| *x == 0.0) {
+        false
+    } else if nalgebra::Cholesky::new(vc).is_none() || vc.diagonal().max() > 1e4 {
+        return Err(bad("velocity covariance not positive definite or absurd"));
+    } else {
+        true
+    };
+    Ok(Some(GnssFix {
+        pos: p,
+        vel: v,
+        pos_cov: pc,
+        vel_cov: vc,
+        vel_valid,
+    }))
 }
