@@ -1,1 +1,518 @@
-fn main() {}
+//! The `sextant` command. `sextant run`: start the drivers and the fusion daemon, supervise them,
+//! stop them cleanly, then analyse the recording (table, `summary.json`, PNG plots).
+
+use anyhow::{Context, bail};
+use clap::{Parser, Subcommand};
+use msgs::ipc::Bus;
+use msgs::{NavMode, SensorId, Status};
+use nix::sys::signal::{Signal, kill};
+use nix::unistd::Pid;
+use sextant_daemons::{analysis, config, plots, scenario};
+use std::collections::HashMap;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::{ExitStatus, Stdio};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+use tokio::signal::unix::{SignalKind, signal};
+use tokio::sync::mpsc;
+
+/// Sextant navigation computer.
+#[derive(Debug, Parser)]
+#[command(name = "sextant", version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Run the live system: drivers, fusion and recorder; then summarise the recording.
+    Run(RunArgs),
+}
+
+#[derive(Debug, clap::Args)]
+struct RunArgs {
+    /// System configuration (default config/sextant.toml; if absent, the copy embedded in the
+    /// binary is written to OUT/config/ and used).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Scenario file (default: `system.scenario` of the configuration).
+    #[arg(long)]
+    scenario: Option<PathBuf>,
+    /// Simulated duration, s (default: `run.duration_s`, at most `run.max_duration_s`).
+    #[arg(long)]
+    duration: Option<f64>,
+    /// Speed-up of simulated time over wall time (default: `run.speed`).
+    #[arg(long)]
+    speed: Option<f64>,
+    /// Output directory (default: `run.out`): recording.mcap, summary.json, plots, logs/.
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Service-name prefix (default: `system.prefix`); use distinct prefixes for parallel runs.
+    #[arg(long)]
+    prefix: Option<String>,
+}
+
+const DEFAULT_CONFIG: &str = "config/sextant.toml";
+
+fn main() -> anyhow::Result<()> {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+    let cli = Cli::parse();
+    match cli.command {
+        Command::Run(args) => {
+            let rt = tokio::runtime::Builder::new_current_thread()
+                .enable_all()
+                .build()?;
+            let code = rt.block_on(run(args))?;
+            std::process::exit(code);
+        }
+    }
+}
+
+/// One supervised child process.
+struct Slot {
+    name: String,
+    program: PathBuf,
+    args: Vec<String>,
+    log: PathBuf,
+    restarts: u32,
+    finished: bool,
+    pid: Option<i32>,
+}
+
+fn spawn(
+    idx: usize,
+    slot: &mut Slot,
+    tx: &mpsc::UnboundedSender<(usize, std::io::Result<ExitStatus>)>,
+) -> anyhow::Result<()> {
+    let log = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(&slot.log)
+        .with_context(|| format!("open log {}", slot.log.display()))?;
+    let mut cmd = tokio::process::Command::new(&slot.program);
+    cmd.args(&slot.args)
+        .stdin(Stdio::null())
+        .stdout(log.try_clone()?)
+        .stderr(log)
+        // Own process group: a terminal Ctrl-C reaches only `sextant`, which stops the children
+        // in order (drivers, then fusion, so that the recorder sees everything).
+        .process_group(0);
+    // SAFETY: only calls prctl(2), async-signal-safe, between fork and exec.
+    unsafe {
+        cmd.pre_exec(|| {
+            // If `sextant` dies (even by SIGKILL), the child gets SIGTERM: no orphans.
+            nix::sys::prctl::set_pdeathsig(Signal::SIGTERM).map_err(std::io::Error::from)
+        });
+    }
+    let mut child = cmd
+        .spawn()
+        .with_context(|| format!("start {}", slot.program.display()))?;
+    slot.pid = child.id().map(|p| p as i32);
+    tracing::debug!("started {} (pid {:?})", slot.name, slot.pid);
+    let tx = tx.clone();
+    tokio::spawn(async move {
+        let r = child.wait().await;
+        let _ = tx.send((idx, r));
+    });
+    Ok(())
+}
+
+fn signal_pid(slot: &Slot, sig: Signal) {
+    if let Some(pid) = slot.pid
+        && let Err(e) = kill(Pid::from_raw(pid), sig)
+    {
+        tracing::debug!("{sig} to {} ({pid}): {e}", slot.name);
+    }
+}
+
+/// Wait until every slot in `which` has exited, up to `timeout`; then SIGKILL the rest and wait
+/// for them too.
+async fn stop_and_wait(
+    slots: &mut [Slot],
+    which: &[usize],
+    rx: &mut mpsc::UnboundedReceiver<(usize, std::io::Result<ExitStatus>)>,
+    timeout: Duration,
+    results: &mut HashMap<usize, ExitStatus>,
+) {
+    for &i in which {
+        if slots[i].pid.is_some() {
+            signal_pid(&slots[i], Signal::SIGTERM);
+        }
+    }
+    let live = |slots: &[Slot]| which.iter().any(|&i| slots[i].pid.is_some());
+    let deadline = tokio::time::Instant::now() + timeout;
+    let mut killed = false;
+    while live(slots) {
+        match tokio::time::timeout_at(deadline, rx.recv()).await {
+            Ok(Some((i, r))) => {
+                slots[i].pid = None;
+                if let Ok(st) = r {
+                    results.insert(i, st);
+                }
+            }
+            Ok(None) => break,
+            Err(_) if !killed => {
+                killed = true;
+                for &i in which {
+                    if slots[i].pid.is_some() {
+                        tracing::warn!("{} did not stop in {timeout:?}: SIGKILL", slots[i].name);
+                        signal_pid(&slots[i], Signal::SIGKILL);
+                    }
+                }
+                // Reaping after SIGKILL is immediate.
+                while live(slots) {
+                    match tokio::time::timeout(Duration::from_secs(5), rx.recv()).await {
+                        Ok(Some((i, _))) => slots[i].pid = None,
+                        _ => return,
+                    }
+                }
+            }
+            Err(_) => break,
+        }
+    }
+}
+
+fn status_line(st: &Status) -> String {
+    let mode = NavMode::from_u32(st.mode).map_or("?", |m| m.name());
+    let t = if st.header.time_ns > 0 {
+        let s = st.header.time_ns as f64 * 1e-9;
+        format!("{:.1}", s % 86_400.0)
+    } else {
+        "—".into()
+    };
+    let alive: Vec<&str> = SensorId::ALL
+        .iter()
+        .filter(|s| st.alive_mask & (1 << (**s as u32)) != 0)
+        .map(|s| s.name())
+        .collect();
+    let gated: u64 = st.sensors.iter().map(|h| h.rejected_gate).sum();
+    format!(
+        "\r[GPS tod {t} s] {mode:<19} alive: {:<38} nav {} rec {} dropped {} gated {}   ",
+        alive.join(","),
+        st.solutions_published,
+        st.records_written,
+        st.records_dropped,
+        gated
+    )
+}
+
+/// Subscribe to the status on a plain thread and print a live one-line status.
+fn status_thread(prefix: String, stop: Arc<AtomicBool>) -> std::thread::JoinHandle<()> {
+    std::thread::spawn(move || {
+        use iceoryx2::prelude::*;
+        let run = || -> Result<(), String> {
+            let bus = Bus::new(&prefix, "sextant-run").map_err(|e| e.to_string())?;
+            let sub = bus.subscriber::<Status>().map_err(|e| e.to_string())?;
+            let ws = WaitSetBuilder::new()
+                .signal_handling_mode(SignalHandlingMode::Disabled)
+                .create::<ipc::Service>()
+                .map_err(|e| format!("{e:?}"))?;
+            let _g = ws
+                .attach_notification(sub.listener())
+                .map_err(|e| format!("{e:?}"))?;
+            let _tick = ws
+                .attach_interval(Duration::from_millis(200))
+                .map_err(|e| format!("{e:?}"))?;
+            let mut printed = false;
+            while !stop.load(Ordering::SeqCst) {
+                ws.wait_and_process_once_with_timeout(
+                    |_| CallbackProgression::Continue,
+                    Duration::from_secs(1),
+                )
+                .map_err(|e| format!("{e:?}"))?;
+                sub.clear_events();
+                let mut last = None;
+                while let Ok(Some(st)) = sub.receive() {
+                    last = Some(st);
+                }
+                if let Some(st) = last {
+                    let mut err = std::io::stderr().lock();
+                    let _ = write!(err, "{}", status_line(&st));
+                    let _ = err.flush();
+                    printed = true;
+                }
+            }
+            if printed {
+                eprintln!();
+            }
+            Ok(())
+        };
+        if let Err(e) = run() {
+            tracing::warn!("status display: {e}");
+        }
+    })
+}
+
+fn load_config(args: &RunArgs, out: &Path) -> anyhow::Result<config::LoadedConfig> {
+    let path = match &args.config {
+        Some(p) => p.clone(),
+        None if Path::new(DEFAULT_CONFIG).exists() => PathBuf::from(DEFAULT_CONFIG),
+        None => {
+            let dir = out.join("config");
+            let p = config::materialize_embedded(&dir)?;
+            tracing::info!(
+                "{DEFAULT_CONFIG} not found: using the embedded configuration, written to {}",
+                dir.display()
+            );
+            p
+        }
+    };
+    Ok(config::load(&path)?)
+}
+
+async fn run(args: RunArgs) -> anyhow::Result<i32> {
+    let wall_start = Instant::now();
+    // The output directory is needed before the config only for the embedded fallback, whose
+    // default is the built-in `out/run`.
+    let pre_out = args.out.clone().unwrap_or_else(|| PathBuf::from("out/run"));
+    let cfg = load_config(&args, &pre_out)?;
+    let rc = &cfg.system.run;
+    let out = args.out.clone().unwrap_or_else(|| rc.out.clone());
+    let duration = args.duration.unwrap_or(rc.duration_s);
+    if !(duration.is_finite() && duration > 0.0 && duration <= rc.max_duration_s) {
+        bail!(
+            "--duration must be within (0, {}] s (run.max_duration_s of {}), got {duration}",
+            rc.max_duration_s,
+            cfg.path.display()
+        );
+    }
+    let speed = args.speed.unwrap_or(rc.speed);
+    if !(speed.is_finite() && speed > 0.0 && speed <= 1000.0) {
+        bail!("--speed must be within (0, 1000], got {speed}");
+    }
+    let scenario_path = args.scenario.clone().unwrap_or_else(|| cfg.scenario_path());
+    let scen = scenario::ScenarioInfo::load(&scenario_path)?;
+    let prefix = args
+        .prefix
+        .clone()
+        .unwrap_or_else(|| cfg.system.system.prefix.clone());
+    std::fs::create_dir_all(out.join("logs"))
+        .with_context(|| format!("create {}", out.display()))?;
+    let recording = out.join("recording.mcap");
+    if recording.exists() {
+        std::fs::remove_file(&recording)
+            .with_context(|| format!("remove old {}", recording.display()))?;
+    }
+
+    let cleaned = msgs::ipc::cleanup_dead_nodes()?;
+    if cleaned > 0 {
+        tracing::info!("removed the shared memory of {cleaned} dead node(s) of an earlier run");
+    }
+
+    let bin_dir = std::env::current_exe()?
+        .parent()
+        .map(Path::to_path_buf)
+        .context("no directory of the current executable")?;
+    let mut names: Vec<String> = rc.drivers.clone();
+    names.push("sextant-fusion".into());
+    let missing: Vec<_> = names
+        .iter()
+        .filter(|n| !bin_dir.join(n).is_file())
+        .cloned()
+        .collect();
+    if !missing.is_empty() {
+        bail!(
+            "missing binaries in {}: {} (build them: cargo build --workspace --bins)",
+            bin_dir.display(),
+            missing.join(", ")
+        );
+    }
+
+    let mut sigint = signal(SignalKind::interrupt())?;
+    let mut sigterm = signal(SignalKind::terminate())?;
+
+    let start_mono_ns =
+        msgs::monotonic_ns() + (rc.start_delay_s * 1e9) as u64;
+    let scenario_arg = scenario_path.display().to_string();
+    let mut slots: Vec<Slot> = rc
+        .drivers
+        .iter()
+        .map(|n| Slot {
+            name: n.clone(),
+            program: bin_dir.join(n),
+            args: vec![
+                "--scenario".into(),
+                scenario_arg.clone(),
+                "--prefix".into(),
+                prefix.clone(),
+                "--start-mono-ns".into(),
+                start_mono_ns.to_string(),
+                "--speed".into(),
+                speed.to_string(),
+                "--duration".into(),
+                duration.to_string(),
+            ],
+            log: out.join("logs").join(format!("{n}.log")),
+            restarts: 0,
+            finished: false,
+            pid: None,
+        })
+        .collect();
+    let fusion_idx = slots.len();
+    slots.push(Slot {
+        name: "sextant-fusion".into(),
+        program: bin_dir.join("sextant-fusion"),
+        args: vec![
+            "--config".into(),
+            cfg.path.display().to_string(),
+            "--prefix".into(),
+            prefix.clone(),
+            "--out".into(),
+            recording.display().to_string(),
+            "--speed".into(),
+            speed.to_string(),
+        ],
+        log: out.join("logs").join("sextant-fusion.log"),
+        restarts: 0,
+        finished: false,
+        pid: None,
+    });
+    let driver_idx: Vec<usize> = (0..fusion_idx).collect();
+
+    eprintln!(
+        "sextant run: scenario {} ({}), {duration} s at {speed}x, prefix {prefix}, output {}",
+        scenario_path.display(),
+        scen.name,
+        out.display()
+    );
+    let (tx, mut rx) = mpsc::unbounded_channel();
+    // Fusion first, so that its subscribers exist before the first sample.
+    spawn(fusion_idx, &mut slots[fusion_idx], &tx)?;
+    for &i in &driver_idx {
+        if let Err(e) = spawn(i, &mut slots[i], &tx) {
+            let mut results = HashMap::new();
+            let all: Vec<usize> = (0..slots.len()).collect();
+            stop_and_wait(&mut slots, &all, &mut rx, Duration::from_secs(5), &mut results).await;
+            return Err(e);
+        }
+    }
+    let status_stop = Arc::new(AtomicBool::new(false));
+    let status = status_thread(prefix.clone(), status_stop.clone());
+
+    // The drivers end by themselves; a watchdog stops a run that overruns by far.
+    let expected = Duration::from_secs_f64(rc.start_delay_s + duration / speed);
+    let watchdog = tokio::time::sleep(expected + Duration::from_secs(30) + expected / 2);
+    tokio::pin!(watchdog);
+    let stop_timeout = Duration::from_secs_f64(rc.stop_timeout_s);
+    let mut results: HashMap<usize, ExitStatus> = HashMap::new();
+    #[derive(Debug, PartialEq)]
+    enum End {
+        Completed,
+        Interrupted(&'static str),
+        FusionDied,
+        Watchdog,
+    }
+    let end = loop {
+        tokio::select! {
+            _ = sigint.recv() => break End::Interrupted("SIGINT"),
+            _ = sigterm.recv() => break End::Interrupted("SIGTERM"),
+            _ = &mut watchdog => break End::Watchdog,
+            Some((i, r)) = rx.recv() => {
+                slots[i].pid = None;
+                if i == fusion_idx {
+                    tracing::error!("sextant-fusion exited unexpectedly: {r:?} (see {})", slots[i].log.display());
+                    if let Ok(st) = r { results.insert(i, st); }
+                    break End::FusionDied;
+                }
+                match r {
+                    Ok(st) if st.success() => {
+                        slots[i].finished = true;
+                        results.insert(i, st);
+                    }
+                    other => {
+                        let slot = &mut slots[i];
+                        if slot.restarts < rc.max_restarts {
+                            slot.restarts += 1;
+                            eprintln!();
+                            tracing::warn!("{} died ({other:?}): restart {}/{}", slot.name, slot.restarts, rc.max_restarts);
+                            if let Err(e) = spawn(i, slot, &tx) {
+                                tracing::error!("restart of {} failed: {e:#}", slot.name);
+                                slot.finished = true;
+                            }
+                        } else {
+                            tracing::error!("{} died ({other:?}) after {} restarts: giving up on it", slot.name, slot.restarts);
+                            slot.finished = true;
+                            if let Ok(st) = other { results.insert(i, st); }
+                        }
+                    }
+                }
+                if driver_idx.iter().all(|&d| slots[d].finished) {
+                    break End::Completed;
+                }
+            }
+        }
+    };
+    if end != End::Completed {
+        eprintln!();
+        tracing::info!("stopping ({end:?})");
+    }
+    // Drivers first, then the fusion daemon (which drains, finishes the recording and exits).
+    stop_and_wait(&mut slots, &driver_idx, &mut rx, stop_timeout, &mut results).await;
+    stop_and_wait(&mut slots, &[fusion_idx], &mut rx, stop_timeout * 4, &mut results).await;
+    status_stop.store(true, Ordering::SeqCst);
+    let _ = tokio::task::spawn_blocking(move || status.join()).await;
+    match msgs::ipc::cleanup_dead_nodes() {
+        Ok(n) if n > 0 => tracing::warn!("cleaned the shared memory of {n} dead node(s)"),
+        Ok(_) => {}
+        Err(e) => tracing::warn!("cleanup: {e}"),
+    }
+    let fusion_ok = results.get(&fusion_idx).is_some_and(|s| s.success());
+    if !fusion_ok {
+        tracing::error!(
+            "sextant-fusion did not exit cleanly ({:?}); see {}",
+            results.get(&fusion_idx),
+            slots[fusion_idx].log.display()
+        );
+    }
+
+    let wall_s = wall_start.elapsed().as_secs_f64();
+    if !recording.exists() {
+        bail!("no recording was written ({})", recording.display());
+    }
+    let a = analysis::analyze(&recording, &scen.gnss_outages)?;
+    println!("{}", analysis::format_table(&a.summary));
+    let mut json = serde_json::to_value(&a.summary)?;
+    if let Some(m) = json.as_object_mut() {
+        m.insert("run_wall_time_s".into(), wall_s.into());
+        m.insert("scenario".into(), scenario_arg.clone().into());
+        m.insert("requested_duration_s".into(), duration.into());
+        m.insert("speed".into(), speed.into());
+        m.insert("service_prefix".into(), prefix.clone().into());
+        m.insert("end".into(), format!("{end:?}").into());
+        m.insert(
+            "driver_restarts".into(),
+            serde_json::Value::Object(
+                slots[..fusion_idx]
+                    .iter()
+                    .map(|s| (s.name.clone(), s.restarts.into()))
+                    .collect(),
+            ),
+        );
+    }
+    let summary_path = out.join("summary.json");
+    std::fs::write(&summary_path, serde_json::to_string_pretty(&json)? + "\n")
+        .with_context(|| format!("write {}", summary_path.display()))?;
+    match plots::write_plots(&out, &a.series) {
+        Ok(files) => {
+            for f in files {
+                println!("  plot: {}", f.display());
+            }
+        }
+        Err(e) => tracing::warn!("{e}"),
+    }
+    println!("  summary: {}", summary_path.display());
+    println!("  run time: {wall_s:.1} s wall");
+    Ok(match end {
+        End::Completed | End::Interrupted(_) if fusion_ok => 0,
+        _ => 1,
+    })
+}
