@@ -123,7 +123,10 @@ where
     F: FnOnce(&Scenario, i64) -> S,
 {
     if !(args.speed > 0.0) {
-        return Err(cli_invalid("--speed", format!("must be > 0, got {}", args.speed)));
+        return Err(cli_invalid(
+            "--speed",
+            format!("must be > 0, got {}", args.speed),
+        ));
     }
     let scn = Scenario::load(&args.scenario)?;
     let duration_ns = match args.duration {

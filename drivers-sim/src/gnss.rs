@@ -181,7 +181,12 @@ impl GnssSim {
 
     /// Receiver output at `t_s` since the scenario epoch (GPS time `t_gps_ns`) for the truth
     /// point `truth`, with the hidden truth of the epoch.
-    pub fn sample(&mut self, t_s: f64, t_gps_ns: i64, truth: &TruthPoint) -> (GnssSample, GnssEpochTruth) {
+    pub fn sample(
+        &mut self,
+        t_s: f64,
+        t_gps_ns: i64,
+        truth: &TruthPoint,
+    ) -> (GnssSample, GnssEpochTruth) {
         if let Some(prev) = self.last_t_s {
             self.propagate_clock(t_s - prev);
         }

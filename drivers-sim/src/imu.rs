@@ -89,7 +89,13 @@ impl TriadErrors {
     }
 
     /// Corrupt the true increment `x` (rad or m/s) over `dt` with `bias` and white draw `w`.
-    fn apply(&self, x: &Vector3<f64>, dt: f64, bias: &Vector3<f64>, w: &Vector3<f64>) -> Vector3<f64> {
+    fn apply(
+        &self,
+        x: &Vector3<f64>,
+        dt: f64,
+        bias: &Vector3<f64>,
+        w: &Vector3<f64>,
+    ) -> Vector3<f64> {
         let scaled = (Matrix3::from_diagonal(&(Vector3::repeat(1.0) + self.scale)) * self.mis) * x;
         let y = scaled + bias * dt + w * (self.white_per_rt_s * dt.sqrt());
         if self.lsb > 0.0 {
@@ -141,7 +147,11 @@ impl ImuErrorModel {
     }
 
     /// Draw the constant errors of `grade` from `rng`.
-    pub fn from_grade(grade: &ImuGrade, temperature: TemperatureProfile, mut rng: ChaCha20Rng) -> Self {
+    pub fn from_grade(
+        grade: &ImuGrade,
+        temperature: TemperatureProfile,
+        mut rng: ChaCha20Rng,
+    ) -> Self {
         let g = &grade.gyro;
         let a = &grade.accel;
         let gyro_lsb = if g.adc_bits > 0 {
@@ -188,7 +198,8 @@ impl ImuErrorModel {
     /// Make the draws of the interval `(t_end_s − dt_s, t_end_s]` and advance the bias random
     /// walk. Returns the biases applied over that interval.
     pub fn next_interval(&mut self, t_end_s: f64, dt_s: f64) -> IntervalErrors {
-        let dtemp = temperature_c(&self.temperature, t_end_s - 0.5 * dt_s) - self.reference_temperature_c;
+        let dtemp =
+            temperature_c(&self.temperature, t_end_s - 0.5 * dt_s) - self.reference_temperature_c;
         let e = IntervalErrors {
             gyro_bias_rad_s: self.gyro.bias(dtemp),
             accel_bias_m_s2: self.accel.bias(dtemp),
@@ -209,7 +220,12 @@ impl ImuErrorModel {
             return (inc.delta_angle_b_rad, inc.delta_velocity_b_m_s);
         }
         (
-            self.gyro.apply(&inc.delta_angle_b_rad, inc.dt_s, &e.gyro_bias_rad_s, &e.gyro_white),
+            self.gyro.apply(
+                &inc.delta_angle_b_rad,
+                inc.dt_s,
+                &e.gyro_bias_rad_s,
+                &e.gyro_white,
+            ),
             self.accel.apply(
                 &inc.delta_velocity_b_m_s,
                 inc.dt_s,

@@ -543,7 +543,20 @@ pub fn parse_utc(s: &str) -> Option<UtcCalendar> {
         return None;
     }
     let leap = (year % 4 == 0 && year % 100 != 0) || year % 400 == 0;
-    let mdays = [31, if leap { 29 } else { 28 }, 31, 30, 31, 30, 31, 31, 30, 31, 30, 31];
+    let mdays = [
+        31,
+        if leap { 29 } else { 28 },
+        31,
+        30,
+        31,
+        30,
+        31,
+        31,
+        30,
+        31,
+        30,
+        31,
+    ];
     if !(1980..=2100).contains(&year)
         || !(1..=12).contains(&month)
         || day < 1
@@ -614,20 +627,22 @@ fn load_grade<T: DeserializeOwned>(
     if let Some(o) = overrides {
         merge(&mut table, o);
     }
-    toml::Value::Table(table).try_into().map_err(|e: toml::de::Error| {
-        let origin = if overrides.is_some() {
-            format!(
-                " (grade `{grade}` merged with `{section}.overrides` of {})",
-                scenario_file.display()
-            )
-        } else {
-            String::new()
-        };
-        SimError::Parse {
-            file: path.clone(),
-            message: format!("[{section}]{origin}: {}", e.message()),
-        }
-    })
+    toml::Value::Table(table)
+        .try_into()
+        .map_err(|e: toml::de::Error| {
+            let origin = if overrides.is_some() {
+                format!(
+                    " (grade `{grade}` merged with `{section}.overrides` of {})",
+                    scenario_file.display()
+                )
+            } else {
+                String::new()
+            };
+            SimError::Parse {
+                file: path.clone(),
+                message: format!("[{section}]{origin}: {}", e.message()),
+            }
+        })
 }
 
 impl Scenario {
@@ -723,16 +738,27 @@ impl Scenario {
             return Err(invalid(
                 f,
                 "site.lat_deg",
-                format!("{} is outside ±89° (NED trajectory is singular at the poles)", s.lat_deg),
+                format!(
+                    "{} is outside ±89° (NED trajectory is singular at the poles)",
+                    s.lat_deg
+                ),
             ));
         }
         finite("site.lon_deg", s.lon_deg)?;
         if !(-180.0..=360.0).contains(&s.lon_deg) {
-            return Err(invalid(f, "site.lon_deg", format!("{} is outside −180..360", s.lon_deg)));
+            return Err(invalid(
+                f,
+                "site.lon_deg",
+                format!("{} is outside −180..360", s.lon_deg),
+            ));
         }
         finite("site.height_m", s.height_m)?;
         if !(-500.0..=20_000.0).contains(&s.height_m) {
-            return Err(invalid(f, "site.height_m", "outside −500..20 000 m (ISA range)"));
+            return Err(invalid(
+                f,
+                "site.height_m",
+                "outside −500..20 000 m (ISA range)",
+            ));
         }
         match &spec.trajectory {
             Trajectory::Static(st) => {
@@ -749,7 +775,11 @@ impl Scenario {
                     finite(&format!("{k}.to_deg"), mv.to_deg)?;
                     positive(&format!("{k}.duration_s"), mv.duration_s)?;
                     if mv.start_s < end {
-                        return Err(invalid(f, format!("{k}.start_s"), "overlaps the previous move"));
+                        return Err(invalid(
+                            f,
+                            format!("{k}.start_s"),
+                            "overlaps the previous move",
+                        ));
                     }
                     end = mv.start_s + mv.duration_s;
                 }
@@ -795,7 +825,10 @@ impl Scenario {
         }
         rate("imu.rate_hz", spec.imu.rate_hz)?;
         finite("imu.temperature.initial_c", spec.imu.temperature.initial_c)?;
-        finite("imu.temperature.rate_c_per_h", spec.imu.temperature.rate_c_per_h)?;
+        finite(
+            "imu.temperature.rate_c_per_h",
+            spec.imu.temperature.rate_c_per_h,
+        )?;
         rate("star_tracker.rate_hz", spec.star_tracker.rate_hz)?;
         for (i, k) in spec.star_tracker.mounting_kappa_deg.iter().enumerate() {
             finite(&format!("star_tracker.mounting_kappa_deg[{i}]"), *k)?;
@@ -815,7 +848,11 @@ impl Scenario {
         finite("gnss.constellation.inclination_deg", c.inclination_deg)?;
         finite("gnss.constellation.raan0_deg", c.raan0_deg)?;
         if !(c.semi_major_axis_m.is_finite() && c.semi_major_axis_m > 7.0e6) {
-            return Err(invalid(f, "gnss.constellation.semi_major_axis_m", "must be > 7000 km"));
+            return Err(invalid(
+                f,
+                "gnss.constellation.semi_major_axis_m",
+                "must be > 7000 km",
+            ));
         }
         rate("odometer.rate_hz", spec.odometer.rate_hz)?;
         rate("baro.rate_hz", spec.baro.rate_hz)?;
@@ -839,11 +876,20 @@ impl Scenario {
             ("imu.gyro.temp_coeff_deg_h_per_c", g.temp_coeff_deg_h_per_c),
             ("imu.gyro.full_scale_deg_s", g.full_scale_deg_s),
             ("imu.accel.bias_ug", imu.accel.bias_ug),
-            ("imu.accel.bias_rw_ug_per_rt_h", imu.accel.bias_rw_ug_per_rt_h),
+            (
+                "imu.accel.bias_rw_ug_per_rt_h",
+                imu.accel.bias_rw_ug_per_rt_h,
+            ),
             ("imu.accel.vrw_ug_per_rt_hz", imu.accel.vrw_ug_per_rt_hz),
             ("imu.accel.scale_factor_ppm", imu.accel.scale_factor_ppm),
-            ("imu.accel.misalignment_arcsec", imu.accel.misalignment_arcsec),
-            ("imu.accel.temp_coeff_ug_per_c", imu.accel.temp_coeff_ug_per_c),
+            (
+                "imu.accel.misalignment_arcsec",
+                imu.accel.misalignment_arcsec,
+            ),
+            (
+                "imu.accel.temp_coeff_ug_per_c",
+                imu.accel.temp_coeff_ug_per_c,
+            ),
             ("imu.accel.full_scale_g", imu.accel.full_scale_g),
         ] {
             if !(v.is_finite() && v >= 0.0) {
@@ -873,15 +919,25 @@ impl Scenario {
         )?;
         let sf = sensors_dir.join(format!("{}.toml", spec.star_tracker.grade));
         for (k, v) in [
-            ("star_tracker.sigma_cross_arcsec", star_tracker.sigma_cross_arcsec),
-            ("star_tracker.sigma_roll_arcsec", star_tracker.sigma_roll_arcsec),
+            (
+                "star_tracker.sigma_cross_arcsec",
+                star_tracker.sigma_cross_arcsec,
+            ),
+            (
+                "star_tracker.sigma_roll_arcsec",
+                star_tracker.sigma_roll_arcsec,
+            ),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(invalid(&sf, k, format!("must be finite and ≥ 0, got {v}")));
             }
         }
         if star_tracker.min_stars > star_tracker.max_stars {
-            return Err(invalid(&sf, "star_tracker.min_stars", "greater than max_stars"));
+            return Err(invalid(
+                &sf,
+                "star_tracker.min_stars",
+                "greater than max_stars",
+            ));
         }
 
         let gnss: GnssGrade = load_grade(
@@ -895,8 +951,14 @@ impl Scenario {
         for (k, v) in [
             ("gnss.pseudorange_sigma_m", gnss.pseudorange_sigma_m),
             ("gnss.range_rate_sigma_m_s", gnss.range_rate_sigma_m_s),
-            ("gnss.clock_bias_initial_sigma_m", gnss.clock_bias_initial_sigma_m),
-            ("gnss.clock_drift_initial_sigma_m_s", gnss.clock_drift_initial_sigma_m_s),
+            (
+                "gnss.clock_bias_initial_sigma_m",
+                gnss.clock_bias_initial_sigma_m,
+            ),
+            (
+                "gnss.clock_drift_initial_sigma_m_s",
+                gnss.clock_drift_initial_sigma_m_s,
+            ),
             ("gnss.clock_bias_psd_m2_s", gnss.clock_bias_psd_m2_s),
             ("gnss.clock_drift_psd_m2_s3", gnss.clock_drift_psd_m2_s3),
             ("gnss.phase_sigma_cycles", gnss.phase_sigma_cycles),
@@ -934,10 +996,18 @@ impl Scenario {
         if !(odometer.scale_factor_error_ppm.is_finite()
             && odometer.scale_factor_error_ppm.abs() < 1e5)
         {
-            return Err(invalid(&of, "odometer.scale_factor_error_ppm", "|value| must be < 1e5"));
+            return Err(invalid(
+                &of,
+                "odometer.scale_factor_error_ppm",
+                "|value| must be < 1e5",
+            ));
         }
         if !(odometer.speed_noise_m_s.is_finite() && odometer.speed_noise_m_s >= 0.0) {
-            return Err(invalid(&of, "odometer.speed_noise_m_s", "must be finite and ≥ 0"));
+            return Err(invalid(
+                &of,
+                "odometer.speed_noise_m_s",
+                "must be finite and ≥ 0",
+            ));
         }
         let baro: BaroGrade = load_grade(
             sensors_dir,
@@ -953,7 +1023,11 @@ impl Scenario {
             ("baro.noise_pa", baro.noise_pa),
         ] {
             if !v.is_finite() || (k != "baro.bias_pa" && v < 0.0) {
-                return Err(invalid(&bf, k, format!("must be finite (and ≥ 0), got {v}")));
+                return Err(invalid(
+                    &bf,
+                    k,
+                    format!("must be finite (and ≥ 0), got {v}"),
+                ));
             }
         }
         Ok(Scenario {

@@ -227,7 +227,11 @@ fn v_ned(k: &Kinematics) -> Vector3<f64> {
     if k.speed_m_s == 0.0 {
         return Vector3::zeros();
     }
-    Vector3::new(k.speed_m_s * ch * cp, k.speed_m_s * sh * cp, -k.speed_m_s * sp)
+    Vector3::new(
+        k.speed_m_s * ch * cp,
+        k.speed_m_s * sh * cp,
+        -k.speed_m_s * sp,
+    )
 }
 
 /// Time derivative of the NED velocity components, m/s².
@@ -381,11 +385,7 @@ impl TruthGenerator {
     fn pos_rate(profile: &Profile, ell: &Ellipsoid, t_s: f64, lat: f64, h: f64) -> [f64; 3] {
         let v = v_ned(&profile.at(t_s));
         let (r_n, r_e) = earth::radii_of_curvature(ell, lat);
-        [
-            v.x / (r_n + h),
-            v.y / ((r_e + h) * lat.cos()),
-            -v.z,
-        ]
+        [v.x / (r_n + h), v.y / ((r_e + h) * lat.cos()), -v.z]
     }
 
     fn point_at(
@@ -453,14 +453,7 @@ impl TruthGenerator {
         self.lon_rad = lon + d(1);
         self.height_m = hh + d(2);
         self.k += 1;
-        let next = Self::point_at(
-            p,
-            e,
-            self.k,
-            self.lat_rad,
-            self.lon_rad,
-            self.height_m,
-        );
+        let next = Self::point_at(p, e, self.k, self.lat_rad, self.lon_rad, self.height_m);
         let prev = &self.point;
         self.acc.dt_s += h;
         self.acc.delta_angle_b_rad += 0.5 * h * (prev.w_ib_b_rad_s + next.w_ib_b_rad_s);
@@ -527,6 +520,10 @@ mod tests {
         // Ċ_n_b = C_n_b [ω_nb^b ×]  ⇒  [ω×] ≈ C_n_bᵀ (C1 − C0)/dt
         let w = c0.transpose() * (c1 - c0) / dt;
         let w_fd = Vector3::new(w[(2, 1)], w[(0, 2)], w[(1, 0)]);
-        assert!((w_fd - w_nb_b(&k0)).norm() < 1e-7, "{w_fd} vs {}", w_nb_b(&k0));
+        assert!(
+            (w_fd - w_nb_b(&k0)).norm() < 1e-7,
+            "{w_fd} vs {}",
+            w_nb_b(&k0)
+        );
     }
 }

@@ -86,7 +86,9 @@ mod tests {
 
     #[test]
     fn inverse_round_trips() {
-        for h in [-400.0, 0.0, 200.0, 5_000.0, 10_999.0, 11_000.0, 11_001.0, 18_000.0] {
+        for h in [
+            -400.0, 0.0, 200.0, 5_000.0, 10_999.0, 11_000.0, 11_001.0, 18_000.0,
+        ] {
             let back = isa_altitude_m(isa_pressure_pa(h));
             assert!((back - h).abs() < 1e-6, "{h} -> {back}");
         }
