@@ -178,3 +178,29 @@ fn leap_second_2016_2017_jumps_gps_by_2_s() {
     let b = GpsTime::from_utc(2017, 1, 1, 0, 0, 0.0);
     assert_eq!(b.ns - a.ns, 2_000_000_000);
 }
+
+/// Cost of the two variants (run with `--ignored --nocapture`, ideally `--release`).
+#[test]
+#[ignore]
+fn timing_2000a_vs_2000b() {
+    let eop = EarthOrientation::default();
+    let t0 = GpsTime::from_utc(2025, 1, 1, 0, 0, 0.0);
+    let n = 2000;
+    let mut acc = 0.0;
+    let start = std::time::Instant::now();
+    for k in 0..n {
+        acc += c_e_i(t0.add_ns(k * 1_000_000_000), &eop)[(0, 0)];
+    }
+    let a = start.elapsed().as_secs_f64() / n as f64;
+    let start = std::time::Instant::now();
+    for k in 0..n {
+        acc += c_e_i_2000b(t0.add_ns(k * 1_000_000_000), &eop)[(0, 0)];
+    }
+    let b = start.elapsed().as_secs_f64() / n as f64;
+    println!(
+        "c_e_i {:.1} µs, c_e_i_2000b {:.1} µs, ratio {:.1} ({acc})",
+        a * 1e6,
+        b * 1e6,
+        a / b
+    );
+}
