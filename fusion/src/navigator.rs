@@ -1140,7 +1140,8 @@ impl Navigator {
         }
     }
 
-    /// Run one gated update; returns Some(accepted) or None when the sample is too old.
+    /// Run one gated update (health counters of sensor `id`, or the ZUPT counters for None);
+    /// returns whether it was accepted.
     fn run_update<const M: usize>(&mut self, id: Option<usize>, m: &Measurement<M>) -> bool {
         let out = ekf::update(&self.ekf.p, m, self.gates.threshold(M));
         if let Some(id) = id {
@@ -1175,14 +1176,21 @@ impl Navigator {
             self.health[id].dropped_late += 1;
             return;
         };
+        // Position and velocity are gated separately; the sample's NIS is the larger one.
         let mut fused = false;
+        let mut nis = f64::NEG_INFINITY;
         if self.config.updates.gnss_position {
             let m = ekf::gnss_position(&self.hist[hi].nav, &fix.pos, &fix.pos_cov);
             fused |= self.run_update(Some(id), &m);
+            nis = nis.max(self.health[id].last_nis);
         }
         if self.config.updates.gnss_velocity && fix.vel_valid {
             let m = ekf::gnss_velocity(&self.hist[hi].nav, &fix.vel, &fix.vel_cov);
             fused |= self.run_update(Some(id), &m);
+            nis = nis.max(self.health[id].last_nis);
+        }
+        if nis.is_finite() || nis == f64::INFINITY {
+            self.health[id].last_nis = nis;
         }
         if fused {
             self.mark_fused(id, ts);
@@ -1455,4 +1463,346 @@ fn validate_gnss(s: &GnssSample) -> Result<Option<GnssFix>, FusionError> {
         vel_cov: vc,
         vel_valid,
     }))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::strapdown::stationary_increment;
+    use rand::SeedableRng;
+    use rand_chacha::ChaCha8Rng;
+    use rand_distr::{Distribution, Normal};
+
+    const T0: i64 = 1_400_000_000_000_000_000;
+
+    /// Synthetic static site: IMU increments from fusion::earth plus bias and white noise at
+    /// the configured navigation-grade densities, GNSS fixes with white noise.
+    struct StaticSim {
+        ell: Ellipsoid,
+        r_e: Vector3<f64>,
+        q_e_b: UnitQuaternion<f64>,
+        b_g: Vector3<f64>,
+        b_a: Vector3<f64>,
+        dt: f64,
+        k: i64,
+        rng: ChaCha8Rng,
+        n_g: Normal<f64>,
+        n_a: Normal<f64>,
+        gnss_sigma: f64,
+        imu_seq: u64,
+        gnss_seq: u64,
+    }
+
+    impl StaticSim {
+        fn new(seed: u64, rate_hz: f64) -> Self {
+            let ell = WGS84;
+            let g = Geodetic {
+                lat_rad: 55.655 * DEG,
+                lon_rad: 37.534 * DEG,
+                height_m: 180.0,
+            };
+            let q_n_b = crate::attitude::q_n_b_from_rpy(0.01, -0.02, 0.7);
+            let dt = 1.0 / rate_hz;
+            let spec = ImuSpec::default();
+            let pn = spec.process_noise();
+            let mut rng = ChaCha8Rng::seed_from_u64(seed);
+            let unit = Normal::new(0.0, 1.0).unwrap();
+            let mut rv = |s: f64| {
+                Vector3::new(
+                    unit.sample(&mut rng) * s,
+                    unit.sample(&mut rng) * s,
+                    unit.sample(&mut rng) * s,
+                )
+            };
+            let b_g = rv(spec.gyro_bias_rad_s());
+            let b_a = rv(spec.accel_bias_m_s2());
+            Self {
+                r_e: earth::geodetic_to_ecef(&ell, &g),
+                q_e_b: q_e_n(g.lat_rad, g.lon_rad) * q_n_b,
+                ell,
+                b_g,
+                b_a,
+                dt,
+                k: 0,
+                rng,
+                n_g: Normal::new(0.0, pn.arw_rad_sqrt_s * dt.sqrt()).unwrap(),
+                n_a: Normal::new(0.0, pn.vrw_m_s_sqrt_s * dt.sqrt()).unwrap(),
+                gnss_sigma: 2.0,
+                imu_seq: 0,
+                gnss_seq: 0,
+            }
+        }
+        fn time_ns(&self) -> i64 {
+            T0 + (self.k as f64 * self.dt * 1e9).round() as i64
+        }
+        fn next_imu(&mut self) -> ImuSample {
+            self.k += 1;
+            self.imu_seq += 1;
+            let inc =
+                stationary_increment(&self.ell, GravityModel::J2, &self.r_e, &self.q_e_b, self.dt);
+            let mut s = ImuSample::default();
+            s.header.time_ns = self.time_ns();
+            s.header.seq = self.imu_seq;
+            s.header.send_mono_ns = 42 + self.k as u64;
+            s.dt_s = self.dt;
+            for i in 0..3 {
+                s.delta_angle_rad[i] =
+                    inc.delta_angle_rad[i] + self.b_g[i] * self.dt + self.n_g.sample(&mut self.rng);
+                s.delta_velocity_m_s[i] = inc.delta_velocity_m_s[i]
+                    + self.b_a[i] * self.dt
+                    + self.n_a.sample(&mut self.rng);
+            }
+            s
+        }
+        fn gnss(&mut self) -> GnssSample {
+            self.gnss_seq += 1;
+            let n = Normal::new(0.0, self.gnss_sigma).unwrap();
+            let nv = Normal::new(0.0, 0.02).unwrap();
+            let mut g = GnssSample::default();
+            g.header.time_ns = self.time_ns();
+            g.header.seq = self.gnss_seq;
+            g.fix_valid = 1;
+            g.n_satellites = 8;
+            for i in 0..3 {
+                g.pos_ecef_m[i] = self.r_e[i] + n.sample(&mut self.rng);
+                g.vel_ecef_m_s[i] = nv.sample(&mut self.rng);
+                g.pos_cov_ecef_m2[4 * i] = self.gnss_sigma.powi(2);
+                g.vel_cov_ecef_m2_s2[4 * i] = 0.02f64.powi(2);
+            }
+            g
+        }
+    }
+
+    fn quick_config() -> NavigatorConfig {
+        NavigatorConfig {
+            alignment_s: 60.0,
+            ..NavigatorConfig::default()
+        }
+    }
+
+    /// Run a static scenario: IMU at `rate` Hz, GNSS at 1 Hz, for `seconds` in total.
+    /// Returns the navigator and the simulator.
+    fn run_static(
+        seed: u64,
+        rate: f64,
+        seconds: f64,
+        cfg: NavigatorConfig,
+    ) -> (Navigator, StaticSim) {
+        let mut nav = Navigator::new(cfg).unwrap();
+        let mut sim = StaticSim::new(seed, rate);
+        let per_s = rate.round() as i64;
+        let steps = (seconds * rate).round() as i64;
+        for k in 1..=steps {
+            let imu = sim.next_imu();
+            if k % per_s == 0 {
+                // GNSS sample arrives just after the IMU sample of the same time.
+                nav.push_imu(&imu).unwrap();
+                let g = sim.gnss();
+                nav.push_gnss(&g).unwrap();
+            } else {
+                nav.push_imu(&imu).unwrap();
+            }
+        }
+        (nav, sim)
+    }
+
+    fn pos_error_and_nees(nav: &Navigator, sim: &StaticSim) -> (Vector3<f64>, f64) {
+        let e = nav.nav_state().r_e - sim.r_e;
+        let p: Matrix3<f64> = nav
+            .covariance()
+            .fixed_view::<3, 3>(idx::POS, idx::POS)
+            .into_owned();
+        let nees = e.dot(&(p.try_inverse().unwrap() * e));
+        (e, nees)
+    }
+
+    #[test]
+    fn filter_toml_is_the_default_and_validates() {
+        let text = include_str!("../../config/filter.toml");
+        let cfg: NavigatorConfig = toml::from_str(text).unwrap();
+        assert_eq!(cfg, NavigatorConfig::default());
+        cfg.validate().unwrap();
+        let bad: Result<NavigatorConfig, _> = toml::from_str("alignment_s = 1.0\nbogus = 3\n");
+        assert!(bad.unwrap_err().to_string().contains("bogus"));
+        let mut c = NavigatorConfig::default();
+        c.aiding.zupt_sigma_m_s = -1.0;
+        let e = c.validate().unwrap_err().to_string();
+        assert!(e.contains("filter.aiding.zupt_sigma_m_s"), "{e}");
+        c = NavigatorConfig::default();
+        c.gate_probability = f64::NAN;
+        assert!(
+            c.validate()
+                .unwrap_err()
+                .to_string()
+                .contains("gate_probability")
+        );
+    }
+
+    #[test]
+    fn aligns_then_navigates_with_gnss() {
+        let (nav, sim) = run_static(1, 100.0, 120.0, quick_config());
+        assert!(nav.is_navigating());
+        assert_eq!(nav.mode(), NavMode::GnssInertial as u32);
+        let h = nav.health();
+        let g = &h[SensorId::Gnss as usize];
+        assert_eq!(g.received, 120);
+        assert!(g.fused >= 55, "{g:?}");
+        assert_eq!(g.rejected_invalid, 0);
+        let (e, _) = pos_error_and_nees(&nav, &sim);
+        assert!(e.norm() < 3.0, "position error {e}");
+        // Heading from gyrocompassing + filter within a few tenths of a degree.
+        let q_n_b = nav.nav_state().q_n_b(&WGS84);
+        let rpy = rpy_from_q_n_b(&q_n_b);
+        assert!((rpy.z - 0.7).abs() < 0.2 * DEG, "heading {}", rpy.z / DEG);
+        assert!((rpy.x - 0.01).abs() < 0.02 * DEG);
+        assert!((rpy.y + 0.02).abs() < 0.02 * DEG);
+    }
+
+    #[test]
+    fn static_gnss_run_averages_position_and_is_consistent() {
+        // Monte Carlo over independent seeds: position error at the end of a static run with
+        // 1 Hz GNSS (σ = 2 m) after N fixes is of order σ/√N, and the position NEES summed over
+        // the runs lies inside the two-sided 99.9 % chi-square bounds.
+        let runs = 6;
+        let mut nees_sum = 0.0;
+        let mut err_rms = 0.0;
+        let seconds = 360.0;
+        let n_fixes = seconds - 60.0;
+        for seed in 0..runs {
+            let (nav, sim) = run_static(100 + seed, 100.0, seconds, quick_config());
+            let (e, nees) = pos_error_and_nees(&nav, &sim);
+            nees_sum += nees;
+            err_rms += e.norm_squared();
+            let sigma_ned = nav
+                .covariance()
+                .fixed_view::<3, 3>(0, 0)
+                .diagonal()
+                .map(f64::sqrt);
+            eprintln!(
+                "seed {seed}: |e| = {:.3} m, NEES = {nees:.2}, σ = {sigma_ned:?}",
+                e.norm()
+            );
+        }
+        let err_rms = (err_rms / runs as f64 / 3.0).sqrt();
+        let dof = 3 * runs as u32;
+        let lo = ekf::chi2_quantile(dof, 0.0005);
+        let hi = ekf::chi2_quantile(dof, 0.9995);
+        eprintln!(
+            "per-axis RMS error {err_rms:.3} m (σ/√N = {:.3} m); NEES sum {nees_sum:.2} in [{lo:.2}, {hi:.2}]",
+            2.0 / n_fixes.sqrt()
+        );
+        assert!(err_rms < 5.0 * 2.0 / n_fixes.sqrt(), "RMS {err_rms}");
+        assert!(
+            nees_sum > lo && nees_sum < hi,
+            "NEES {nees_sum} outside [{lo}, {hi}]"
+        );
+    }
+
+    #[test]
+    fn outlier_is_gated_and_counted() {
+        let (mut nav, mut sim) = run_static(7, 100.0, 80.0, quick_config());
+        let before = nav.nav_state().r_e;
+        let imu = sim.next_imu();
+        nav.push_imu(&imu).unwrap();
+        let mut g = sim.gnss();
+        g.pos_ecef_m[0] += 300.0;
+        nav.push_gnss(&g).unwrap();
+        let imu = sim.next_imu();
+        nav.push_imu(&imu).unwrap();
+        let h = nav.health()[SensorId::Gnss as usize];
+        assert!(h.rejected_gate >= 1, "{h:?}");
+        assert!(h.last_nis > ekf::chi2_quantile(3, 0.999));
+        assert!((nav.nav_state().r_e - before).norm() < 0.5);
+    }
+
+    #[test]
+    fn invalid_inputs_are_rejected_without_touching_the_state() {
+        let (mut nav, mut sim) = run_static(9, 100.0, 65.0, quick_config());
+        let state = *nav.nav_state();
+        let p = *nav.covariance();
+        let mut imu = sim.next_imu();
+        let good = imu;
+        imu.delta_velocity_m_s[1] = f64::NAN;
+        assert!(nav.push_imu(&imu).is_err());
+        imu = good;
+        imu.dt_s = f64::INFINITY;
+        assert!(nav.push_imu(&imu).is_err());
+        imu = good;
+        imu.delta_angle_rad[0] = 1.0; // 100 rad/s
+        assert!(nav.push_imu(&imu).is_err());
+        assert_eq!(*nav.nav_state(), state);
+        assert_eq!(*nav.covariance(), p);
+        assert_eq!(nav.health()[SensorId::Imu as usize].rejected_invalid, 3);
+        // The good sample still goes through; then its duplicate and an older one do not.
+        nav.push_imu(&good).unwrap();
+        assert!(nav.push_imu(&good).is_err());
+        let mut older = good;
+        older.header.seq += 1;
+        older.header.time_ns -= 1;
+        assert!(matches!(
+            nav.push_imu(&older),
+            Err(FusionError::TimeNotIncreasing { .. })
+        ));
+        assert_eq!(nav.health()[SensorId::Imu as usize].rejected_invalid, 5);
+        // GNSS with NaN, star tracker with a non-unit quaternion, baro with absurd pressure.
+        let mut g = sim.gnss();
+        g.pos_ecef_m[2] = f64::NAN;
+        assert!(nav.push_gnss(&g).is_err());
+        let mut st = StarTrackerSample::default();
+        st.header.time_ns = good.header.time_ns;
+        st.valid = 1;
+        st.q_sensor_icrf = [2.0, 0.0, 0.0, 0.0];
+        st.sigma_cross_rad = 1e-5;
+        st.sigma_roll_rad = 1e-4;
+        assert!(nav.push_star_tracker(&st).is_err());
+        let mut b = BaroSample::default();
+        b.header.time_ns = good.header.time_ns;
+        b.pressure_pa = f64::INFINITY;
+        assert!(nav.push_baro(&b).is_err());
+        let mut o = OdometerSample::default();
+        o.header.time_ns = good.header.time_ns;
+        o.dt_s = 0.01;
+        o.speed_m_s = f64::NAN;
+        assert!(nav.push_odometer(&o).is_err());
+        let h = nav.health();
+        for s in [
+            SensorId::Gnss,
+            SensorId::StarTracker,
+            SensorId::Baro,
+            SensorId::Odometer,
+        ] {
+            assert_eq!(h[s as usize].rejected_invalid, 1, "{:?}", s);
+        }
+        // Nothing of it reached the filter.
+        let next = sim.next_imu();
+        let sol = nav.push_imu(&next).unwrap().unwrap();
+        assert!(sol.pos_sigma_ned_m.iter().all(|s| s.is_finite()));
+        assert!((nav.nav_state().r_e - sim.r_e).norm() < 5.0);
+    }
+
+    #[test]
+    fn late_samples_are_dropped_and_solution_is_complete() {
+        let (mut nav, mut sim) = run_static(11, 100.0, 70.0, quick_config());
+        let stale = sim.gnss();
+        for _ in 0..200 {
+            let imu = sim.next_imu();
+            nav.push_imu(&imu).unwrap();
+        }
+        let mut stale = stale;
+        stale.header.seq = 1_000;
+        stale.header.time_ns = nav.time_ns() - 1_500_000_000;
+        // Time still increases for the sensor (the previous fix was even older).
+        let before = nav.health()[SensorId::Gnss as usize].dropped_late;
+        nav.push_gnss(&stale).unwrap_or(());
+        let imu = sim.next_imu();
+        let sol = nav.push_imu(&imu).unwrap().unwrap();
+        let h = nav.health()[SensorId::Gnss as usize];
+        assert!(h.dropped_late > before || h.rejected_invalid > 0, "{h:?}");
+        assert_eq!(sol.header.time_ns, imu.header.time_ns);
+        assert_eq!(sol.imu_send_mono_ns, imu.header.send_mono_ns);
+        assert!((sol.lat_rad - 55.655 * DEG).abs() < 1e-5);
+        assert!(sol.q_ned_body.iter().all(|x| x.is_finite()));
+        assert!(sol.att_sigma_ned_rad.iter().all(|x| *x > 0.0 && *x < 0.01));
+        assert!((sol.roll_pitch_heading_rad[2] - 0.7).abs() < 0.01);
+    }
 }
