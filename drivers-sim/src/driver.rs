@@ -122,7 +122,7 @@ where
     S: SampleSource,
     F: FnOnce(&Scenario, i64) -> S,
 {
-    if !(args.speed > 0.0) {
+    if args.speed.is_nan() || args.speed <= 0.0 {
         return Err(cli_invalid(
             "--speed",
             format!("must be > 0, got {}", args.speed),
