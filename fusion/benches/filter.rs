@@ -2,11 +2,11 @@
 //! and each measurement update.
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use fusion::earth::{Geodetic, WGS84};
-use fusion::ekf::{self, Covariance, ErrorStateEkf, GateTable};
-use fusion::navigator::ImuSpec;
-use fusion::strapdown::NavState;
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
+use sextant_fusion::earth::{Geodetic, WGS84};
+use sextant_fusion::ekf::{self, Covariance, ErrorStateEkf, GateTable};
+use sextant_fusion::navigator::ImuSpec;
+use sextant_fusion::strapdown::NavState;
 use std::hint::black_box;
 
 fn setup() -> (ErrorStateEkf, NavState) {

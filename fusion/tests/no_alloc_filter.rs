@@ -1,0 +1,215 @@
+//! Proves that the filter allocates nothing in steady state: a counting global allocator wraps
+//! the system allocator for this test binary; after alignment, `Navigator::push_imu` (with
+//! GNSS, star-tracker, odometer and baro samples fused inside it, and zero-velocity updates),
+//! the `push_*` queueing calls and every `ekf` measurement update must not move the count.
+//! One `#[test]` only, so that no other test thread allocates concurrently.
+
+use msgs::{
+    BaroSample, GnssSample, ImuSample, NavMode, OdometerSample, SensorId, StarTrackerSample,
+};
+use nalgebra::{Matrix3, UnitQuaternion, Vector3};
+use sextant_fusion::celestial::{EarthOrientation, c_e_i};
+use sextant_fusion::earth::{Geodetic, GravityModel, WGS84, geodetic_to_ecef};
+use sextant_fusion::ekf::{self, GateTable};
+use sextant_fusion::navigator::{Navigator, NavigatorConfig};
+use sextant_fusion::strapdown::{q_e_n, stationary_increment};
+use sextant_fusion::time::GpsTime;
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+struct Counting;
+
+static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
+
+// SAFETY: forwards to the system allocator unchanged; only counts calls.
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
+        // SAFETY: same contract as the caller's.
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: same contract as the caller's.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
+        // SAFETY: same contract as the caller's.
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+fn count() -> usize {
+    ALLOCATIONS.load(Ordering::SeqCst)
+}
+
+const T0: i64 = 1_400_000_000_000_000_000;
+
+#[test]
+fn filter_allocates_nothing_in_steady_state() {
+    let probe = count();
+    let boxed = std::hint::black_box(Box::new([1.0_f64; 4]));
+    assert!(count() > probe, "the counting allocator must work");
+    drop(boxed);
+
+    let site = Geodetic {
+        lat_rad: 55.655f64.to_radians(),
+        lon_rad: 37.534f64.to_radians(),
+        height_m: 180.0,
+    };
+    let r_e = geodetic_to_ecef(&WGS84, &site);
+    let q_e_b =
+        q_e_n(site.lat_rad, site.lon_rad) * UnitQuaternion::from_euler_angles(0.0, 0.0, 0.7);
+    let c_s_b = Matrix3::new(1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, -1.0);
+    let pressure = sextant_fusion::atmosphere::isa_pressure_pa(site.height_m);
+    let cfg = NavigatorConfig {
+        alignment_s: 5.0,
+        ..NavigatorConfig::default()
+    };
+    let mut nav = Box::new(Navigator::new(cfg).unwrap());
+    let rate = 100;
+    let dt = 1.0 / rate as f64;
+    let mut seq = 0u64;
+    let mut step = |nav: &mut Navigator, k: i64| {
+        seq += 1;
+        let t = T0 + k * 10_000_000;
+        let inc = stationary_increment(&WGS84, GravityModel::J2, &r_e, &q_e_b, dt);
+        let mut s = ImuSample::default();
+        s.header.time_ns = t;
+        s.header.seq = seq;
+        s.dt_s = dt;
+        s.delta_angle_rad = inc.delta_angle_rad.into();
+        s.delta_velocity_m_s = inc.delta_velocity_m_s.into();
+        if k % 10 == 0 {
+            let mut g = GnssSample::default();
+            g.header.time_ns = t;
+            g.header.seq = seq;
+            g.fix_valid = 1;
+            g.pos_ecef_m = r_e.into();
+            g.pos_cov_ecef_m2 = [4.0, 0.0, 0.0, 0.0, 4.0, 0.0, 0.0, 0.0, 4.0];
+            g.vel_cov_ecef_m2_s2 = [1e-4, 0.0, 0.0, 0.0, 1e-4, 0.0, 0.0, 0.0, 1e-4];
+            nav.push_gnss(&g).unwrap();
+            let c_s_i = c_s_b
+                * q_e_b.to_rotation_matrix().into_inner().transpose()
+                * c_e_i(GpsTime { ns: t }, &EarthOrientation::default());
+            let q = UnitQuaternion::from_matrix(&c_s_i);
+            let mut st = StarTrackerSample::default();
+            st.header.time_ns = t;
+            st.header.seq = seq;
+            st.q_sensor_icrf = [q.w, q.i, q.j, q.k];
+            st.sigma_cross_rad = 2e-5;
+            st.sigma_roll_rad = 1e-4;
+            st.valid = 1;
+            st.n_stars = 10;
+            nav.push_star_tracker(&st).unwrap();
+            let mut b = BaroSample::default();
+            b.header.time_ns = t;
+            b.header.seq = seq;
+            b.pressure_pa = pressure;
+            b.temperature_c = 15.0;
+            nav.push_baro(&b).unwrap();
+        }
+        if k % 2 == 0 {
+            let mut o = OdometerSample::default();
+            o.header.time_ns = t;
+            o.header.seq = seq;
+            o.dt_s = 0.02;
+            nav.push_odometer(&o).unwrap();
+        }
+        nav.push_imu(&s).unwrap()
+    };
+    // Alignment (5 s) and warm-up.
+    let mut k = 0;
+    while k < 10 * rate {
+        k += 1;
+        step(&mut nav, k);
+    }
+    assert!(nav.is_navigating());
+    let before = count();
+    for _ in 0..5 * rate {
+        k += 1;
+        let sol = step(&mut nav, k).expect("navigating");
+        assert!(sol.lat_rad.is_finite());
+    }
+    let used = count() - before;
+    assert_eq!(
+        used, 0,
+        "push_imu / push_* allocated {used} times in steady state"
+    );
+    assert_eq!(nav.mode(), NavMode::GnssAstroInertial as u32);
+    let h = nav.health();
+    for s in [
+        SensorId::Gnss,
+        SensorId::StarTracker,
+        SensorId::Odometer,
+        SensorId::Baro,
+    ] {
+        assert!(
+            h[s as usize].fused > 0,
+            "{s:?} never fused: {:?}",
+            h[s as usize]
+        );
+    }
+    assert!(nav.zupt_health().fused > 0);
+
+    // Each update function on its own.
+    let p = *nav.covariance();
+    let state = *nav.nav_state();
+    let gates = GateTable::new(0.999);
+    let before = count();
+    let c_e_i_now = c_e_i(GpsTime { ns: T0 }, &EarthOrientation::default());
+    let q = UnitQuaternion::identity();
+    let outs = [
+        ekf::update(
+            &p,
+            &ekf::gnss_position(&state, &r_e, &(Matrix3::identity() * 4.0)),
+            gates.threshold(3),
+        )
+        .residual
+        .nis,
+        ekf::update(
+            &p,
+            &ekf::gnss_velocity(&state, &Vector3::zeros(), &(Matrix3::identity() * 1e-4)),
+            gates.threshold(3),
+        )
+        .residual
+        .nis,
+        ekf::update(
+            &p,
+            &ekf::star_attitude(&state, &q, &c_e_i_now, &c_s_b, 2e-5, 1e-4),
+            gates.threshold(3),
+        )
+        .residual
+        .nis,
+        ekf::update(
+            &p,
+            &ekf::baro_height(&state, &WGS84, 180.0, 2.0),
+            gates.threshold(1),
+        )
+        .residual
+        .nis,
+        ekf::update(
+            &p,
+            &ekf::odometer_nhc(&state, 0.0, 0.05, 0.05),
+            gates.threshold(3),
+        )
+        .residual
+        .nis,
+        ekf::update(
+            &p,
+            &ekf::odometer_speed(&state, 0.0, 0.05),
+            gates.threshold(1),
+        )
+        .residual
+        .nis,
+        ekf::update(&p, &ekf::zero_velocity(&state, 0.005), gates.threshold(3))
+            .residual
+            .nis,
+    ];
+    let used = count() - before;
+    assert_eq!(used, 0, "ekf updates allocated {used} times");
+    assert!(outs.iter().all(|n| !n.is_nan()));
+}
