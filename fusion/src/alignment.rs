@@ -162,22 +162,32 @@ pub fn expected_errors(
     )
 }
 
-/// 1-σ coarse-alignment accuracy `(level, heading)`, rad, for bias uncertainties `sigma_bg`
-/// (rad/s) and `sigma_ba` (m/s²), noise densities `arw` (rad/√s) and `vrw` (m/s/√s), window
-/// `t_s`, at latitude `lat_rad`.
+/// IMU error figures that limit a static alignment (1-σ, SI units).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AlignmentErrorSpec {
+    /// Gyro bias σ, rad/s.
+    pub gyro_bias_rad_s: f64,
+    /// Accelerometer bias σ, m/s².
+    pub accel_bias_m_s2: f64,
+    /// Angle random walk, rad/√s.
+    pub arw_rad_sqrt_s: f64,
+    /// Velocity random walk, m/s/√s.
+    pub vrw_m_s_sqrt_s: f64,
+}
+
+/// 1-σ coarse-alignment accuracy `(level, heading)`, rad, of an IMU with errors `spec` over a
+/// window of `t_s` seconds at latitude `lat_rad` (Earth rate `omega_ie_rad_s`, gravity `g`).
 pub fn expected_sigmas(
-    sigma_bg: f64,
-    sigma_ba: f64,
-    arw: f64,
-    vrw: f64,
+    spec: &AlignmentErrorSpec,
     t_s: f64,
     lat_rad: f64,
     omega_ie_rad_s: f64,
     g: f64,
 ) -> (f64, f64) {
     let t = t_s.max(1e-3);
-    let level = (sigma_ba.powi(2) + vrw.powi(2) / t).sqrt() / g;
-    let heading = (sigma_bg.powi(2) + arw.powi(2) / t).sqrt() / (omega_ie_rad_s * lat_rad.cos());
+    let level = (spec.accel_bias_m_s2.powi(2) + spec.vrw_m_s_sqrt_s.powi(2) / t).sqrt() / g;
+    let heading = (spec.gyro_bias_rad_s.powi(2) + spec.arw_rad_sqrt_s.powi(2) / t).sqrt()
+        / (omega_ie_rad_s * lat_rad.cos());
     (level, heading)
 }
 
@@ -294,16 +304,13 @@ mod tests {
             WGS84.omega_ie_rad_s,
             9.81,
         );
-        let (s_level, s_head) = expected_sigmas(
-            0.0,
-            0.0,
-            0.002f64.to_radians() / 60.0,
-            20e-6 * 9.80665,
-            120.0,
-            lat,
-            WGS84.omega_ie_rad_s,
-            9.81,
-        );
+        let spec = AlignmentErrorSpec {
+            gyro_bias_rad_s: 0.0,
+            accel_bias_m_s2: 0.0,
+            arw_rad_sqrt_s: 0.002f64.to_radians() / 60.0,
+            vrw_m_s_sqrt_s: 20e-6 * 9.80665,
+        };
+        let (s_level, s_head) = expected_sigmas(&spec, 120.0, lat, WGS84.omega_ie_rad_s, 9.81);
         // Attitude error as a small rotation in NED: C_n_b_est · C_n_b_trueᵀ = I + [e×].
         let c_est = a.q_n_b.to_rotation_matrix().into_inner();
         let e_m = c_est * c_n_b.transpose();

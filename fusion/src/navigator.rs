@@ -763,9 +763,9 @@ impl Navigator {
                 sigma_cross: s.sigma_cross_rad,
                 sigma_roll: s.sigma_roll_rad,
             };
-            if self.too_late(s.header.time_ns) {
-                self.health[id].dropped_late += 1;
-            } else if self.star_q.insert(s.header.time_ns, obs).is_some() {
+            if self.too_late(s.header.time_ns)
+                || self.star_q.insert(s.header.time_ns, obs).is_some()
+            {
                 self.health[id].dropped_late += 1;
             }
         }
@@ -787,12 +787,11 @@ impl Navigator {
             }
         };
         self.accept_header(id, &s.header);
-        if let Some(fix) = fix {
-            if self.too_late(s.header.time_ns) {
-                self.health[id].dropped_late += 1;
-            } else if self.gnss_q.insert(s.header.time_ns, fix).is_some() {
-                self.health[id].dropped_late += 1;
-            }
+        if let Some(fix) = fix
+            && (self.too_late(s.header.time_ns)
+                || self.gnss_q.insert(s.header.time_ns, fix).is_some())
+        {
+            self.health[id].dropped_late += 1;
         }
         Ok(())
     }
@@ -821,9 +820,9 @@ impl Navigator {
             return Err(e);
         }
         self.accept_header(id, &s.header);
-        if self.too_late(s.header.time_ns) {
-            self.health[id].dropped_late += 1;
-        } else if self.odo_q.insert(s.header.time_ns, s.speed_m_s).is_some() {
+        if self.too_late(s.header.time_ns)
+            || self.odo_q.insert(s.header.time_ns, s.speed_m_s).is_some()
+        {
             self.health[id].dropped_late += 1;
         }
         Ok(())
@@ -853,9 +852,7 @@ impl Navigator {
             self.health[id].rejected_invalid += 1;
             return Err(invalid("baro", &s.header, "pressure gives no ISA altitude"));
         }
-        if self.too_late(s.header.time_ns) {
-            self.health[id].dropped_late += 1;
-        } else if self.baro_q.insert(s.header.time_ns, h).is_some() {
+        if self.too_late(s.header.time_ns) || self.baro_q.insert(s.header.time_ns, h).is_some() {
             self.health[id].dropped_late += 1;
         }
         Ok(())
@@ -1023,11 +1020,14 @@ impl Navigator {
         };
         let imu = &self.config.imu;
         let noise = imu.process_noise();
+        let spec = alignment::AlignmentErrorSpec {
+            gyro_bias_rad_s: imu.gyro_bias_rad_s(),
+            accel_bias_m_s2: imu.accel_bias_m_s2(),
+            arw_rad_sqrt_s: noise.arw_rad_sqrt_s,
+            vrw_m_s_sqrt_s: noise.vrw_m_s_sqrt_s,
+        };
         let (s_level, s_head) = alignment::expected_sigmas(
-            imu.gyro_bias_rad_s(),
-            imu.accel_bias_m_s2(),
-            noise.arw_rad_sqrt_s,
-            noise.vrw_m_s_sqrt_s,
+            &spec,
             self.align.duration_s(),
             geo.lat_rad,
             self.ell.omega_ie_rad_s,
