@@ -434,3 +434,64 @@ mod parse_errors {
         assert!(e.contains("angel_deg"), "{e}");
     }
 }
+
+/// Odometer distance over the vehicle run = (1 + scale-factor error) × true path length, up to
+/// the white noise (σ_speed·dt·√n ≈ 0.02·0.05·√12000 ≈ 0.11 m).
+#[test]
+fn odometer_distance_carries_scale_factor() {
+    use crate::sources::OdometerSource;
+    let scn = load("vehicle");
+    let mut odo = OdometerSource::new(&scn, 0);
+    let mut gen_ = TruthGenerator::new(&scn);
+    let p = period_ns(scn.spec.odometer.rate_hz);
+    let (mut meas, mut truth) = (0.0, 0.0);
+    let mut k = 1;
+    while k * p <= scn.duration_ns() {
+        meas += odo.sample(k * p).distance_m;
+        truth += gen_.advance_to(k * p).distance_x_m;
+        k += 1;
+    }
+    let sf = scn.odometer.scale_factor_error_ppm * 1e-6;
+    assert!(truth > 5000.0, "path {truth} m");
+    assert!((meas - (1.0 + sf) * truth).abs() < 0.5, "{meas} vs {truth}");
+}
+
+/// Baro: pressure minus ISA at the true height averages to the configured bias.
+#[test]
+fn baro_bias_and_noise() {
+    use crate::sources::BaroSource;
+    let scn = load("static_site");
+    let mut baro = BaroSource::new(&scn, 0);
+    let p = period_ns(scn.spec.baro.rate_hz);
+    let n = 4000;
+    let res: Vec<f64> = (0..n)
+        .map(|k| baro.sample(k * p).pressure_pa - fusion::atmosphere::isa_pressure_pa(200.0))
+        .collect();
+    let mean = res.iter().sum::<f64>() / n as f64;
+    let sd = (res.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n as f64 - 1.0)).sqrt();
+    assert!((mean - 30.0).abs() < 0.5, "{mean}");
+    assert!((sd - 5.0).abs() < 0.3, "{sd}");
+}
+
+/// MEMS grade: the 12-bit ADC makes every output rate a whole number of LSBs.
+#[test]
+fn mems_outputs_are_quantised() {
+    let mut scn = load("static_site");
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../config/sensors");
+    let text = std::fs::read_to_string(scenario_path("static_site"))
+        .unwrap_or_default()
+        .replacen("grade = \"navigation\"", "grade = \"mems\"", 1);
+    let spec = Scenario::parse(&text, &scenario_path("static_site")).expect("parse");
+    scn = Scenario::validate(spec, &scn.file, &dir).expect("validate");
+    let lsb_w = 2.0 * 150f64.to_radians() / 4096.0;
+    let lsb_f = 2.0 * 4.0 * crate::imu::G0_M_S2 / 4096.0;
+    let mut src = ImuSource::new(&scn, 0);
+    for k in 1..=200 {
+        let m = src.sample(k * 5_000_000);
+        for i in 0..3 {
+            let qw = m.delta_angle_rad[i] / m.dt_s / lsb_w;
+            let qf = m.delta_velocity_m_s[i] / m.dt_s / lsb_f;
+            assert!((qw - qw.round()).abs() < 1e-6 && (qf - qf.round()).abs() < 1e-6);
+        }
+    }
+}
