@@ -12,10 +12,10 @@ fn walk(dir: &Path, base: &Path, out: &mut Vec<(String, PathBuf)>) {
     for p in entries {
         if p.is_dir() {
             walk(&p, base, out);
-        } else if p.extension().is_some_and(|e| e == "toml") {
-            if let Ok(rel) = p.strip_prefix(base) {
-                out.push((rel.to_string_lossy().into_owned(), p.clone()));
-            }
+        } else if p.extension().is_some_and(|e| e == "toml")
+            && let Ok(rel) = p.strip_prefix(base)
+        {
+            out.push((rel.to_string_lossy().into_owned(), p.clone()));
         }
     }
 }
@@ -31,7 +31,10 @@ fn main() {
     }
     let mut src = String::from("&[\n");
     for (rel, p) in &files {
-        src.push_str(&format!("    ({rel:?}, include_str!({:?})),\n", p.display().to_string()));
+        src.push_str(&format!(
+            "    ({rel:?}, include_str!({:?})),\n",
+            p.display().to_string()
+        ));
     }
     src.push_str("]\n");
     let out = PathBuf::from(std::env::var("OUT_DIR").expect("cargo sets it"));

@@ -56,8 +56,11 @@ pub struct Summary {
     pub recording: String,
     /// True when the recording ended early (crash): analysed up to its last complete chunk.
     pub recording_truncated: bool,
-    /// Span of simulated time covered by the solution (or by any message), s.
+    /// Span of simulated time covered by the solution (alignment excluded; when there is no
+    /// solution, by any message), s.
     pub duration_s: f64,
+    /// Span of the time of validity over every message of the recording, s.
+    pub recorded_time_span_s: f64,
     /// Messages per topic.
     pub messages_per_channel: BTreeMap<String, u64>,
     /// Missing sequence numbers per channel (publisher's sequence jumps).
@@ -224,7 +227,10 @@ pub fn analyze(path: &Path, outages: &[TimeWindow]) -> Result<Analysis, Analysis
             t_min = t_min.min(h.time_ns);
             t_max = t_max.max(h.time_ns);
         }
-        let gaps = s.sequence_gaps_per_channel.entry(topic.clone()).or_insert(0);
+        let gaps = s
+            .sequence_gaps_per_channel
+            .entry(topic.clone())
+            .or_insert(0);
         if let Some(prev) = last_seq.insert(topic.clone(), h.seq) {
             if h.seq > prev + 1 {
                 *gaps += h.seq - prev - 1;
@@ -263,6 +269,9 @@ pub fn analyze(path: &Path, outages: &[TimeWindow]) -> Result<Analysis, Analysis
         );
     }
     s.solutions = navs.len() as u64;
+    if t_max > t_min {
+        s.recorded_time_span_s = (t_max - t_min) as f64 * 1e-9;
+    }
     if let (Some(a), Some(b)) = (navs.first(), navs.last()) {
         s.duration_s = (b.header.time_ns - a.header.time_ns) as f64 * 1e-9;
     } else if t_max > t_min {
@@ -369,32 +378,91 @@ pub fn format_table(s: &Summary) -> String {
     }
     let mut rows: Vec<(String, String)> = vec![
         ("recording".into(), s.recording.clone()),
-        ("simulated duration [s]".into(), format!("{:.1}", s.duration_s)),
-        ("final mode".into(), s.final_mode.clone().unwrap_or_else(|| "—".into())),
-        ("solutions (matched with truth)".into(), format!("{} ({})", s.solutions, s.solutions_matched_with_truth)),
-        ("horizontal error RMS / max [m]".into(), format!("{} / {}", opt(s.horizontal_error_rms_m, 3), opt(s.horizontal_error_max_m, 3))),
-        ("vertical error RMS / max [m]".into(), format!("{} / {}", opt(s.vertical_error_rms_m, 3), opt(s.vertical_error_max_m, 3))),
-        ("attitude error RMS / max [deg]".into(), format!("{} / {}", opt(s.attitude_error_rms_deg, 4), opt(s.attitude_error_max_deg, 4))),
+        (
+            "solution time span [s]".into(),
+            format!("{:.1}", s.duration_s),
+        ),
+        (
+            "recorded time span [s]".into(),
+            format!("{:.1}", s.recorded_time_span_s),
+        ),
+        (
+            "final mode".into(),
+            s.final_mode.clone().unwrap_or_else(|| "—".into()),
+        ),
+        (
+            "solutions (matched with truth)".into(),
+            format!("{} ({})", s.solutions, s.solutions_matched_with_truth),
+        ),
+        (
+            "horizontal error RMS / max [m]".into(),
+            format!(
+                "{} / {}",
+                opt(s.horizontal_error_rms_m, 3),
+                opt(s.horizontal_error_max_m, 3)
+            ),
+        ),
+        (
+            "vertical error RMS / max [m]".into(),
+            format!(
+                "{} / {}",
+                opt(s.vertical_error_rms_m, 3),
+                opt(s.vertical_error_max_m, 3)
+            ),
+        ),
+        (
+            "attitude error RMS / max [deg]".into(),
+            format!(
+                "{} / {}",
+                opt(s.attitude_error_rms_deg, 4),
+                opt(s.attitude_error_max_deg, 4)
+            ),
+        ),
     ];
     if !s.gnss_outages.is_empty() {
-        rows.push(("GNSS outage: horizontal error max [m]".into(), opt(s.outage_horizontal_error_max_m, 3)));
-        rows.push((format!("after outage ({AFTER_OUTAGE_S:.0} s): horizontal RMS [m]"), opt(s.after_outage_horizontal_error_rms_m, 3)));
+        rows.push((
+            "GNSS outage: horizontal error max [m]".into(),
+            opt(s.outage_horizontal_error_max_m, 3),
+        ));
+        rows.push((
+            format!("after outage ({AFTER_OUTAGE_S:.0} s): horizontal RMS [m]"),
+            opt(s.after_outage_horizontal_error_rms_m, 3),
+        ));
     }
-    rows.push(("latency p50 / p99 / max [µs]".into(), format!("{} / {} / {}", opt(s.latency_p50_us, 0), opt(s.latency_p99_us, 0), opt(s.latency_max_us, 0))));
+    rows.push((
+        "latency p50 / p99 / max [µs]".into(),
+        format!(
+            "{} / {} / {}",
+            opt(s.latency_p50_us, 0),
+            opt(s.latency_p99_us, 0),
+            opt(s.latency_max_us, 0)
+        ),
+    ));
     rows.push(("records dropped".into(), s.records_dropped.to_string()));
     if s.recording_truncated {
-        rows.push(("recording truncated".into(), "yes (read up to last complete chunk)".into()));
+        rows.push((
+            "recording truncated".into(),
+            "yes (read up to last complete chunk)".into(),
+        ));
     }
     for (ch, n) in &s.messages_per_channel {
         let gaps = s.sequence_gaps_per_channel.get(ch).copied().unwrap_or(0);
-        let restarts = s.sequence_restarts_per_channel.get(ch).copied().unwrap_or(0);
+        let restarts = s
+            .sequence_restarts_per_channel
+            .get(ch)
+            .copied()
+            .unwrap_or(0);
         let mut v = n.to_string();
         if gaps > 0 || restarts > 0 {
             v.push_str(&format!(" (gaps {gaps}, restarts {restarts})"));
         }
         rows.push((format!("messages {ch}"), v));
     }
-    let w = rows.iter().map(|(k, _)| k.chars().count()).max().unwrap_or(0);
+    let w = rows
+        .iter()
+        .map(|(k, _)| k.chars().count())
+        .max()
+        .unwrap_or(0);
     let mut out = String::new();
     for (k, v) in rows {
         out.push_str(&format!("  {k:<w$}  {v}\n"));
@@ -403,6 +471,7 @@ pub fn format_table(s: &Summary) -> String {
 }
 
 #[cfg(test)]
+#[allow(clippy::field_reassign_with_default)]
 mod tests {
     use super::*;
     use crate::recorder::{Record, Recorder, RecorderOptions};

@@ -198,7 +198,11 @@ fn positive(file: &Path, key: &str, v: f64) -> Result<(), ConfigError> {
     if v.is_finite() && v > 0.0 {
         Ok(())
     } else {
-        Err(invalid(file, key, format!("must be a finite number > 0, got {v}")))
+        Err(invalid(
+            file,
+            key,
+            format!("must be a finite number > 0, got {v}"),
+        ))
     }
 }
 
@@ -225,7 +229,9 @@ impl SystemConfig {
             return Err(invalid(
                 file,
                 "system.prefix",
-                format!("must be 1–64 characters of [A-Za-z0-9_-/], not starting or ending with '/', got {p:?}"),
+                format!(
+                    "must be 1–64 characters of [A-Za-z0-9_-/], not starting or ending with '/', got {p:?}"
+                ),
             ));
         }
         let r = &self.run;
@@ -235,16 +241,27 @@ impl SystemConfig {
             return Err(invalid(
                 file,
                 "run.duration_s",
-                format!("{} exceeds run.max_duration_s = {}", r.duration_s, r.max_duration_s),
+                format!(
+                    "{} exceeds run.max_duration_s = {}",
+                    r.duration_s, r.max_duration_s
+                ),
             ));
         }
         positive(file, "run.speed", r.speed)?;
         if !(r.start_delay_s.is_finite() && (0.0..=60.0).contains(&r.start_delay_s)) {
-            return Err(invalid(file, "run.start_delay_s", "must be within 0..=60 s"));
+            return Err(invalid(
+                file,
+                "run.start_delay_s",
+                "must be within 0..=60 s",
+            ));
         }
         positive(file, "run.stop_timeout_s", r.stop_timeout_s)?;
         if r.drivers.is_empty() {
-            return Err(invalid(file, "run.drivers", "must name at least one driver"));
+            return Err(invalid(
+                file,
+                "run.drivers",
+                "must name at least one driver",
+            ));
         }
         for (i, d) in r.drivers.iter().enumerate() {
             if d.is_empty() || d.contains('/') {
@@ -270,10 +287,18 @@ impl SystemConfig {
         }
         let rec = &self.recorder;
         if !(16..=10_000_000).contains(&rec.queue_capacity) {
-            return Err(invalid(file, "recorder.queue_capacity", "must be within 16..=10000000"));
+            return Err(invalid(
+                file,
+                "recorder.queue_capacity",
+                "must be within 16..=10000000",
+            ));
         }
         if !(1024..=1 << 30).contains(&rec.chunk_size_bytes) {
-            return Err(invalid(file, "recorder.chunk_size_bytes", "must be within 1 KiB..=1 GiB"));
+            return Err(invalid(
+                file,
+                "recorder.chunk_size_bytes",
+                "must be within 1 KiB..=1 GiB",
+            ));
         }
         positive(file, "recorder.flush_interval_s", rec.flush_interval_s)?;
         Ok(())
@@ -414,7 +439,9 @@ mod tests {
 
     #[test]
     fn missing_file_is_named() {
-        let e = load(Path::new("/nonexistent/sextant.toml")).unwrap_err().to_string();
+        let e = load(Path::new("/nonexistent/sextant.toml"))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("/nonexistent/sextant.toml"), "{e}");
     }
 

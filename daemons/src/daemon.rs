@@ -187,13 +187,14 @@ impl<E: NavEngine> State<'_, E> {
                             sol.imu_send_mono_ns = s.header.send_mono_ns;
                             sol.header.seq = self.solutions;
                             sol.header.send_mono_ns = msgs::monotonic_ns();
-                            if self.solutions % self.decimation == 0 {
+                            if self.solutions.is_multiple_of(self.decimation) {
                                 match self.nav_pub.send_raw(sol) {
                                     Ok(()) => self.published += 1,
                                     Err(e) => tracing::error!("{e}"),
                                 }
                             }
-                            self.recorder.record(Record::Nav(sol), sol.header.send_mono_ns);
+                            self.recorder
+                                .record(Record::Nav(sol), sol.header.send_mono_ns);
                         }
                         Ok(None) => self.filter_time_ns = s.header.time_ns,
                         Err(e) => self.log_push_error(e),
@@ -264,8 +265,10 @@ impl<E: NavEngine> State<'_, E> {
         let st = self.status();
         match self.status_pub.send(st) {
             Ok(stamped) => {
-                self.recorder
-                    .record(Record::Status(Box::new(stamped)), stamped.header.send_mono_ns);
+                self.recorder.record(
+                    Record::Status(Box::new(stamped)),
+                    stamped.header.send_mono_ns,
+                );
             }
             Err(e) => tracing::error!("{e}"),
         }
@@ -376,8 +379,18 @@ pub fn run<E: NavEngine>(
             let _ = l.try_wait(|_| {});
         }
         // Aiding first: the navigator buffers it until the inertial solution reaches its time.
-        st.drain_aiding(&star, SensorId::StarTracker, Record::StarTracker, E::push_star_tracker);
-        st.drain_aiding(&gnss, SensorId::Gnss, |s| Record::Gnss(Box::new(s)), E::push_gnss);
+        st.drain_aiding(
+            &star,
+            SensorId::StarTracker,
+            Record::StarTracker,
+            E::push_star_tracker,
+        );
+        st.drain_aiding(
+            &gnss,
+            SensorId::Gnss,
+            |s| Record::Gnss(Box::new(s)),
+            E::push_gnss,
+        );
         st.drain_aiding(&odo, SensorId::Odometer, Record::Odometer, E::push_odometer);
         st.drain_aiding(&baro, SensorId::Baro, Record::Baro, E::push_baro);
         st.drain_imu(&imu);
@@ -431,6 +444,7 @@ pub fn run<E: NavEngine>(
 }
 
 #[cfg(test)]
+#[allow(clippy::field_reassign_with_default)]
 mod tests {
     use super::*;
     use std::sync::{Arc, Mutex};

@@ -201,6 +201,7 @@ pub fn pose_in_frame_schema() -> String {
 }
 
 #[cfg(test)]
+#[allow(clippy::field_reassign_with_default)]
 mod tests {
     use super::*;
 
@@ -237,6 +238,8 @@ mod tests {
         // At lat 0, lon 0: ECEF x is up, z is north, y is east.
         let r0 = [6_378_137.0, 0.0, 0.0];
         let d = ned_offset(r0, 0.0, 0.0, [6_378_137.0 - 1.0, 2.0, 3.0]);
-        assert!((d[0] - 3.0).abs() < 1e-12 && (d[1] - 2.0).abs() < 1e-12 && (d[2] - 1.0).abs() < 1e-12);
+        assert!(
+            (d[0] - 3.0).abs() < 1e-12 && (d[1] - 2.0).abs() < 1e-12 && (d[2] - 1.0).abs() < 1e-12
+        );
     }
 }

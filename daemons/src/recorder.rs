@@ -447,6 +447,7 @@ impl Drop for Recorder {
 }
 
 #[cfg(test)]
+#[allow(clippy::field_reassign_with_default)]
 mod tests {
     use super::*;
     use mcap::MessageStream;
@@ -513,7 +514,10 @@ mod tests {
             .filter(|m| Channel::from_name(&m.channel.topic).is_some())
             .map(|m| m.channel.topic.clone())
             .collect();
-        let expected: Vec<_> = records.iter().map(|r| r.channel().name().to_string()).collect();
+        let expected: Vec<_> = records
+            .iter()
+            .map(|r| r.channel().name().to_string())
+            .collect();
         assert_eq!(order, expected);
         // Messages validate against their schemas; log_time is GPS ns, publish_time receive.
         for m in &msgs {
@@ -579,10 +583,13 @@ mod tests {
 
     #[test]
     fn unwritable_path_is_an_error_naming_it() {
-        let e = Recorder::start(Path::new("/nonexistent-dir/x.mcap"), &RecorderOptions::default())
-            .err()
-            .unwrap()
-            .to_string();
+        let e = Recorder::start(
+            Path::new("/nonexistent-dir/x.mcap"),
+            &RecorderOptions::default(),
+        )
+        .err()
+        .unwrap()
+        .to_string();
         assert!(e.contains("/nonexistent-dir/x.mcap"), "{e}");
     }
 }

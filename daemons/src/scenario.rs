@@ -185,9 +185,15 @@ duration_s = 60.0
 
     #[test]
     fn bad_epoch_names_the_key() {
-        let e = ScenarioInfo::parse("[scenario]\nstart_utc = \"yesterday\"\n", Path::new("x.toml"))
-            .unwrap_err()
-            .to_string();
-        assert!(e.contains("scenario.start_utc") && e.contains("x.toml"), "{e}");
+        let e = ScenarioInfo::parse(
+            "[scenario]\nstart_utc = \"yesterday\"\n",
+            Path::new("x.toml"),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("scenario.start_utc") && e.contains("x.toml"),
+            "{e}"
+        );
     }
 }

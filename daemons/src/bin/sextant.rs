@@ -65,6 +65,8 @@ fn main() -> anyhow::Result<()> {
         )
         .with_writer(std::io::stderr)
         .init();
+    // iceoryx2's own log: warnings and errors only unless IOX2_LOG_LEVEL says otherwise.
+    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
     let cli = Cli::parse();
     match cli.command {
         Command::Run(args) => {
@@ -330,8 +332,7 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
     let mut sigint = signal(SignalKind::interrupt())?;
     let mut sigterm = signal(SignalKind::terminate())?;
 
-    let start_mono_ns =
-        msgs::monotonic_ns() + (rc.start_delay_s * 1e9) as u64;
+    let start_mono_ns = msgs::monotonic_ns() + (rc.start_delay_s * 1e9) as u64;
     let scenario_arg = scenario_path.display().to_string();
     let mut slots: Vec<Slot> = rc
         .drivers
@@ -391,7 +392,14 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
         if let Err(e) = spawn(i, &mut slots[i], &tx) {
             let mut results = HashMap::new();
             let all: Vec<usize> = (0..slots.len()).collect();
-            stop_and_wait(&mut slots, &all, &mut rx, Duration::from_secs(5), &mut results).await;
+            stop_and_wait(
+                &mut slots,
+                &all,
+                &mut rx,
+                Duration::from_secs(5),
+                &mut results,
+            )
+            .await;
             return Err(e);
         }
     }
@@ -457,7 +465,14 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
     }
     // Drivers first, then the fusion daemon (which drains, finishes the recording and exits).
     stop_and_wait(&mut slots, &driver_idx, &mut rx, stop_timeout, &mut results).await;
-    stop_and_wait(&mut slots, &[fusion_idx], &mut rx, stop_timeout * 4, &mut results).await;
+    stop_and_wait(
+        &mut slots,
+        &[fusion_idx],
+        &mut rx,
+        stop_timeout * 4,
+        &mut results,
+    )
+    .await;
     status_stop.store(true, Ordering::SeqCst);
     let _ = tokio::task::spawn_blocking(move || status.join()).await;
     match msgs::ipc::cleanup_dead_nodes() {
