@@ -69,7 +69,7 @@ fn bench(c: &mut Criterion) {
     });
     c.bench_function("update_baro", |b| {
         b.iter(|| {
-            let m = ekf::baro_height(black_box(&nav), &WGS84, 181.0, 2.0);
+            let m = ekf::baro_height(black_box(&nav), &WGS84, 181.0, 0.0, 0.5);
             ekf::update(&f.p, &m, gates.threshold(1))
         })
     });

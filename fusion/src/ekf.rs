@@ -12,9 +12,16 @@
 //! | 6..9 | [`idx::ATT`] | `ψ`, attitude error in ECEF: `C_e_b = (I + [ψ×])·Ĉ_e_b` | rad |
 //! | 9..12 | [`idx::BG`] | `δb_g = b_g − b̂_g`, gyro bias, body | rad/s |
 //! | 12..15 | [`idx::BA`] | `δb_a = b_a − b̂_a`, accelerometer bias, body | m/s² |
+//! | 15 | [`idx::BARO`] | `δb_h = b_h − b̂_h`, baro height bias (`h_baro = h + b_h`) | m |
 //!
-//! New groups (scale factors, star-tracker boresight, receiver clock, odometer scale, baro
-//! bias — DESIGN.md "Filter") are appended after index 15: raise [`NX`], add their indices in
+//! The baro bias is a state rather than extra measurement noise because the simulated (and
+//! real) baro error is dominated by a constant bias (30 Pa ≈ 2.5 m) that white noise cannot
+//! represent: treating it as noise would make the height covariance dishonest after a few
+//! samples. With GNSS it is observable; without GNSS the height stays tied to the baro with
+//! the bias σ as its honest uncertainty.
+//!
+//! New groups (scale factors, star-tracker boresight, receiver clock, odometer scale —
+//! DESIGN.md "Filter") are appended after index 16: raise [`NX`], add their indices in
 //! [`idx`], their dynamics in [`error_dynamics`] and their noise in [`ProcessNoise`]; existing
 //! measurement models only fill the columns they know, so they keep working unchanged.
 //!
@@ -26,7 +33,7 @@
 //! δṙ = δv
 //! δv̇ = G·δr − 2[ω_ie×]·δv − [f̂_e×]·ψ − Ĉ_e_b·δb_a − Ĉ_e_b·n_a
 //! ψ̇  = −[ω_ie×]·ψ − Ĉ_e_b·δb_g − Ĉ_e_b·n_g
-//! δḃ_g = w_g,  δḃ_a = w_a                       (random walks)
+//! δḃ_g = w_g,  δḃ_a = w_a,  δḃ_h = w_h          (random walks)
 //! ```
 //! `G = ∂g/∂r = GM/r³·(3 u uᵀ − I) − [ω_ie×]²` is the gravity gradient: the `−GM/r³·I` part is
 //! paper 002's `−ν²Δr` (Schuler frequency `ν² = g/r`), `3GM/r³ u uᵀ` its `3ν² r (r·Δr)/r²`
@@ -56,7 +63,7 @@ use crate::strapdown::NavState;
 use nalgebra::{Cholesky, Matrix3, Rotation3, SMatrix, SVector, UnitQuaternion, Vector3};
 
 /// Number of error states.
-pub const NX: usize = 15;
+pub const NX: usize = 16;
 
 /// Start index of each state group in the error-state vector.
 pub mod idx {
@@ -70,6 +77,8 @@ pub mod idx {
     pub const BG: usize = 9;
     /// Accelerometer bias error, body, m/s².
     pub const BA: usize = 12;
+    /// Baro height bias error, m (one state).
+    pub const BARO: usize = 15;
 }
 
 /// Error-state vector (see the module table for layout and units).
@@ -91,6 +100,8 @@ pub struct ProcessNoise {
     pub gyro_bias_rw_rad_s_sqrt_s: f64,
     /// Accelerometer bias random-walk density, m/s²/√s.
     pub accel_bias_rw_m_s2_sqrt_s: f64,
+    /// Baro height bias random-walk density, m/√s.
+    pub baro_bias_rw_m_sqrt_s: f64,
 }
 
 impl ProcessNoise {
@@ -103,6 +114,7 @@ impl ProcessNoise {
             q[idx::BG + i] = self.gyro_bias_rw_rad_s_sqrt_s.powi(2);
             q[idx::BA + i] = self.accel_bias_rw_m_s2_sqrt_s.powi(2);
         }
+        q[idx::BARO] = self.baro_bias_rw_m_sqrt_s.powi(2);
         q
     }
 }
@@ -189,6 +201,8 @@ pub struct ErrorStateEkf {
     pub gyro_bias_rad_s: Vector3<f64>,
     /// Estimated accelerometer bias, body, m/s².
     pub accel_bias_m_s2: Vector3<f64>,
+    /// Estimated baro height bias, m (`h_baro = h + b_h`).
+    pub baro_bias_m: f64,
     /// Process noise densities.
     pub noise: ProcessNoise,
     qc: StateVector,
@@ -201,6 +215,7 @@ impl ErrorStateEkf {
             p: p0,
             gyro_bias_rad_s: Vector3::zeros(),
             accel_bias_m_s2: Vector3::zeros(),
+            baro_bias_m: 0.0,
             qc: noise.qc_diagonal(),
             noise,
         }
@@ -230,6 +245,7 @@ impl ErrorStateEkf {
         correct_nav_state(nav, dx);
         self.gyro_bias_rad_s += dx.fixed_rows::<3>(idx::BG);
         self.accel_bias_m_s2 += dx.fixed_rows::<3>(idx::BA);
+        self.baro_bias_m += dx[idx::BARO];
     }
 }
 
@@ -401,12 +417,14 @@ pub fn star_attitude(
 }
 
 /// Baro altitude taken as height above the ellipsoid (HELPERS.md): `z = h_baro` (m),
-/// predicted `ĥ` = geodetic height of `r̂_e`; `H_r = u_upᵀ` (ECEF unit up vector at the
-/// estimated latitude/longitude), noise `sigma_m`.
+/// predicted `ĥ + b̂_h` (geodetic height of `r̂_e` plus the estimated baro bias
+/// `baro_bias_m`); `H_r = u_upᵀ` (ECEF unit up vector at the estimated latitude/longitude),
+/// `H_b = 1`; white noise `sigma_m`.
 pub fn baro_height(
     nav: &NavState,
     ell: &Ellipsoid,
     height_baro_m: f64,
+    baro_bias_m: f64,
     sigma_m: f64,
 ) -> Measurement<1> {
     let g = crate::earth::ecef_to_geodetic(ell, &nav.r_e);
@@ -418,8 +436,9 @@ pub fn baro_height(
     let mut h = SMatrix::<f64, 1, NX>::zeros();
     h.fixed_view_mut::<1, 3>(0, idx::POS)
         .copy_from(&up.transpose());
+    h[(0, idx::BARO)] = 1.0;
     Measurement {
-        innovation: SVector::<f64, 1>::new(height_baro_m - g.height_m),
+        innovation: SVector::<f64, 1>::new(height_baro_m - g.height_m - baro_bias_m),
         h,
         r: SMatrix::<f64, 1, 1>::new(sigma_m * sigma_m),
     }

@@ -120,6 +120,7 @@ impl ImuSpec {
             vrw_m_s_sqrt_s: self.vrw_ug_sqrt_hz * 1e-6 * G0,
             gyro_bias_rw_rad_s_sqrt_s: self.gyro_bias_rw_deg_h_sqrt_h * DEG / 3600.0 / 60.0,
             accel_bias_rw_m_s2_sqrt_s: self.accel_bias_rw_ug_sqrt_h * 1e-6 * G0 / 60.0,
+            baro_bias_rw_m_sqrt_s: 0.0,
         }
     }
 }
@@ -188,10 +189,13 @@ impl Default for UpdateSwitches {
 #[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct AidingNoise {
-    /// Baro height σ, m. The baro bias is not a state yet: this σ must cover it.
+    /// Baro height white-noise σ, m (the bias is a filter state).
     pub baro_sigma_m: f64,
-    /// Minimum time between two fused baro samples, s (limits the time-correlated error's
-    /// weight; the samples in between are not fused).
+    /// Initial σ of the baro height bias state, m.
+    pub baro_bias_sigma_m: f64,
+    /// Random walk of the baro height bias, m/√s.
+    pub baro_bias_rw_m_sqrt_s: f64,
+    /// Minimum time between two fused baro samples, s (the samples in between are not fused).
     pub baro_min_interval_s: f64,
     /// Odometer speed white-noise σ, m/s.
     pub odometer_sigma_m_s: f64,
@@ -217,10 +221,12 @@ pub struct AidingNoise {
 impl Default for AidingNoise {
     fn default() -> Self {
         Self {
-            baro_sigma_m: 2.0,
-            baro_min_interval_s: 1.0,
+            baro_sigma_m: 0.5,
+            baro_bias_sigma_m: 10.0,
+            baro_bias_rw_m_sqrt_s: 0.005,
+            baro_min_interval_s: 0.2,
             odometer_sigma_m_s: 0.05,
-            odometer_scale_sigma: 0.002,
+            odometer_scale_sigma: 0.003,
             nhc_sigma_m_s: 0.05,
             zupt_sigma_m_s: 0.005,
             zupt_interval_s: 0.1,
@@ -417,6 +423,7 @@ impl NavigatorConfig {
                 "initial.heading_sigma_min_deg",
             ),
             (self.aiding.baro_sigma_m, "aiding.baro_sigma_m"),
+            (self.aiding.baro_bias_sigma_m, "aiding.baro_bias_sigma_m"),
             (self.aiding.odometer_sigma_m_s, "aiding.odometer_sigma_m_s"),
             (self.aiding.nhc_sigma_m_s, "aiding.nhc_sigma_m_s"),
             (self.aiding.zupt_sigma_m_s, "aiding.zupt_sigma_m_s"),
@@ -442,6 +449,10 @@ impl NavigatorConfig {
             (
                 self.aiding.baro_min_interval_s,
                 "aiding.baro_min_interval_s",
+            ),
+            (
+                self.aiding.baro_bias_rw_m_sqrt_s,
+                "aiding.baro_bias_rw_m_sqrt_s",
             ),
             (
                 self.aiding.odometer_scale_sigma,
@@ -904,6 +915,11 @@ impl Navigator {
         (self.ekf.gyro_bias_rad_s, self.ekf.accel_bias_m_s2)
     }
 
+    /// Estimated baro height bias (`h_baro = h + b`), m.
+    pub fn baro_bias_m(&self) -> f64 {
+        self.ekf.baro_bias_m
+    }
+
     /// True once alignment is complete and the filter runs.
     pub fn is_navigating(&self) -> bool {
         self.phase == Phase::Navigating
@@ -1019,7 +1035,8 @@ impl Navigator {
             }
         };
         let imu = &self.config.imu;
-        let noise = imu.process_noise();
+        let mut noise = imu.process_noise();
+        noise.baro_bias_rw_m_sqrt_s = self.config.aiding.baro_bias_rw_m_sqrt_s;
         let spec = alignment::AlignmentErrorSpec {
             gyro_bias_rad_s: imu.gyro_bias_rad_s(),
             accel_bias_m_s2: imu.accel_bias_m_s2(),
@@ -1061,6 +1078,7 @@ impl Navigator {
             p0[(idx::BG + k, idx::BG + k)] = sbg;
             p0[(idx::BA + k, idx::BA + k)] = sba;
         }
+        p0[(idx::BARO, idx::BARO)] = self.config.aiding.baro_bias_sigma_m.powi(2);
         self.ekf = ErrorStateEkf::new(p0, noise);
         self.strapdown = Strapdown::new(self.config.mechanization());
         self.phase = Phase::Navigating;
@@ -1266,6 +1284,7 @@ impl Navigator {
             &self.hist[hi].nav,
             &self.ell,
             height_m,
+            self.ekf.baro_bias_m,
             self.config.aiding.baro_sigma_m,
         );
         self.last_baro_fused = Some(ts);
@@ -1466,6 +1485,11 @@ fn validate_gnss(s: &GnssSample) -> Result<Option<GnssFix>, FusionError> {
 }
 
 #[cfg(test)]
+mod tests_support {
+    pub use super::tests::StaticSim;
+}
+
+#[cfg(test)]
 mod tests {
     use super::*;
     use crate::strapdown::stationary_increment;
@@ -1477,7 +1501,7 @@ mod tests {
 
     /// Synthetic static site: IMU increments from fusion::earth plus bias and white noise at
     /// the configured navigation-grade densities, GNSS fixes with white noise.
-    struct StaticSim {
+    pub struct StaticSim {
         ell: Ellipsoid,
         r_e: Vector3<f64>,
         q_e_b: UnitQuaternion<f64>,
@@ -1494,7 +1518,7 @@ mod tests {
     }
 
     impl StaticSim {
-        fn new(seed: u64, rate_hz: f64) -> Self {
+        pub fn new(seed: u64, rate_hz: f64) -> Self {
             let ell = WGS84;
             let g = Geodetic {
                 lat_rad: 55.655 * DEG,
@@ -1535,7 +1559,7 @@ mod tests {
         fn time_ns(&self) -> i64 {
             T0 + (self.k as f64 * self.dt * 1e9).round() as i64
         }
-        fn next_imu(&mut self) -> ImuSample {
+        pub fn next_imu(&mut self) -> ImuSample {
             self.k += 1;
             self.imu_seq += 1;
             let inc =
@@ -1554,7 +1578,7 @@ mod tests {
             }
             s
         }
-        fn gnss(&mut self) -> GnssSample {
+        pub fn gnss(&mut self) -> GnssSample {
             self.gnss_seq += 1;
             let n = Normal::new(0.0, self.gnss_sigma).unwrap();
             let nv = Normal::new(0.0, 0.02).unwrap();
@@ -1804,5 +1828,51 @@ mod tests {
         assert!(sol.q_ned_body.iter().all(|x| x.is_finite()));
         assert!(sol.att_sigma_ned_rad.iter().all(|x| *x > 0.0 && *x < 0.01));
         assert!((sol.roll_pitch_heading_rad[2] - 0.7).abs() < 0.01);
+    }
+}
+
+#[cfg(test)]
+mod baro_tests {
+    use super::tests_support::*;
+    use super::*;
+
+    #[test]
+    fn baro_bias_state_converges_with_gnss() {
+        // Baro reads 2.5 m high (the simulator's 30 Pa bias); GNSS at 1 Hz pins the height,
+        // so the bias state must converge to ≈ 2.5 m and the height must stay unbiased.
+        let mut nav = Navigator::new(NavigatorConfig {
+            alignment_s: 60.0,
+            ..NavigatorConfig::default()
+        })
+        .unwrap();
+        let mut sim = StaticSim::new(21, 100.0);
+        let h_true = 180.0;
+        for k in 1..=(300 * 100) {
+            let imu = sim.next_imu();
+            nav.push_imu(&imu).unwrap();
+            if k % 100 == 0 {
+                let g = sim.gnss();
+                nav.push_gnss(&g).unwrap();
+            }
+            if k % 20 == 0 {
+                let mut b = BaroSample::default();
+                b.header.time_ns = imu.header.time_ns;
+                b.header.seq = k as u64;
+                b.pressure_pa = crate::atmosphere::isa_pressure_pa(h_true + 2.5);
+                b.temperature_c = 15.0;
+                nav.push_baro(&b).unwrap();
+            }
+        }
+        let h = nav.health()[SensorId::Baro as usize];
+        assert!(h.fused > 500, "{h:?}");
+        let sigma_b = nav.covariance()[(idx::BARO, idx::BARO)].sqrt();
+        eprintln!("baro bias {:.3} m ± {sigma_b:.3}", nav.baro_bias_m());
+        assert!((nav.baro_bias_m() - 2.5).abs() < 4.0 * sigma_b + 0.05);
+        let geo = nav.nav_state().geodetic(&WGS84);
+        assert!(
+            (geo.height_m - h_true).abs() < 1.0,
+            "height {}",
+            geo.height_m
+        );
     }
 }

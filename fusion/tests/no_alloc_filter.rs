@@ -186,7 +186,7 @@ fn filter_allocates_nothing_in_steady_state() {
         .nis,
         ekf::update(
             &p,
-            &ekf::baro_height(&state, &WGS84, 180.0, 2.0),
+            &ekf::baro_height(&state, &WGS84, 180.0, 0.0, 0.5),
             gates.threshold(1),
         )
         .residual
