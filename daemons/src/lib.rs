@@ -14,6 +14,7 @@
 pub mod analysis;
 pub mod config;
 pub mod daemon;
+pub mod experiments;
 pub mod foxglove;
 pub mod plots;
 pub mod recorder;

@@ -1,0 +1,228 @@
+//! Line charts (PNG, plotters) for the experiments: any number of named polylines on linear or
+//! logarithmic axes. Non-finite points, and non-positive ones on a logarithmic axis, are left
+//! out (and split the line) rather than failing the plot.
+
+use super::ExperimentError;
+use plotters::coord::ranged1d::{AsRangedCoord, ValueFormatter};
+use plotters::prelude::*;
+use std::path::Path;
+
+/// Colours cycled through by [`color`].
+const PALETTE: [RGBColor; 6] = [
+    RGBColor(31, 119, 180),
+    RGBColor(214, 39, 40),
+    RGBColor(44, 160, 44),
+    RGBColor(255, 127, 14),
+    RGBColor(148, 103, 189),
+    RGBColor(140, 86, 75),
+];
+
+/// The `i`-th colour of the palette.
+pub fn color(i: usize) -> RGBColor {
+    PALETTE[i % PALETTE.len()]
+}
+
+/// One polyline.
+#[derive(Debug, Clone)]
+pub struct Line {
+    /// Legend entry.
+    pub label: String,
+    /// Points (x, y) in the chart's units.
+    pub points: Vec<(f64, f64)>,
+    /// Colour.
+    pub color: RGBColor,
+    /// Dashed (for references, expectations) instead of solid.
+    pub dashed: bool,
+    /// Draw a circle at each point (for sparse data such as step sizes).
+    pub markers: bool,
+}
+
+/// A chart: title, axis labels (with units) and scales, lines.
+#[derive(Debug, Clone)]
+pub struct Chart<'a> {
+    /// Caption.
+    pub title: &'a str,
+    /// X axis label, with unit.
+    pub x_label: &'a str,
+    /// Y axis label, with unit.
+    pub y_label: &'a str,
+    /// Logarithmic x axis.
+    pub log_x: bool,
+    /// Logarithmic y axis.
+    pub log_y: bool,
+    /// The lines.
+    pub lines: &'a [Line],
+}
+
+type DynErr = Box<dyn std::error::Error>;
+
+/// Draw `chart` into the PNG file `path` (1000 × 600 px).
+pub fn line_chart(path: &Path, chart: &Chart) -> Result<(), ExperimentError> {
+    let usable = |v: f64, log: bool| v.is_finite() && (!log || v > 0.0);
+    let (x0, x1) = range(
+        chart
+            .lines
+            .iter()
+            .flat_map(|l| l.points.iter().map(|p| p.0))
+            .filter(|&x| usable(x, chart.log_x)),
+        chart.log_x,
+    );
+    let (y0, y1) = range(
+        chart
+            .lines
+            .iter()
+            .flat_map(|l| l.points.iter().map(|p| p.1))
+            .filter(|&y| usable(y, chart.log_y)),
+        chart.log_y,
+    );
+    let result = match (chart.log_x, chart.log_y) {
+        (false, false) => draw(path, chart, x0..x1, y0..y1),
+        (true, false) => draw(path, chart, (x0..x1).log_scale(), y0..y1),
+        (false, true) => draw(path, chart, x0..x1, (y0..y1).log_scale()),
+        (true, true) => draw(path, chart, (x0..x1).log_scale(), (y0..y1).log_scale()),
+    };
+    result.map_err(|e| ExperimentError::Plot {
+        path: path.to_path_buf(),
+        detail: e.to_string(),
+    })
+}
+
+/// Axis range of the values with a margin (5 % linear, a factor 1.3 logarithmic).
+fn range(values: impl Iterator<Item = f64>, log: bool) -> (f64, f64) {
+    let (lo, hi) = values.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| {
+        (a.min(x), b.max(x))
+    });
+    if !lo.is_finite() || !hi.is_finite() {
+        return if log { (0.1, 10.0) } else { (0.0, 1.0) };
+    }
+    if log {
+        if hi / lo < 1.0 + 1e-9 {
+            return (lo / 2.0, hi * 2.0);
+        }
+        return (lo / 1.3, hi * 1.3);
+    }
+    if hi - lo < 1e-12 * (1.0 + hi.abs()) {
+        return (lo - 0.5, hi + 0.5);
+    }
+    let m = (hi - lo) * 0.05;
+    (lo - m, hi + m)
+}
+
+fn draw<XR, YR>(path: &Path, chart: &Chart, xr: XR, yr: YR) -> Result<(), DynErr>
+where
+    XR: AsRangedCoord<Value = f64>,
+    YR: AsRangedCoord<Value = f64>,
+    XR::CoordDescType: ValueFormatter<f64>,
+    YR::CoordDescType: ValueFormatter<f64>,
+{
+    let root = BitMapBackend::new(path, (1000, 600)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let mut ctx = ChartBuilder::on(&root)
+        .caption(chart.title, ("sans-serif", 22))
+        .margin(12)
+        .x_label_area_size(45)
+        .y_label_area_size(80)
+        .build_cartesian_2d(xr, yr)?;
+    ctx.configure_mesh()
+        .x_desc(chart.x_label)
+        .y_desc(chart.y_label)
+        .draw()?;
+    for line in chart.lines {
+        let c = line.color;
+        let ok = |p: &(f64, f64)| {
+            p.0.is_finite()
+                && p.1.is_finite()
+                && (!chart.log_x || p.0 > 0.0)
+                && (!chart.log_y || p.1 > 0.0)
+        };
+        // Split into runs of usable points so that a gap is not bridged by a straight line.
+        let mut runs: Vec<Vec<(f64, f64)>> = vec![Vec::new()];
+        for p in &line.points {
+            if ok(p) {
+                if let Some(run) = runs.last_mut() {
+                    run.push(*p);
+                }
+            } else if runs.last().is_some_and(|r| !r.is_empty()) {
+                runs.push(Vec::new());
+            }
+        }
+        let style = ShapeStyle::from(&c).stroke_width(2);
+        let mut first = true;
+        for run in runs.into_iter().filter(|r| !r.is_empty()) {
+            let anno = if line.dashed {
+                ctx.draw_series(DashedLineSeries::new(run.iter().copied(), 8, 6, style))?
+            } else {
+                ctx.draw_series(LineSeries::new(run.iter().copied(), style))?
+            };
+            if first {
+                anno.label(line.label.clone())
+                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], c));
+                first = false;
+            }
+            if line.markers {
+                ctx.draw_series(run.iter().map(|&p| Circle::new(p, 4, c.filled())))?;
+            }
+        }
+    }
+    ctx.configure_series_labels()
+        .position(SeriesLabelPosition::UpperLeft)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .draw()?;
+    root.present()?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn draws_linear_and_log_charts_and_skips_bad_points() {
+        let dir = super::super::test_dir("plot");
+        std::fs::create_dir_all(&dir).expect("temp dir");
+        let lines = [
+            Line {
+                label: "y = x²".into(),
+                points: (1..50).map(|i| (i as f64, (i * i) as f64)).collect(),
+                color: color(0),
+                dashed: false,
+                markers: true,
+            },
+            Line {
+                label: "with gaps".into(),
+                points: vec![
+                    (1.0, 1.0),
+                    (2.0, f64::NAN),
+                    (3.0, -1.0),
+                    (4.0, 5.0),
+                    (5.0, 6.0),
+                ],
+                color: color(1),
+                dashed: true,
+                markers: false,
+            },
+        ];
+        for (i, (lx, ly)) in [(false, false), (true, true), (false, true), (true, false)]
+            .into_iter()
+            .enumerate()
+        {
+            let path = dir.join(format!("chart_{i}.png"));
+            line_chart(
+                &path,
+                &Chart {
+                    title: "test",
+                    x_label: "x [1]",
+                    y_label: "y [1]",
+                    log_x: lx,
+                    log_y: ly,
+                    lines: &lines,
+                },
+            )
+            .expect("chart");
+            let len = std::fs::metadata(&path).map(|m| m.len()).unwrap_or(0);
+            assert!(len > 1000, "{path:?}: {len} bytes");
+        }
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
