@@ -54,6 +54,9 @@ impl Default for Settings {
     }
 }
 
+/// A figure of a grid point, for plotting.
+type PointFigure = dyn Fn(&Point) -> f64;
+
 /// Gravity of each model at one grid point, compared with the normal gravity.
 #[derive(Debug, Clone, Copy)]
 struct Point {
@@ -193,7 +196,7 @@ pub fn run_with(
     write_summary(out_dir, &summary)?;
 
     let heights = [0.0, 10_000.0, settings.max_height_m];
-    let curves = |f: &dyn Fn(&Point) -> f64| -> Vec<Line> {
+    let curves = |f: &PointFigure| -> Vec<Line> {
         heights
             .iter()
             .enumerate()
@@ -211,7 +214,7 @@ pub fn run_with(
             })
             .collect()
     };
-    let charts: [(&str, &str, &str, &dyn Fn(&Point) -> f64); 4] = [
+    let charts: [(&str, &str, &str, &PointFigure); 4] = [
         (
             "gravity_magnitude_j2_minus_normal_mgal.png",
             "|g| J2 − normal gravity (Somigliana + free air)",

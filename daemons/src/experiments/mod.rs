@@ -190,17 +190,24 @@ mod tests {
     }
 
     /// The full-length runs, timed: `cargo test --release -p sextant-daemons --lib
-    /// full_length -- --ignored --nocapture` (seconds in release mode; too slow unoptimised).
+    /// full_length -- --ignored --nocapture` (seconds in release mode). With
+    /// `SEXTANT_EXPERIMENT_KEEP=DIR` the results are kept in `DIR/NAME`.
     #[test]
     #[ignore]
     fn full_length_runs() {
+        let keep = std::env::var_os("SEXTANT_EXPERIMENT_KEEP").map(PathBuf::from);
         for name in names() {
-            let dir = test_dir(&format!("full-{name}"));
+            let dir = match &keep {
+                Some(k) => k.join(name),
+                None => test_dir(&format!("full-{name}")),
+            };
             let t0 = std::time::Instant::now();
             let summary = run_by_name(name, &dir, false).expect("run");
             let table = table_by_name(name, &summary).expect("table");
             eprintln!("{name}: {:.2} s\n{table}", t0.elapsed().as_secs_f64());
-            let _ = std::fs::remove_dir_all(&dir);
+            if keep.is_none() {
+                let _ = std::fs::remove_dir_all(&dir);
+            }
         }
     }
 

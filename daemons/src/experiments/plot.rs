@@ -108,6 +108,33 @@ fn range(values: impl Iterator<Item = f64>, log: bool) -> (f64, f64) {
     (lo - m, hi + m)
 }
 
+/// Tick label: shortest round-trip form of the value rounded to 6 significant digits
+/// (scientific outside 1e-3…1e5); on a logarithmic axis only mantissas 1, 2 and 5 are labelled
+/// (the other key points stay as grid lines), so that labels never overlap.
+fn tick_label(v: f64, log: bool) -> String {
+    if !v.is_finite() {
+        return String::new();
+    }
+    if v == 0.0 {
+        return "0".into();
+    }
+    let exp = v.abs().log10().floor();
+    let mantissa = v.abs() / 10f64.powf(exp);
+    if log
+        && ![1.0, 2.0, 5.0, 10.0]
+            .iter()
+            .any(|m| (mantissa - m).abs() < 1e-6)
+    {
+        return String::new();
+    }
+    let rounded: f64 = format!("{v:.5e}").parse().unwrap_or(v);
+    if (-3.0..5.0).contains(&exp) {
+        format!("{rounded}")
+    } else {
+        format!("{rounded:e}")
+    }
+}
+
 fn draw<XR, YR>(path: &Path, chart: &Chart, xr: XR, yr: YR) -> Result<(), DynErr>
 where
     XR: AsRangedCoord<Value = f64>,
@@ -123,9 +150,14 @@ where
         .x_label_area_size(45)
         .y_label_area_size(80)
         .build_cartesian_2d(xr, yr)?;
+    let (log_x, log_y) = (chart.log_x, chart.log_y);
+    let fx = move |v: &f64| tick_label(*v, log_x);
+    let fy = move |v: &f64| tick_label(*v, log_y);
     ctx.configure_mesh()
         .x_desc(chart.x_label)
         .y_desc(chart.y_label)
+        .x_label_formatter(&fx)
+        .y_label_formatter(&fy)
         .draw()?;
     for line in chart.lines {
         let c = line.color;
@@ -176,6 +208,18 @@ where
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn tick_labels_are_short() {
+        assert_eq!(tick_label(0.30000000000000004, false), "0.3");
+        assert_eq!(tick_label(0.30000000000000004, true), "");
+        assert_eq!(tick_label(0.2, true), "0.2");
+        assert_eq!(tick_label(5e-6, true), "5e-6");
+        assert_eq!(tick_label(100.0, true), "100");
+        assert_eq!(tick_label(-12.5, false), "-12.5");
+        assert_eq!(tick_label(2.5e7, false), "2.5e7");
+        assert_eq!(tick_label(0.0, false), "0");
+    }
 
     #[test]
     fn draws_linear_and_log_charts_and_skips_bad_points() {
