@@ -153,6 +153,11 @@ where
         published: 0,
         interrupted: false,
     };
+    // A driver restarted mid-run (by `sextant run` after a crash) must not replay the samples
+    // that fell due while it was dead: like a real sensor it resumes with current data. Their
+    // values are still computed, because every source is a sequential process (random streams,
+    // truth integration) that must stay identical to an uninterrupted run.
+    let started_mono = msgs::monotonic_ns();
     let mut k = source.first_index();
     while k * period <= duration_ns {
         if stop_requested() {
@@ -163,6 +168,10 @@ where
         let msg = source.sample(t_ns);
         let offset = t_ns as f64 / args.speed;
         let target = start_mono.saturating_add(if offset.is_finite() { offset as u64 } else { 0 });
+        if args.speed.is_finite() && target < started_mono {
+            k += 1;
+            continue;
+        }
         if !sleep_until_mono(target) {
             summary.interrupted = true;
             break;

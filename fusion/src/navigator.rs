@@ -315,7 +315,7 @@ pub struct NavigatorConfig {
 impl Default for NavigatorConfig {
     fn default() -> Self {
         Self {
-            alignment_s: 120.0,
+            alignment_s: 100.0,
             ellipsoid: EllipsoidName::Wgs84,
             gravity: GravityModel::J2,
             integrator: Integrator::Rk4,

@@ -30,6 +30,17 @@ struct Cli {
 enum Command {
     /// Run the live system: drivers, fusion and recorder; then summarise the recording.
     Run(RunArgs),
+    /// Run a named offline experiment; prints its table, writes summary.json and PNG plots.
+    Experiment(ExperimentArgs),
+}
+
+#[derive(Debug, clap::Args)]
+struct ExperimentArgs {
+    /// Experiment name: integrators, schuler or gravity.
+    name: String,
+    /// Output directory (default out/experiment/NAME).
+    #[arg(long)]
+    out: Option<PathBuf>,
 }
 
 #[derive(Debug, clap::Args)]
@@ -76,7 +87,28 @@ fn main() -> anyhow::Result<()> {
             let code = rt.block_on(run(args))?;
             std::process::exit(code);
         }
+        Command::Experiment(args) => experiment(args),
     }
+}
+
+/// `sextant experiment NAME`: run it, print its table, point at its files.
+fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
+    use sextant_daemons::experiments;
+    if !experiments::names().contains(&args.name.as_str()) {
+        bail!(
+            "unknown experiment `{}`; known: {}",
+            args.name,
+            experiments::names().join(", ")
+        );
+    }
+    let out = args
+        .out
+        .unwrap_or_else(|| PathBuf::from("out/experiment").join(&args.name));
+    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    let summary = experiments::run_by_name(&args.name, &out, true)?;
+    println!("{}", experiments::table_by_name(&args.name, &summary)?);
+    println!("summary and plots in {}", out.display());
+    Ok(())
 }
 
 /// One supervised child process.
