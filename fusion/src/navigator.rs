@@ -121,6 +121,7 @@ impl ImuSpec {
             gyro_bias_rw_rad_s_sqrt_s: self.gyro_bias_rw_deg_h_sqrt_h * DEG / 3600.0 / 60.0,
             accel_bias_rw_m_s2_sqrt_s: self.accel_bias_rw_ug_sqrt_h * 1e-6 * G0 / 60.0,
             baro_bias_rw_m_sqrt_s: 0.0,
+            odo_scale_rw_per_sqrt_s: 0.0,
         }
     }
 }
@@ -1079,6 +1080,7 @@ impl Navigator {
             p0[(idx::BA + k, idx::BA + k)] = sba;
         }
         p0[(idx::BARO, idx::BARO)] = self.config.aiding.baro_bias_sigma_m.powi(2);
+        p0[(idx::ODO, idx::ODO)] = self.config.aiding.odometer_scale_sigma.powi(2);
         self.ekf = ErrorStateEkf::new(p0, noise);
         self.strapdown = Strapdown::new(self.config.mechanization());
         self.phase = Phase::Navigating;
@@ -1250,14 +1252,16 @@ impl Navigator {
             return;
         };
         let a = &self.config.aiding;
-        let sigma =
-            (a.odometer_sigma_m_s.powi(2) + (a.odometer_scale_sigma * speed).powi(2)).sqrt();
+        // The scale factor is a filter state (initial σ `odometer_scale_sigma`), so only the
+        // white part of the odometer error is measurement noise.
+        let sigma = a.odometer_sigma_m_s;
         let nav = self.hist[hi].nav;
+        let k = self.ekf.odo_scale;
         let ok = if self.config.updates.nonholonomic {
-            let m = ekf::odometer_nhc(&nav, speed, sigma, a.nhc_sigma_m_s);
+            let m = ekf::odometer_nhc(&nav, k, speed, sigma, a.nhc_sigma_m_s);
             self.run_update(Some(id), &m)
         } else {
-            let m = ekf::odometer_speed(&nav, speed, sigma);
+            let m = ekf::odometer_speed(&nav, k, speed, sigma);
             self.run_update(Some(id), &m)
         };
         if ok {

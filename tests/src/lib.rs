@@ -10,7 +10,9 @@ use std::path::{Path, PathBuf};
 /// (`target/<profile>`), found from the test executable's own path (`target/<profile>/deps`).
 pub fn bin_dir() -> Result<PathBuf> {
     let exe = std::env::current_exe()?;
-    let deps = exe.parent().ok_or_else(|| anyhow!("test executable has no parent"))?;
+    let deps = exe
+        .parent()
+        .ok_or_else(|| anyhow!("test executable has no parent"))?;
     let dir = deps.parent().ok_or_else(|| anyhow!("deps has no parent"))?;
     Ok(dir.to_path_buf())
 }

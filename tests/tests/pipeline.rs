@@ -26,7 +26,13 @@ fn ned_error(r: &[f64], r_true: &[f64], lat: f64, lon: f64) -> (f64, f64) {
 
 /// Rotation angle between two unit quaternions `[w, x, y, z]`, rad.
 fn quat_angle(a: &[f64], b: &[f64]) -> f64 {
-    let dot: f64 = a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>().abs().min(1.0);
+    let dot: f64 = a
+        .iter()
+        .zip(b)
+        .map(|(x, y)| x * y)
+        .sum::<f64>()
+        .abs()
+        .min(1.0);
     2.0 * dot.acos()
 }
 
@@ -52,12 +58,24 @@ fn scenario_outages(path: &Path) -> Vec<Outage> {
     };
     if let Some(arr) = find(&v) {
         for o in arr {
-            let s = o.get("start_s").and_then(|x| x.as_float().or(x.as_integer().map(|i| i as f64)));
-            let e = o.get("end_s").and_then(|x| x.as_float().or(x.as_integer().map(|i| i as f64)));
-            let d = o.get("duration_s").and_then(|x| x.as_float().or(x.as_integer().map(|i| i as f64)));
+            let s = o
+                .get("start_s")
+                .and_then(|x| x.as_float().or(x.as_integer().map(|i| i as f64)));
+            let e = o
+                .get("end_s")
+                .and_then(|x| x.as_float().or(x.as_integer().map(|i| i as f64)));
+            let d = o
+                .get("duration_s")
+                .and_then(|x| x.as_float().or(x.as_integer().map(|i| i as f64)));
             match (s, e, d) {
-                (Some(s), Some(e), _) => out.push(Outage { start_s: s, end_s: e }),
-                (Some(s), None, Some(d)) => out.push(Outage { start_s: s, end_s: s + d }),
+                (Some(s), Some(e), _) => out.push(Outage {
+                    start_s: s,
+                    end_s: e,
+                }),
+                (Some(s), None, Some(d)) => out.push(Outage {
+                    start_s: s,
+                    end_s: s + d,
+                }),
                 _ => {}
             }
         }
@@ -78,7 +96,15 @@ fn run_records_every_channel_and_navigates_within_sensor_bounds() {
     let t0 = Instant::now();
     let status = Command::new(bin("sextant").unwrap())
         .current_dir(&root)
-        .args(["run", "--scenario", SCENARIO, "--duration", "600", "--speed", "20"])
+        .args([
+            "run",
+            "--scenario",
+            SCENARIO,
+            "--duration",
+            "600",
+            "--speed",
+            "20",
+        ])
         .args(["--prefix", &prefix, "--out"])
         .arg(&out)
         .status()
@@ -88,9 +114,16 @@ fn run_records_every_channel_and_navigates_within_sensor_bounds() {
     assert!(t0.elapsed() < Duration::from_secs_f64(duration_s / speed + 60.0));
 
     // No process and no shared memory of this run is left behind.
-    assert!(processes_matching(&prefix).is_empty(), "{:?}", processes_matching(&prefix));
+    assert!(
+        processes_matching(&prefix).is_empty(),
+        "{:?}",
+        processes_matching(&prefix)
+    );
     let leaked: Vec<_> = iceoryx_entries().difference(&shm_before).cloned().collect();
-    assert!(leaked.is_empty(), "iceoryx2 resources left behind: {leaked:?}");
+    assert!(
+        leaked.is_empty(),
+        "iceoryx2 resources left behind: {leaked:?}"
+    );
 
     // Exactly one recording; every channel has a JSON Schema and every message validates.
     let mcaps: Vec<_> = std::fs::read_dir(&out)
@@ -100,7 +133,16 @@ fn run_records_every_channel_and_navigates_within_sensor_bounds() {
         .collect();
     assert_eq!(mcaps.len(), 1, "expected one MCAP in {}", out.display());
     let rec = read_recording(&mcaps[0].path()).expect("recording readable");
-    for topic in ["imu", "star_tracker", "gnss", "odometer", "baro", "truth", "nav", "status"] {
+    for topic in [
+        "imu",
+        "star_tracker",
+        "gnss",
+        "odometer",
+        "baro",
+        "truth",
+        "nav",
+        "status",
+    ] {
         let (schema, schema_enc, msg_enc) = rec
             .channels
             .get(topic)
@@ -111,7 +153,11 @@ fn run_records_every_channel_and_navigates_within_sensor_bounds() {
     for (_topic, (_, schema_enc, _)) in rec.channels.iter() {
         assert_eq!(schema_enc, "jsonschema");
     }
-    assert!(rec.invalid.is_empty(), "messages failing their schema: {:?}", &rec.invalid[..rec.invalid.len().min(5)]);
+    assert!(
+        rec.invalid.is_empty(),
+        "messages failing their schema: {:?}",
+        &rec.invalid[..rec.invalid.len().min(5)]
+    );
 
     // Message counts within the configured rates (drivers send every sample of the scenario;
     // the recording keeps them all unless it reports drops).
@@ -129,7 +175,10 @@ fn run_records_every_channel_and_navigates_within_sensor_bounds() {
     expect("odometer", 20.0);
     expect("baro", 20.0);
     let n_status = rec.count("status") as f64;
-    assert!(n_status >= 0.8 * duration_s / speed, "status at 1 Hz wall: {n_status}");
+    assert!(
+        n_status >= 0.8 * duration_s / speed,
+        "status at 1 Hz wall: {n_status}"
+    );
 
     // Accuracy against truth, matched by time of validity.
     let mut truth = std::collections::BTreeMap::new();
@@ -138,7 +187,10 @@ fn run_records_every_channel_and_navigates_within_sensor_bounds() {
     }
     let t_start = *truth.keys().next().expect("truth recorded");
     let outages = scenario_outages(&root.join(SCENARIO));
-    assert!(!outages.is_empty(), "the default vehicle scenario has a GNSS outage");
+    assert!(
+        !outages.is_empty(),
+        "the default vehicle scenario has a GNSS outage"
+    );
     let in_window = |t: f64, a: f64, b: f64| t >= a && t < b;
 
     // The GNSS fix noise, measured from the recording itself.
@@ -161,8 +213,14 @@ fn run_records_every_channel_and_navigates_within_sensor_bounds() {
     assert!(gnss_h.len() > 100 && gnss_h_rms.is_finite());
 
     // Star-tracker noise: total angle RMS from the σ's it reports (two cross axes + roll).
-    let st = rec.topic("star_tracker").next().expect("star tracker recorded");
-    let (sc, sr) = (num(&st.json, "/sigma_cross_rad").unwrap(), num(&st.json, "/sigma_roll_rad").unwrap());
+    let st = rec
+        .topic("star_tracker")
+        .next()
+        .expect("star tracker recorded");
+    let (sc, sr) = (
+        num(&st.json, "/sigma_cross_rad").unwrap(),
+        num(&st.json, "/sigma_roll_rad").unwrap(),
+    );
     let star_noise_rad = (2.0 * sc * sc + sr * sr).sqrt();
 
     let (mut h_aided, mut att_aided, mut h_out, mut h_after) = (vec![], vec![], vec![], vec![]);
@@ -179,8 +237,12 @@ fn run_records_every_channel_and_navigates_within_sensor_bounds() {
         );
         let att = quat_angle(&f64s(&r.json["q_ned_body"]), &f64s(&tr["q_ned_body"]));
         let during = outages.iter().any(|o| in_window(t, o.start_s, o.end_s));
-        let after = outages.iter().any(|o| in_window(t, o.end_s + 30.0, o.end_s + 90.0));
-        let recovering = outages.iter().any(|o| in_window(t, o.end_s, o.end_s + 30.0));
+        let after = outages
+            .iter()
+            .any(|o| in_window(t, o.end_s + 30.0, o.end_s + 90.0));
+        let recovering = outages
+            .iter()
+            .any(|o| in_window(t, o.end_s, o.end_s + 30.0));
         if t < nav_start_s {
             continue;
         }
@@ -201,8 +263,14 @@ fn run_records_every_channel_and_navigates_within_sensor_bounds() {
         att_rms.to_degrees() * 3600.0,
         star_noise_rad.to_degrees() * 3600.0
     );
-    assert!(h_rms < gnss_h_rms, "horizontal RMS {h_rms} m not below GNSS fix noise {gnss_h_rms} m");
-    assert!(att_rms < 3.0 * star_noise_rad, "attitude RMS {att_rms} rad vs star tracker {star_noise_rad} rad");
+    assert!(
+        h_rms < gnss_h_rms,
+        "horizontal RMS {h_rms} m not below GNSS fix noise {gnss_h_rms} m"
+    );
+    assert!(
+        att_rms < 3.0 * star_noise_rad,
+        "attitude RMS {att_rms} rad vs star tracker {star_noise_rad} rad"
+    );
 
     // During the outage the error grows as inertial physics allows: starting from the aided
     // error, with the navigation-grade accelerometer bias (50 µg) and the star-held tilt
@@ -218,17 +286,31 @@ fn run_records_every_channel_and_navigates_within_sensor_bounds() {
             }
             let dt = t - o.start_s;
             let bound = e0 + 3.0 * 0.05 * dt + 0.5 * a_err * dt * dt;
-            assert!(h <= bound, "outage error {h} m at +{dt} s exceeds inertial bound {bound} m");
+            assert!(
+                h <= bound,
+                "outage error {h} m at +{dt} s exceeds inertial bound {bound} m"
+            );
         }
     }
     let h_after_rms = rms(&h_after);
-    assert!(h_after_rms < gnss_h_rms, "no recovery after the outage: {h_after_rms} m");
+    assert!(
+        h_after_rms < gnss_h_rms,
+        "no recovery after the outage: {h_after_rms} m"
+    );
 
     // The summary has the figures under self-explaining names.
     let summary: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
-    for key in ["horizontal_error_rms_m", "attitude_error_rms_deg", "latency_p50_us", "latency_p99_us"] {
-        assert!(summary.get(key).and_then(|v| v.as_f64()).is_some(), "summary.json lacks {key}: {summary}");
+    for key in [
+        "horizontal_error_rms_m",
+        "attitude_error_rms_deg",
+        "latency_p50_us",
+        "latency_p99_us",
+    ] {
+        assert!(
+            summary.get(key).and_then(|v| v.as_f64()).is_some(),
+            "summary.json lacks {key}: {summary}"
+        );
     }
 }
 
@@ -241,11 +323,20 @@ fn ctrl_c_leaves_no_process_no_shared_memory_and_a_readable_recording() {
     let shm_before = iceoryx_entries();
     let mut child = Command::new(bin("sextant").unwrap())
         .current_dir(&root)
-        .args(["run", "--scenario", SCENARIO, "--duration", "600", "--speed", "5"])
+        .args([
+            "run",
+            "--scenario",
+            SCENARIO,
+            "--duration",
+            "600",
+            "--speed",
+            "20",
+        ])
         .args(["--prefix", &prefix, "--out"])
         .arg(&out)
         .spawn()
         .expect("start sextant run");
+    // 12 s of wall time at 20× is 240 s of scenario: past the 100 s alignment, mid-drive.
     std::thread::sleep(Duration::from_secs(12));
     assert!(
         processes_matching(&prefix).len() >= 7,
@@ -262,14 +353,27 @@ fn ctrl_c_leaves_no_process_no_shared_memory_and_a_readable_recording() {
         if let Some(s) = child.try_wait().unwrap() {
             break s;
         }
-        assert!(t0.elapsed() < Duration::from_secs(30), "sextant run did not stop on SIGINT");
+        assert!(
+            t0.elapsed() < Duration::from_secs(30),
+            "sextant run did not stop on SIGINT"
+        );
         std::thread::sleep(Duration::from_millis(100));
     };
-    assert!(status.success() || status.code() == Some(130), "exit status {status}");
+    assert!(
+        status.success() || status.code() == Some(130),
+        "exit status {status}"
+    );
     std::thread::sleep(Duration::from_millis(300));
-    assert!(processes_matching(&prefix).is_empty(), "{:?}", processes_matching(&prefix));
+    assert!(
+        processes_matching(&prefix).is_empty(),
+        "{:?}",
+        processes_matching(&prefix)
+    );
     let leaked: Vec<_> = iceoryx_entries().difference(&shm_before).cloned().collect();
-    assert!(leaked.is_empty(), "iceoryx2 resources left behind: {leaked:?}");
+    assert!(
+        leaked.is_empty(),
+        "iceoryx2 resources left behind: {leaked:?}"
+    );
     let rec = read_recording(&out.join("recording.mcap")).expect("recording readable after Ctrl-C");
     assert!(rec.count("imu") > 100, "imu messages: {}", rec.count("imu"));
     assert!(rec.count("nav") > 10);
