@@ -72,7 +72,9 @@ impl Bus {
 
     fn service_name(&self, channel: Channel) -> Result<ServiceName, IpcError> {
         let s = channel.service_name(&self.prefix);
-        s.as_str().try_into().map_err(ice(format!("service name {s}")))
+        s.as_str()
+            .try_into()
+            .map_err(ice(format!("service name {s}")))
     }
 
     /// Open (or create) the publish-subscribe service and event service of `T`'s channel and

@@ -28,7 +28,9 @@ pub const SPEED_OF_LIGHT_M_S: f64 = 299_792_458.0;
 
 /// Common header of every message.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize, Deserialize, JsonSchema)]
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize, Deserialize, JsonSchema,
+)]
 #[type_name("sextant::Header")]
 pub struct Header {
     /// Time of validity of the sample: GPS time, nanoseconds since the GPS epoch
@@ -50,7 +52,9 @@ pub struct Header {
 /// Skewed (redundant) layouts fill the per-channel arrays; the orthogonal triad fills the
 /// vectors (and may leave `n_channels` = 0).
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize, Deserialize, JsonSchema)]
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize, Deserialize, JsonSchema,
+)]
 #[type_name("sextant::ImuSample")]
 pub struct ImuSample {
     /// Header; `time_ns` is the end of the integration interval.
@@ -79,7 +83,9 @@ pub struct ImuSample {
 
 /// Star-tracker attitude solution.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize, Deserialize, JsonSchema)]
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize, Deserialize, JsonSchema,
+)]
 #[type_name("sextant::StarTrackerSample")]
 pub struct StarTrackerSample {
     /// Header; `time_ns` is the exposure mid-time.
@@ -98,7 +104,9 @@ pub struct StarTrackerSample {
 
 /// One satellite's raw GNSS measurements.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize, Deserialize, JsonSchema)]
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize, Deserialize, JsonSchema,
+)]
 #[type_name("sextant::GnssSatellite")]
 pub struct GnssSatellite {
     /// Satellite number (GPS PRN).
@@ -125,7 +133,9 @@ pub struct GnssSatellite {
 
 /// GNSS receiver output: position/velocity fix with covariance, and raw per-satellite data.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize, Deserialize, JsonSchema)]
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize, Deserialize, JsonSchema,
+)]
 #[type_name("sextant::GnssSample")]
 pub struct GnssSample {
     /// Header; `time_ns` is the measurement epoch (receiver time corrected to GPS time).
@@ -154,7 +164,9 @@ pub struct GnssSample {
 
 /// Odometer / speed-meter sample.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize, Deserialize, JsonSchema)]
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize, Deserialize, JsonSchema,
+)]
 #[type_name("sextant::OdometerSample")]
 pub struct OdometerSample {
     /// Header; `time_ns` is the end of the counting interval.
@@ -169,7 +181,9 @@ pub struct OdometerSample {
 
 /// Barometric sample.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize, Deserialize, JsonSchema)]
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize, Deserialize, JsonSchema,
+)]
 #[type_name("sextant::BaroSample")]
 pub struct BaroSample {
     /// Header.
@@ -182,7 +196,9 @@ pub struct BaroSample {
 
 /// Simulated truth (evaluation only: the fusion filter never reads it).
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize, Deserialize, JsonSchema)]
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize, Deserialize, JsonSchema,
+)]
 #[type_name("sextant::TruthSample")]
 pub struct TruthSample {
     /// Header.
@@ -257,7 +273,9 @@ impl NavMode {
 
 /// Fusion solution.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize, Deserialize, JsonSchema)]
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize, Deserialize, JsonSchema,
+)]
 #[type_name("sextant::NavSolution")]
 pub struct NavSolution {
     /// Header; `time_ns` is the time of validity (that of the last IMU sample used).
@@ -333,7 +351,9 @@ impl SensorId {
 
 /// Per-sensor health counters.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize, Deserialize, JsonSchema)]
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize, Deserialize, JsonSchema,
+)]
 #[type_name("sextant::SensorHealth")]
 pub struct SensorHealth {
     /// Samples received.
@@ -358,7 +378,9 @@ pub struct SensorHealth {
 
 /// Fusion health, published at 1 Hz.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize, Deserialize, JsonSchema)]
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Serialize, Deserialize, JsonSchema,
+)]
 #[type_name("sextant::Status")]
 pub struct Status {
     /// Header (`time_ns` = filter time).
@@ -462,7 +484,11 @@ macro_rules! message {
     };
 }
 message!(ImuSample, Channel::Imu, "sextant.ImuSample");
-message!(StarTrackerSample, Channel::StarTracker, "sextant.StarTrackerSample");
+message!(
+    StarTrackerSample,
+    Channel::StarTracker,
+    "sextant.StarTrackerSample"
+);
 message!(GnssSample, Channel::Gnss, "sextant.GnssSample");
 message!(OdometerSample, Channel::Odometer, "sextant.OdometerSample");
 message!(BaroSample, Channel::Baro, "sextant.BaroSample");
@@ -496,7 +522,10 @@ pub fn channel_schema(channel: Channel) -> (&'static str, String) {
 /// Current CLOCK_MONOTONIC in nanoseconds (shared by all processes on one machine), for
 /// latency stamps only.
 pub fn monotonic_ns() -> u64 {
-    let mut ts = libc_timespec { tv_sec: 0, tv_nsec: 0 };
+    let mut ts = libc_timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
     // SAFETY: clock_gettime writes a timespec into the pointer we own.
     unsafe {
         clock_gettime(1, &mut ts);
@@ -529,8 +558,10 @@ mod tests {
 
     #[test]
     fn json_round_trip_is_bit_exact() {
-        let mut s = ImuSample::default();
-        s.delta_angle_rad = [1.0e-7 / 3.0, -2.0_f64.sqrt(), core::f64::consts::PI];
+        let mut s = ImuSample {
+            delta_angle_rad: [1.0e-7 / 3.0, -2.0_f64.sqrt(), core::f64::consts::PI],
+            ..Default::default()
+        };
         s.header.time_ns = 1_400_000_000_123_456_789;
         let j = serde_json::to_string(&s).unwrap();
         let back: ImuSample = serde_json::from_str(&j).unwrap();

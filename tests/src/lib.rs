@@ -90,12 +90,12 @@ pub fn read_recording(path: &Path) -> Result<Recording> {
                 ch.message_encoding.clone(),
             )
         });
-        if !validators.contains_key(&ch.id) {
+        if let std::collections::btree_map::Entry::Vacant(slot) = validators.entry(ch.id) {
             let s: serde_json::Value = serde_json::from_slice(&schema.data)
                 .with_context(|| format!("schema of {} is not JSON", ch.topic))?;
             let v = jsonschema::validator_for(&s)
                 .map_err(|e| anyhow!("schema of {} is not a valid JSON Schema: {e}", ch.topic))?;
-            validators.insert(ch.id, v);
+            slot.insert(v);
         }
         let json: serde_json::Value = serde_json::from_slice(&msg.data)
             .with_context(|| format!("message on {} is not JSON", ch.topic))?;
