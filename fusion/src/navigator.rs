@@ -1417,8 +1417,18 @@ impl Navigator {
             gyro_bias_rad_s: self.ekf.gyro_bias_rad_s.into(),
             accel_bias_m_s2: self.ekf.accel_bias_m_s2.into(),
             imu_send_mono_ns: s.header.send_mono_ns,
+            gyro_bias_sigma_rad_s: diag_sigma(p, idx::BG),
+            accel_bias_sigma_m_s2: diag_sigma(p, idx::BA),
+            baro_bias_m: self.ekf.baro_bias_m,
+            odometer_scale: self.ekf.odo_scale,
+            ..Default::default()
         }
     }
+}
+
+/// 1-σ of three consecutive states from the covariance diagonal.
+fn diag_sigma(p: &Covariance, k: usize) -> [f64; 3] {
+    [0, 1, 2].map(|i| p[(k + i, k + i)].max(0.0).sqrt())
 }
 
 /// The oldest history epoch also stands for sample times inside the IMU interval before it

@@ -310,6 +310,26 @@ pub struct NavSolution {
     pub accel_bias_m_s2: [f64; 3],
     /// `send_mono_ns` of the IMU sample this solution was computed from (for latency).
     pub imu_send_mono_ns: u64,
+    /// 1-σ of the gyro bias estimate, body axes, rad/s.
+    pub gyro_bias_sigma_rad_s: [f64; 3],
+    /// 1-σ of the accelerometer bias estimate, body axes, m/s².
+    pub accel_bias_sigma_m_s2: [f64; 3],
+    /// Estimated gyro scale-factor error per body axis, ppm (0 when the state is off).
+    pub gyro_scale_ppm: [f64; 3],
+    /// Estimated accelerometer scale-factor error per body axis, ppm (0 when the state is off).
+    pub accel_scale_ppm: [f64; 3],
+    /// Estimated star-tracker boresight angles κ1, κ2, κ3 (paper 000), rad.
+    pub boresight_rad: [f64; 3],
+    /// 1-σ of the boresight estimate, rad (0 when the state is off).
+    pub boresight_sigma_rad: [f64; 3],
+    /// Receiver clock bias times c, m (0 when the state is off).
+    pub clock_bias_m: f64,
+    /// Receiver clock drift times c, m/s.
+    pub clock_drift_m_s: f64,
+    /// Estimated baro bias, m.
+    pub baro_bias_m: f64,
+    /// Estimated odometer scale-factor error (dimensionless; 0 = perfect).
+    pub odometer_scale: f64,
 }
 
 /// Sensor slots used in [`Status`] and bit masks.
@@ -374,6 +394,12 @@ pub struct SensorHealth {
     pub deadline_misses: u32,
     /// Normalized innovation squared of the last update.
     pub last_nis: f64,
+    /// Sum of the NIS of all updates of this sensor (mean NIS = sum / count).
+    pub nis_sum: f64,
+    /// Number of updates summed in `nis_sum`.
+    pub nis_count: u64,
+    /// Sum of the measurement dimensions of those updates (the expected NIS sum).
+    pub nis_dof_sum: u64,
 }
 
 /// Fusion health, published at 1 Hz.
@@ -397,6 +423,15 @@ pub struct Status {
     pub records_dropped: u64,
     /// Per-sensor counters, indexed by [`SensorId`].
     pub sensors: [SensorHealth; MAX_SENSORS],
+    /// Redundant IMU (paper 004): bit i set = channel i excluded after fault isolation.
+    pub imu_channels_excluded_mask: u32,
+    /// Redundant IMU: bit i set = channel i currently flagged by the parity test.
+    pub imu_channels_suspect_mask: u32,
+    /// Redundant IMU: parity-space faults detected so far.
+    pub imu_faults_detected: u64,
+    /// Status messages or solutions the recorder could not write (disk full, unwritable), also
+    /// counted in `records_dropped`; nonzero means the recording is incomplete.
+    pub recorder_errors: u64,
 }
 
 /// The logical channels of the system.
