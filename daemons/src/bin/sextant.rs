@@ -36,7 +36,8 @@ enum Command {
 
 #[derive(Debug, clap::Args)]
 struct ExperimentArgs {
-    /// Experiment name: integrators, schuler or gravity.
+    /// Experiment name (`sextant experiment list` is not needed: an unknown name lists them), or
+    /// `all`: every experiment into OUT/NAME plus OUT/RESULTS.md.
     name: String,
     /// Output directory (default out/experiment/NAME).
     #[arg(long)]
@@ -64,6 +65,10 @@ struct RunArgs {
     /// Service-name prefix (default: `system.prefix`); use distinct prefixes for parallel runs.
     #[arg(long)]
     prefix: Option<String>,
+    /// Wall time between a driver's unexpected death and its restart, s (crash-loop backoff).
+    /// The fusion daemon is restarted at once.
+    #[arg(long, default_value_t = 0.5)]
+    restart_delay: f64,
 }
 
 const DEFAULT_CONFIG: &str = "config/sextant.toml";
@@ -94,7 +99,7 @@ fn main() -> anyhow::Result<()> {
 /// `sextant experiment NAME`: run it, print its table, point at its files.
 fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
     use sextant_daemons::experiments;
-    if !experiments::names().contains(&args.name.as_str()) {
+    if args.name != "all" && !experiments::names().contains(&args.name.as_str()) {
         bail!(
             "unknown experiment `{}`; known: {}",
             args.name,
@@ -215,6 +220,26 @@ async fn stop_and_wait(
     }
 }
 
+/// Recording of the `k`-th fusion daemon of a run: `recording.mcap` for the first (k = 0),
+/// `recording.k.mcap` after its k-th restart.
+fn recording_path(out: &Path, k: usize) -> PathBuf {
+    if k == 0 {
+        out.join("recording.mcap")
+    } else {
+        out.join(format!("recording.{k}.mcap"))
+    }
+}
+
+/// Remove the shared memory of crashed processes (a SIGKILLed driver or daemon leaves its
+/// iceoryx2 node and ports behind; they would hold port slots of the services).
+fn clean_dead_nodes() {
+    match msgs::ipc::cleanup_dead_nodes() {
+        Ok(n) if n > 0 => tracing::info!("cleaned the shared memory of {n} dead node(s)"),
+        Ok(_) => {}
+        Err(e) => tracing::warn!("cleanup of dead nodes: {e}"),
+    }
+}
+
 fn status_line(st: &Status) -> String {
     let mode = NavMode::from_u32(st.mode).map_or("?", |m| m.name());
     let t = if st.header.time_ns > 0 {
@@ -332,10 +357,22 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
     std::fs::create_dir_all(out.join("logs"))
         .with_context(|| format!("create {}", out.display()))?;
     let recording = out.join("recording.mcap");
-    if recording.exists() {
-        std::fs::remove_file(&recording)
-            .with_context(|| format!("remove old {}", recording.display()))?;
+    // Recordings of an earlier run in this directory: recording.mcap and, after fusion restarts,
+    // recording.1.mcap, recording.2.mcap, ... (see `recording_path`).
+    for k in 0..=64 {
+        let old = recording_path(&out, k);
+        if old.exists() {
+            std::fs::remove_file(&old)
+                .with_context(|| format!("remove old {}", old.display()))?;
+        }
     }
+    if !(args.restart_delay.is_finite() && (0.0..=600.0).contains(&args.restart_delay)) {
+        bail!(
+            "--restart-delay must be within [0, 600] s, got {}",
+            args.restart_delay
+        );
+    }
+    let restart_delay = Duration::from_secs_f64(args.restart_delay);
 
     let cleaned = msgs::ipc::cleanup_dead_nodes()?;
     if cleaned > 0 {
@@ -451,17 +488,55 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
         FusionDied,
         Watchdog,
     }
+    // Recordings written, in order: the first fusion writes recording.mcap, the k-th restart
+    // recording.k.mcap; each is a complete MCAP up to its last flushed chunk.
+    let mut recordings: Vec<PathBuf> = vec![recording.clone()];
+    // Drivers waiting out `restart_delay` before their restart.
+    let (respawn_tx, mut respawn_rx) = mpsc::unbounded_channel::<usize>();
     let end = loop {
         tokio::select! {
             _ = sigint.recv() => break End::Interrupted("SIGINT"),
             _ = sigterm.recv() => break End::Interrupted("SIGTERM"),
             _ = &mut watchdog => break End::Watchdog,
+            Some(i) = respawn_rx.recv() => {
+                clean_dead_nodes();
+                let slot = &mut slots[i];
+                if let Err(e) = spawn(i, slot, &tx) {
+                    tracing::error!("restart of {} failed: {e:#}", slot.name);
+                    slot.finished = true;
+                    if driver_idx.iter().all(|&d| slots[d].finished) {
+                        break End::Completed;
+                    }
+                }
+            }
             Some((i, r)) = rx.recv() => {
                 slots[i].pid = None;
                 if i == fusion_idx {
-                    tracing::error!("sextant-fusion exited unexpectedly: {r:?} (see {})", slots[i].log.display());
-                    if let Ok(st) = r { results.insert(i, st); }
-                    break End::FusionDied;
+                    let slot = &mut slots[i];
+                    if slot.restarts >= rc.max_restarts {
+                        tracing::error!("sextant-fusion exited unexpectedly: {r:?} after {} restarts (see {})", slot.restarts, slot.log.display());
+                        if let Ok(st) = r { results.insert(i, st); }
+                        break End::FusionDied;
+                    }
+                    slot.restarts += 1;
+                    let next = recording_path(&out, slot.restarts as usize);
+                    eprintln!();
+                    tracing::warn!(
+                        "sextant-fusion died ({r:?}): restart {}/{}, new recording {} ({} stays readable up to its last chunk)",
+                        slot.restarts, rc.max_restarts, next.display(),
+                        recordings.last().map_or(String::new(), |p| p.display().to_string())
+                    );
+                    if let Some(k) = slot.args.iter().position(|a| a == "--out") {
+                        slot.args[k + 1] = next.display().to_string();
+                    }
+                    recordings.push(next);
+                    // The dead daemon's ports still occupy the services: free them first.
+                    clean_dead_nodes();
+                    if let Err(e) = spawn(i, slot, &tx) {
+                        tracing::error!("restart of sextant-fusion failed: {e:#}");
+                        break End::FusionDied;
+                    }
+                    continue;
                 }
                 match r {
                     Ok(st) if st.success() => {
@@ -473,11 +548,12 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
                         if slot.restarts < rc.max_restarts {
                             slot.restarts += 1;
                             eprintln!();
-                            tracing::warn!("{} died ({other:?}): restart {}/{}", slot.name, slot.restarts, rc.max_restarts);
-                            if let Err(e) = spawn(i, slot, &tx) {
-                                tracing::error!("restart of {} failed: {e:#}", slot.name);
-                                slot.finished = true;
-                            }
+                            tracing::warn!("{} died ({other:?}): restart {}/{} in {restart_delay:?}", slot.name, slot.restarts, rc.max_restarts);
+                            let respawn_tx = respawn_tx.clone();
+                            tokio::spawn(async move {
+                                tokio::time::sleep(restart_delay).await;
+                                let _ = respawn_tx.send(i);
+                            });
                         } else {
                             tracing::error!("{} died ({other:?}) after {} restarts: giving up on it", slot.name, slot.restarts);
                             slot.finished = true;
@@ -522,6 +598,8 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
     }
 
     let wall_s = wall_start.elapsed().as_secs_f64();
+    // The summary is of the last fusion's recording (the whole run when it never crashed).
+    let recording = recordings.last().cloned().unwrap_or(recording);
     if !recording.exists() {
         bail!("no recording was written ({})", recording.display());
     }
@@ -535,6 +613,15 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
         m.insert("speed".into(), speed.into());
         m.insert("service_prefix".into(), prefix.clone().into());
         m.insert("end".into(), format!("{end:?}").into());
+        m.insert("fusion_restarts".into(), slots[fusion_idx].restarts.into());
+        m.insert(
+            "recordings".into(),
+            recordings
+                .iter()
+                .map(|p| serde_json::Value::from(p.display().to_string()))
+                .collect(),
+        );
+        m.insert("analysed_recording".into(), recording.display().to_string().into());
         m.insert(
             "driver_restarts".into(),
             serde_json::Value::Object(

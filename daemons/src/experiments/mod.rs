@@ -13,6 +13,7 @@
 //! plots into the output directory, and returns the summary so that the caller can print it
 //! with the experiment's `table`.
 
+pub mod all;
 pub mod gravity;
 pub mod integrators;
 pub mod plot;
@@ -72,6 +73,7 @@ pub fn run_by_name(
         "integrators" => integrators::run(out_dir, progress),
         "schuler" => schuler::run(out_dir, progress),
         "gravity" => gravity::run(out_dir, progress),
+        "all" => all::run(out_dir, progress),
         _ => Err(unknown(name)),
     }
 }
@@ -82,6 +84,7 @@ pub fn table_by_name(name: &str, summary: &serde_json::Value) -> Result<String, 
         "integrators" => Ok(integrators::table(summary)),
         "schuler" => Ok(schuler::table(summary)),
         "gravity" => Ok(gravity::table(summary)),
+        "all" => Ok(all::table(summary)),
         _ => Err(unknown(name)),
     }
 }
