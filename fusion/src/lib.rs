@@ -10,16 +10,20 @@
 //! - [`strapdown`]: ECEF strapdown mechanization with selectable integrators (paper 002).
 //! - [`ekf`]: the error-state Kalman filter and its measurement models.
 //! - [`alignment`]: static coarse alignment (levelling and gyrocompassing, paper 003).
+//! - [`gnss_ls`]: receiver-style least-squares GNSS fix with DOPs (paper 003 eq. 12–13).
 //! - [`navigator`]: the fusion engine the daemons drive: alignment, mechanization, filter,
 //!   measurement buffering, modes and health.
 
 pub mod alignment;
 pub mod atmosphere;
+pub mod astro_fix;
 pub mod attitude;
 pub mod celestial;
 pub mod earth;
 pub mod ekf;
+pub mod gnss_ls;
 pub mod navigator;
+pub mod redundancy;
 pub mod strapdown;
 pub mod time;
 
