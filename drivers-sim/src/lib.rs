@@ -9,6 +9,7 @@
 pub mod driver;
 pub mod gnss;
 pub mod imu;
+pub mod offline;
 pub mod scenario;
 pub mod sensors;
 pub mod sources;
