@@ -21,3 +21,4 @@ pub mod recorder;
 pub mod scenario;
 pub mod signals;
 pub mod stats;
+pub mod bench;

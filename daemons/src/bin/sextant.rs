@@ -32,6 +32,23 @@ enum Command {
     Run(RunArgs),
     /// Run a named offline experiment; prints its table, writes summary.json and PNG plots.
     Experiment(ExperimentArgs),
+    /// Measure latency through the real processes (200 Hz and 1 kHz IMU), offline fusion and
+    /// recorder throughput, CPU and memory; prints a table, writes summary.json and a histogram.
+    Bench(BenchArgs),
+}
+
+#[derive(Debug, clap::Args)]
+struct BenchArgs {
+    /// Output directory (default out/bench).
+    #[arg(long, default_value = "out/bench")]
+    out: PathBuf,
+    /// System configuration whose directory is copied (default config/sextant.toml; the
+    /// embedded copy when absent).
+    #[arg(long, default_value = DEFAULT_CONFIG)]
+    config: PathBuf,
+    /// Short runs (a few seconds each) for tests; the same figures, less precise.
+    #[arg(long)]
+    quick: bool,
 }
 
 #[derive(Debug, clap::Args)]
@@ -93,7 +110,32 @@ fn main() -> anyhow::Result<()> {
             std::process::exit(code);
         }
         Command::Experiment(args) => experiment(args),
+        Command::Bench(args) => bench(args),
     }
+}
+
+/// `sextant bench`: run it, print its table.
+fn bench(args: BenchArgs) -> anyhow::Result<()> {
+    use sextant_daemons::bench;
+    let bin_dir = std::env::current_exe()?
+        .parent()
+        .map(Path::to_path_buf)
+        .context("no directory of the current executable")?;
+    let cleaned = msgs::ipc::cleanup_dead_nodes()?;
+    if cleaned > 0 {
+        tracing::info!("removed the shared memory of {cleaned} dead node(s) of an earlier run");
+    }
+    let opts = bench::BenchOptions {
+        out: args.out.clone(),
+        config: args.config,
+        bin_dir,
+        prefix: format!("sextant_bench_{}", std::process::id()),
+        quick: args.quick,
+    };
+    let summary = bench::run(&opts)?;
+    println!("{}", bench::table(&summary));
+    println!("summary and histogram in {}", args.out.display());
+    Ok(())
 }
 
 /// `sextant experiment NAME`: run it, print its table, point at its files.

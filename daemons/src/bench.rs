@@ -1,0 +1,697 @@
+//! `sextant bench --out DIR`: measured speed of the system.
+//!
+//! 1. **Latency through the real processes**: the six simulated drivers and `sextant-fusion`
+//!    run at real time (speed 1) on the vehicle scenario with the IMU at 200 Hz and at 1 kHz
+//!    (a copy of the scenario with `imu.rate_hz` overridden). For every solution, latency =
+//!    solution send time − send time of the IMU sample it was computed from (both
+//!    CLOCK_MONOTONIC, `NavSolution.header.send_mono_ns` − `NavSolution.imu_send_mono_ns`),
+//!    read back from the run's recording. The filter's alignment is shortened (`alignment_s`)
+//!    so that the run navigates within a second: latency is a property of the running loop,
+//!    not of the alignment quality.
+//! 2. **CPU and memory of each process**, from `/proc/PID/stat` (user + system time over the
+//!    measurement window) and `/proc/PID/status` (`VmRSS`, `VmHWM`), sampled before the end.
+//! 3. **Offline fusion throughput**: the navigator fed in-process from
+//!    [`drivers_sim::offline::OfflineSim`] (every aiding sensor, pre-generated so that only
+//!    the fusion is timed): IMU samples per second and × real time.
+//! 4. **Recording throughput**: the [`Recorder`] saturated with a realistic record mix
+//!    (records/s, MB/s of MCAP written), then paced at 10× the default live load (the default
+//!    `sextant run` at speed 10) to check that nothing is dropped.
+//!
+//! Writes `summary.json`, a latency histogram PNG, and returns the summary for the table.
+
+use crate::experiments::plot::{Chart, Line, color, line_chart};
+use crate::recorder::{Record, Recorder, RecorderOptions};
+use anyhow::{Context, bail};
+use drivers_sim::offline::{Channel as SimChannel, OfflineSim, SimMessage};
+use drivers_sim::scenario::Scenario;
+use fusion::navigator::Navigator;
+use msgs::{
+    BaroSample, GnssSample, ImuSample, NavSolution, OdometerSample, StarTrackerSample, Status,
+    TruthSample,
+};
+use serde_json::{Value, json};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// Settings of one bench run.
+#[derive(Debug, Clone)]
+pub struct BenchOptions {
+    /// Output directory.
+    pub out: PathBuf,
+    /// The system configuration whose directory (filter, scenarios, sensors) is copied.
+    pub config: PathBuf,
+    /// Directory of the driver and daemon binaries.
+    pub bin_dir: PathBuf,
+    /// Service prefix (unique per run).
+    pub prefix: String,
+    /// Quick mode (for tests): short runs, same figures.
+    pub quick: bool,
+}
+
+/// Wall seconds of each live latency run, simulated seconds of the offline run, wall seconds
+/// of the paced recorder run.
+struct Sizes {
+    live_s: f64,
+    offline_s: f64,
+    record_paced_s: f64,
+    record_saturated: usize,
+}
+
+impl Sizes {
+    fn of(quick: bool) -> Self {
+        if quick {
+            Sizes {
+                live_s: 4.0,
+                offline_s: 60.0,
+                record_paced_s: 1.0,
+                record_saturated: 50_000,
+            }
+        } else {
+            Sizes {
+                live_s: 30.0,
+                offline_s: 600.0,
+                record_paced_s: 5.0,
+                record_saturated: 500_000,
+            }
+        }
+    }
+}
+
+/// Filter alignment time used by the live runs, s (shortened; see the module comment).
+const BENCH_ALIGNMENT_S: f64 = 1.0;
+/// Wall time from starting the processes to the first sample, s.
+const START_DELAY_S: f64 = 1.0;
+
+fn copy_dir(from: &Path, to: &Path) -> anyhow::Result<()> {
+    std::fs::create_dir_all(to).with_context(|| format!("create {}", to.display()))?;
+    for e in std::fs::read_dir(from).with_context(|| format!("read {}", from.display()))? {
+        let e = e?;
+        let p = e.path();
+        if p.is_dir() {
+            copy_dir(&p, &to.join(e.file_name()))?;
+        } else {
+            std::fs::copy(&p, to.join(e.file_name()))
+                .with_context(|| format!("copy {}", p.display()))?;
+        }
+    }
+    Ok(())
+}
+
+/// Set `table.key = value` in a TOML file.
+fn toml_set(path: &Path, table: Option<&str>, key: &str, value: toml::Value) -> anyhow::Result<()> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("read {}", path.display()))?;
+    let mut doc: toml::Table =
+        toml::from_str(&text).with_context(|| format!("parse {}", path.display()))?;
+    let t = match table {
+        Some(name) => doc
+            .get_mut(name)
+            .and_then(|v| v.as_table_mut())
+            .with_context(|| format!("no [{name}] in {}", path.display()))?,
+        None => &mut doc,
+    };
+    t.insert(key.into(), value);
+    std::fs::write(path, toml::to_string(&doc)?)
+        .with_context(|| format!("write {}", path.display()))?;
+    Ok(())
+}
+
+/// CPU time (user + system, s) and resident memory (current, peak; KiB) of a process.
+#[derive(Debug, Clone, Copy, Default)]
+struct ProcSample {
+    cpu_s: f64,
+    rss_kib: u64,
+    hwm_kib: u64,
+}
+
+fn proc_sample(pid: u32) -> Option<ProcSample> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    // Fields after the command name (which may contain spaces) start after the last ')'.
+    let rest = &stat[stat.rfind(')')? + 2..];
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    // utime and stime are fields 14 and 15 of stat(5), i.e. 11 and 12 after the name.
+    let ticks: f64 = f.get(11)?.parse::<f64>().ok()? + f.get(12)?.parse::<f64>().ok()?;
+    // /proc reports in USER_HZ clock ticks, fixed at 100 by the Linux ABI on every architecture
+    // Sextant targets (sysconf(_SC_CLK_TCK)).
+    let hz = 100.0;
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
+    let kib = |key: &str| {
+        status
+            .lines()
+            .find(|l| l.starts_with(key))
+            .and_then(|l| l.split_whitespace().nth(1))
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(0)
+    };
+    Some(ProcSample {
+        cpu_s: ticks / hz,
+        rss_kib: kib("VmRSS:"),
+        hwm_kib: kib("VmHWM:"),
+    })
+}
+
+fn percentile(sorted: &[f64], p: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::NAN;
+    }
+    let k = ((p / 100.0) * (sorted.len() - 1) as f64).round() as usize;
+    sorted[k.min(sorted.len() - 1)]
+}
+
+fn stop(child: &mut Child, timeout: Duration) {
+    let pid = nix::unistd::Pid::from_raw(child.id() as i32);
+    let _ = nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGTERM);
+    let t0 = Instant::now();
+    while t0.elapsed() < timeout {
+        if let Ok(Some(_)) = child.try_wait() {
+            return;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let _ = child.kill();
+    let _ = child.wait();
+}
+
+/// Latencies (µs) of every solution in a recording.
+fn latencies_us(recording: &Path) -> anyhow::Result<Vec<f64>> {
+    let bytes =
+        std::fs::read(recording).with_context(|| format!("read {}", recording.display()))?;
+    let mut out = Vec::new();
+    for m in mcap::MessageStream::new(&bytes)? {
+        let m = m.with_context(|| format!("decode {}", recording.display()))?;
+        if m.channel.topic != "nav" {
+            continue;
+        }
+        let nav: NavSolution = serde_json::from_slice(&m.data)?;
+        if nav.imu_send_mono_ns > 0 && nav.header.send_mono_ns >= nav.imu_send_mono_ns {
+            out.push((nav.header.send_mono_ns - nav.imu_send_mono_ns) as f64 * 1e-3);
+        }
+    }
+    Ok(out)
+}
+
+/// One live run at `imu_hz`: returns (latencies µs, per-process figures).
+fn live_run(
+    opts: &BenchOptions,
+    cfg_dir: &Path,
+    imu_hz: f64,
+    duration_s: f64,
+) -> anyhow::Result<(Vec<f64>, Value)> {
+    let scenario = cfg_dir.join(format!("scenarios/bench_imu_{}hz.toml", imu_hz as u64));
+    std::fs::copy(cfg_dir.join("scenarios/vehicle.toml"), &scenario)?;
+    toml_set(
+        &scenario,
+        Some("imu"),
+        "rate_hz",
+        toml::Value::Float(imu_hz),
+    )?;
+    let prefix = format!("{}_{}hz", opts.prefix, imu_hz as u64);
+    let recording = opts.out.join(format!("latency_{}hz.mcap", imu_hz as u64));
+    let _ = std::fs::remove_file(&recording);
+    let logs = opts.out.join("logs");
+    std::fs::create_dir_all(&logs)?;
+    let log = |name: &str| -> anyhow::Result<std::fs::File> {
+        Ok(std::fs::File::create(
+            logs.join(format!("{name}_{}hz.log", imu_hz as u64)),
+        )?)
+    };
+    let mut fusion = Command::new(opts.bin_dir.join("sextant-fusion"))
+        .arg("--config")
+        .arg(cfg_dir.join("sextant.toml"))
+        .args(["--prefix", &prefix, "--speed", "1", "--out"])
+        .arg(&recording)
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(log("sextant-fusion")?)
+        .spawn()
+        .context("start sextant-fusion")?;
+    let start_mono_ns = msgs::monotonic_ns() + (START_DELAY_S * 1e9) as u64;
+    let drivers = [
+        "sextant-sim-imu",
+        "sextant-sim-star-tracker",
+        "sextant-sim-gnss",
+        "sextant-sim-odometer",
+        "sextant-sim-baro",
+        "sextant-sim-truth",
+    ];
+    let mut children: Vec<(String, Child)> = Vec::new();
+    for d in drivers {
+        let c = Command::new(opts.bin_dir.join(d))
+            .arg("--scenario")
+            .arg(&scenario)
+            .args(["--prefix", &prefix, "--speed", "1"])
+            .args(["--start-mono-ns", &start_mono_ns.to_string()])
+            .args(["--duration", &duration_s.to_string()])
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(log(d)?)
+            .spawn()
+            .with_context(|| format!("start {d}"));
+        match c {
+            Ok(c) => children.push((d.to_string(), c)),
+            Err(e) => {
+                for (_, c) in &mut children {
+                    stop(c, Duration::from_secs(2));
+                }
+                stop(&mut fusion, Duration::from_secs(5));
+                return Err(e);
+            }
+        }
+    }
+    // CPU window: from the first sample + 0.5 s to 0.5 s before the drivers' end.
+    let t_first = Instant::now() + Duration::from_secs_f64(START_DELAY_S);
+    std::thread::sleep(Duration::from_secs_f64(START_DELAY_S + 0.5));
+    let pids: Vec<(String, u32)> = std::iter::once(("sextant-fusion".to_string(), fusion.id()))
+        .chain(children.iter().map(|(n, c)| (n.clone(), c.id())))
+        .collect();
+    let first: Vec<Option<ProcSample>> = pids.iter().map(|(_, p)| proc_sample(*p)).collect();
+    let t_a = Instant::now();
+    let end = t_first + Duration::from_secs_f64(duration_s - 0.5);
+    std::thread::sleep(end.saturating_duration_since(Instant::now()));
+    let last: Vec<Option<ProcSample>> = pids.iter().map(|(_, p)| proc_sample(*p)).collect();
+    let window_s = t_a.elapsed().as_secs_f64();
+    // Let the drivers finish, then stop the daemon (which finishes the recording).
+    let t_wait = Instant::now();
+    for (name, c) in &mut children {
+        loop {
+            match c.try_wait()? {
+                Some(st) if !st.success() => tracing::warn!("{name} exited with {st}"),
+                Some(_) => {}
+                None if t_wait.elapsed() < Duration::from_secs(10) => {
+                    std::thread::sleep(Duration::from_millis(20));
+                    continue;
+                }
+                None => stop(c, Duration::from_secs(2)),
+            }
+            break;
+        }
+    }
+    std::thread::sleep(Duration::from_millis(200));
+    stop(&mut fusion, Duration::from_secs(10));
+    let mut procs = serde_json::Map::new();
+    for (k, (name, _)) in pids.iter().enumerate() {
+        if let (Some(a), Some(b)) = (first[k], last[k]) {
+            procs.insert(
+                name.clone(),
+                json!({
+                    "cpu_percent": 100.0 * (b.cpu_s - a.cpu_s) / window_s,
+                    "rss_mib": b.rss_kib as f64 / 1024.0,
+                    "peak_rss_mib": b.hwm_kib as f64 / 1024.0,
+                }),
+            );
+        }
+    }
+    let mut lat = latencies_us(&recording)?;
+    if lat.is_empty() {
+        bail!(
+            "no solution in {} (see {})",
+            recording.display(),
+            logs.display()
+        );
+    }
+    lat.sort_by(f64::total_cmp);
+    Ok((lat, Value::Object(procs)))
+}
+
+fn latency_figures(lat: &[f64], imu_hz: f64, duration_s: f64) -> Value {
+    json!({
+        "imu_rate_hz": imu_hz,
+        "solutions": lat.len(),
+        "solutions_per_s": lat.len() as f64 / duration_s,
+        "latency_p50_us": percentile(lat, 50.0),
+        "latency_p99_us": percentile(lat, 99.0),
+        "latency_p99_9_us": percentile(lat, 99.9),
+        "latency_max_us": lat.last().copied().unwrap_or(f64::NAN),
+        "latency_mean_us": lat.iter().sum::<f64>() / lat.len().max(1) as f64,
+    })
+}
+
+/// Offline throughput: the navigator over a pre-generated message stream with every aiding
+/// sensor of the vehicle scenario.
+fn offline_throughput(cfg_dir: &Path, sim_s: f64) -> anyhow::Result<Value> {
+    let cfg = crate::config::load(&cfg_dir.join("sextant.toml"))?;
+    let scn = Scenario::load(&cfg_dir.join("scenarios/vehicle.toml"))?;
+    let channels = [
+        SimChannel::Imu,
+        SimChannel::StarTracker,
+        SimChannel::Gnss,
+        SimChannel::Odometer,
+        SimChannel::Baro,
+    ];
+    let msgs: Vec<SimMessage> = OfflineSim::with_channels(&scn, &channels)
+        .with_duration_s(sim_s)
+        .collect();
+    let mut nav = Navigator::new(cfg.navigator.clone())?;
+    let mut imu_all = 0u64;
+    let mut imu_nav = 0u64;
+    let mut t_nav_start: Option<(Instant, i64)> = None;
+    let mut last_t = 0i64;
+    let mut rejected = 0u64;
+    let t0 = Instant::now();
+    for m in &msgs {
+        let r = match m {
+            SimMessage::Imu(s) => {
+                imu_all += 1;
+                let r = nav.push_imu(s).map(|_| ());
+                if nav.is_navigating() {
+                    if t_nav_start.is_none() {
+                        t_nav_start = Some((Instant::now(), s.header.time_ns));
+                    } else {
+                        imu_nav += 1;
+                    }
+                    last_t = s.header.time_ns;
+                }
+                r
+            }
+            SimMessage::StarTracker(s) => nav.push_star_tracker(s),
+            SimMessage::Gnss(s) => nav.push_gnss(s),
+            SimMessage::Odometer(s) => nav.push_odometer(s),
+            SimMessage::Baro(s) => nav.push_baro(s),
+            SimMessage::Truth(_) => Ok(()),
+        };
+        if r.is_err() {
+            rejected += 1;
+        }
+    }
+    let total_s = t0.elapsed().as_secs_f64();
+    let (t_nav, sim0) = t_nav_start.context("the offline run never finished its alignment")?;
+    let nav_wall_s = t_nav.elapsed().as_secs_f64();
+    let nav_sim_s = (last_t - sim0) as f64 * 1e-9;
+    let imu_hz = scn.spec.imu.rate_hz;
+    Ok(json!({
+        "scenario": "vehicle",
+        "imu_rate_hz": imu_hz,
+        "simulated_s": sim_s,
+        "messages": msgs.len(),
+        "rejected_inputs": rejected,
+        "navigating_imu_samples": imu_nav,
+        "navigating_imu_samples_per_s": imu_nav as f64 / nav_wall_s,
+        "navigating_x_real_time": nav_sim_s / nav_wall_s,
+        "whole_run_imu_samples_per_s": imu_all as f64 / total_s,
+        "whole_run_x_real_time": sim_s / total_s,
+        "wall_s": total_s,
+    }))
+}
+
+/// A realistic record mix for the recorder: per second of the default live system at speed 1,
+/// IMU 200, solutions 200, truth 50, star tracker 5, odometer 20, baro 20, GNSS 1, status 1.
+fn record_mix(k: u64) -> Record {
+    let mut h = msgs::Header {
+        time_ns: 1_400_000_000_000_000_000 + k as i64 * 1_000_000,
+        seq: k,
+        ..Default::default()
+    };
+    h.send_mono_ns = k;
+    // 497 records per simulated second; position k within that second picks the type.
+    match k % 497 {
+        0..200 => Record::Imu(ImuSample {
+            header: h,
+            dt_s: 0.005,
+            delta_angle_rad: [1.234e-7 * k as f64, -2.5e-8, 3.3e-8],
+            delta_velocity_m_s: [1.0e-3, -2.0e-3, -0.049_033],
+            ..Default::default()
+        }),
+        200..400 => Record::Nav(NavSolution {
+            header: h,
+            lat_rad: 0.971_3,
+            lon_rad: 0.655_1,
+            height_m: 200.123_456,
+            pos_ecef_m: [2_846_000.123, 2_193_000.456, 5_240_000.789],
+            q_ned_body: [0.9, 0.1, 0.2, 0.3],
+            pos_sigma_ned_m: [0.5, 0.5, 0.8],
+            ..Default::default()
+        }),
+        400..450 => Record::Truth(TruthSample {
+            header: h,
+            ..Default::default()
+        }),
+        450..455 => Record::StarTracker(StarTrackerSample {
+            header: h,
+            ..Default::default()
+        }),
+        455..475 => Record::Odometer(OdometerSample {
+            header: h,
+            ..Default::default()
+        }),
+        475..495 => Record::Baro(BaroSample {
+            header: h,
+            ..Default::default()
+        }),
+        495 => Record::Gnss(Box::new(GnssSample {
+            header: h,
+            ..Default::default()
+        })),
+        _ => Record::Status(Box::new(Status {
+            header: h,
+            ..Default::default()
+        })),
+    }
+}
+
+/// Live records per wall second of the default `sextant run` (speed 10).
+const DEFAULT_LIVE_RECORDS_PER_S: f64 = 497.0 * 10.0;
+
+fn recorder_throughput(out: &Path, saturated: usize, paced_s: f64) -> anyhow::Result<Value> {
+    let ropts = RecorderOptions {
+        queue_capacity: 16384,
+        chunk_size_bytes: 1 << 20,
+        flush_interval: Duration::from_secs(1),
+        ..Default::default()
+    };
+    // Saturated: offer records as fast as possible; retry when the queue is full, so that the
+    // figure is what the writer thread sustains.
+    let path = out.join("recorder_saturated.mcap");
+    let rec = Recorder::start(&path, &ropts)?;
+    let t0 = Instant::now();
+    let mut offered = 0u64;
+    for k in 0..saturated as u64 {
+        while !rec.record(record_mix(k), k) {
+            offered += 1;
+            std::thread::yield_now();
+        }
+    }
+    let stats = rec.finish()?;
+    let sat_s = t0.elapsed().as_secs_f64();
+    let bytes = std::fs::metadata(&path)?.len();
+    let retries = offered;
+
+    // Paced at 10x the default live load, 1 ms batches: nothing may be dropped.
+    let rate = 10.0 * DEFAULT_LIVE_RECORDS_PER_S;
+    let path2 = out.join("recorder_10x.mcap");
+    let rec = Recorder::start(&path2, &ropts)?;
+    let t0 = Instant::now();
+    let n = (rate * paced_s) as u64;
+    let mut k = 0u64;
+    while k < n {
+        let due = ((t0.elapsed().as_secs_f64() * rate) as u64).min(n);
+        while k < due {
+            rec.record(record_mix(k), k);
+            k += 1;
+        }
+        std::thread::sleep(Duration::from_micros(500));
+    }
+    let dropped_10x = rec.dropped();
+    let stats2 = rec.finish()?;
+    let _ = std::fs::remove_file(&path);
+    let _ = std::fs::remove_file(&path2);
+    Ok(json!({
+        "saturated_records": stats.written,
+        "saturated_records_per_s": stats.written as f64 / sat_s,
+        "saturated_mcap_mb_per_s": bytes as f64 / 1e6 / sat_s,
+        "saturated_mcap_bytes_per_record": bytes as f64 / stats.written.max(1) as f64,
+        "saturated_queue_full_retries": retries,
+        "default_live_records_per_s": DEFAULT_LIVE_RECORDS_PER_S,
+        "paced_10x_records_per_s": rate,
+        "paced_10x_records": n,
+        "paced_10x_written": stats2.written,
+        "paced_10x_dropped": dropped_10x + stats2.dropped,
+    }))
+}
+
+fn histogram_png(path: &Path, runs: &[(f64, &[f64])]) -> anyhow::Result<()> {
+    // Bins of 5 µs up to the largest p99.9 of the runs (the tail beyond is in the table).
+    let top = runs
+        .iter()
+        .map(|(_, l)| percentile(l, 99.9))
+        .fold(0.0f64, f64::max)
+        .max(50.0);
+    let width = (top / 60.0).max(1.0);
+    let nbins = (top / width).ceil() as usize + 1;
+    let lines: Vec<Line> = runs
+        .iter()
+        .enumerate()
+        .map(|(i, (hz, lat))| {
+            let mut counts = vec![0u64; nbins];
+            for &x in *lat {
+                let b = ((x / width) as usize).min(nbins - 1);
+                counts[b] += 1;
+            }
+            let mut points = Vec::new();
+            for (b, &c) in counts.iter().enumerate() {
+                let y = c as f64 / lat.len() as f64;
+                points.push((b as f64 * width, y));
+                points.push(((b + 1) as f64 * width, y));
+            }
+            Line {
+                label: format!("IMU {hz:.0} Hz ({} solutions)", lat.len()),
+                points,
+                color: color(i),
+                dashed: false,
+                markers: false,
+            }
+        })
+        .collect();
+    line_chart(
+        path,
+        &Chart {
+            title: "IMU send -> solution send latency",
+            x_label: &format!("latency, us (bins of {width:.1} us; last bin holds the tail)"),
+            y_label: "fraction of solutions",
+            log_x: false,
+            log_y: true,
+            lines: &lines,
+        },
+    )?;
+    Ok(())
+}
+
+fn machine() -> Value {
+    let cpuinfo = std::fs::read_to_string("/proc/cpuinfo").unwrap_or_default();
+    let model = cpuinfo
+        .lines()
+        .find(|l| l.starts_with("model name"))
+        .and_then(|l| l.split(':').nth(1))
+        .map(|s| s.trim().to_string())
+        .unwrap_or_else(|| "unknown".into());
+    let nproc = std::thread::available_parallelism().map_or(0, |n| n.get());
+    let mem = std::fs::read_to_string("/proc/meminfo")
+        .ok()
+        .and_then(|m| {
+            m.lines()
+                .find(|l| l.starts_with("MemTotal:"))
+                .and_then(|l| l.split_whitespace().nth(1))
+                .and_then(|v| v.parse::<f64>().ok())
+        })
+        .map_or(f64::NAN, |k| k / 1024.0 / 1024.0);
+    json!({ "nproc": nproc, "cpu_model": model, "mem_total_gib": mem })
+}
+
+/// Run the bench; writes `summary.json` and `latency_histogram.png` into `opts.out`.
+pub fn run(opts: &BenchOptions) -> anyhow::Result<Value> {
+    let sizes = Sizes::of(opts.quick);
+    std::fs::create_dir_all(&opts.out).with_context(|| format!("create {}", opts.out.display()))?;
+    // A private copy of the configuration with the short alignment.
+    let cfg_dir = opts.out.join("config");
+    let _ = std::fs::remove_dir_all(&cfg_dir);
+    match opts.config.parent() {
+        Some(dir) if opts.config.is_file() => copy_dir(dir, &cfg_dir)?,
+        _ => {
+            crate::config::materialize_embedded(&cfg_dir)?;
+        }
+    }
+    let cfg = crate::config::load(&cfg_dir.join("sextant.toml"))?;
+    toml_set(
+        &cfg.filter_path,
+        None,
+        "alignment_s",
+        toml::Value::Float(BENCH_ALIGNMENT_S),
+    )?;
+
+    let mut runs: Vec<(f64, Vec<f64>)> = Vec::new();
+    let mut live = serde_json::Map::new();
+    for hz in [200.0, 1000.0] {
+        eprintln!("bench: live run, IMU {hz} Hz, {} s", sizes.live_s);
+        let (lat, procs) = live_run(opts, &cfg_dir, hz, sizes.live_s)?;
+        let mut fig = latency_figures(&lat, hz, sizes.live_s - BENCH_ALIGNMENT_S);
+        fig["processes"] = procs;
+        live.insert(format!("imu_{}hz", hz as u64), fig);
+        runs.push((hz, lat));
+    }
+    eprintln!("bench: offline fusion, {} s simulated", sizes.offline_s);
+    let offline = offline_throughput(&cfg_dir, sizes.offline_s)?;
+    eprintln!("bench: recorder");
+    let recorder = recorder_throughput(&opts.out, sizes.record_saturated, sizes.record_paced_s)?;
+    let hist: Vec<(f64, &[f64])> = runs.iter().map(|(h, l)| (*h, l.as_slice())).collect();
+    let png = opts.out.join("latency_histogram.png");
+    if let Err(e) = histogram_png(&png, &hist) {
+        tracing::warn!("histogram: {e}");
+    }
+    let l1k = &live["imu_1000hz"];
+    let fusion_rss = live
+        .values()
+        .filter_map(|v| v["processes"]["sextant-fusion"]["peak_rss_mib"].as_f64())
+        .fold(0.0f64, f64::max);
+    let targets = json!({
+        "latency_p50_us_at_1khz": { "target": 30.0, "measured": l1k["latency_p50_us"] },
+        "latency_p99_us_at_1khz": { "target": 100.0, "measured": l1k["latency_p99_us"] },
+        "offline_x_real_time_all_aiding": { "target": 1000.0, "measured": offline["navigating_x_real_time"] },
+        "fusion_peak_rss_mib": { "target": 30.0, "measured": fusion_rss },
+        "recorder_10x_dropped": { "target": 0, "measured": recorder["paced_10x_dropped"] },
+    });
+    let summary = json!({
+        "machine": machine(),
+        "quick": opts.quick,
+        "live": Value::Object(live),
+        "offline": offline,
+        "recorder": recorder,
+        "targets": targets,
+        "histogram_png": png.display().to_string(),
+    });
+    std::fs::write(
+        opts.out.join("summary.json"),
+        serde_json::to_string_pretty(&summary)? + "\n",
+    )?;
+    Ok(summary)
+}
+
+/// The bench's table.
+pub fn table(s: &Value) -> String {
+    let f = |v: &Value| v.as_f64().map_or("—".into(), |x| format!("{x:.1}"));
+    let mut t = String::new();
+    t += &format!(
+        "machine: {} x {}\n",
+        s["machine"]["nproc"],
+        s["machine"]["cpu_model"].as_str().unwrap_or("?")
+    );
+    t += "IMU rate | solutions | p50 us | p99 us | p99.9 us | max us | fusion CPU % | fusion RSS MiB\n";
+    for key in ["imu_200hz", "imu_1000hz"] {
+        let r = &s["live"][key];
+        t += &format!(
+            "{:>6} Hz | {:>9} | {:>6} | {:>6} | {:>8} | {:>6} | {:>12} | {:>14}\n",
+            r["imu_rate_hz"],
+            r["solutions"],
+            f(&r["latency_p50_us"]),
+            f(&r["latency_p99_us"]),
+            f(&r["latency_p99_9_us"]),
+            f(&r["latency_max_us"]),
+            f(&r["processes"]["sextant-fusion"]["cpu_percent"]),
+            f(&r["processes"]["sextant-fusion"]["peak_rss_mib"]),
+        );
+    }
+    let o = &s["offline"];
+    t += &format!(
+        "offline fusion (all aiding, {} Hz IMU): {} IMU samples/s, {} x real time\n",
+        o["imu_rate_hz"],
+        f(&o["navigating_imu_samples_per_s"]),
+        f(&o["navigating_x_real_time"])
+    );
+    let r = &s["recorder"];
+    t += &format!(
+        "recorder: {} records/s, {} MB/s MCAP saturated; 10x live load ({} records/s): {} dropped\n",
+        f(&r["saturated_records_per_s"]),
+        f(&r["saturated_mcap_mb_per_s"]),
+        f(&r["paced_10x_records_per_s"]),
+        r["paced_10x_dropped"]
+    );
+    t += "targets:\n";
+    if let Some(m) = s["targets"].as_object() {
+        for (k, v) in m {
+            t += &format!(
+                "  {k}: target {} measured {}\n",
+                v["target"],
+                f(&v["measured"])
+            );
+        }
+    }
+    t
+}
