@@ -1,7 +1,7 @@
 //! Error-state extended Kalman filter in ECEF, closed loop (corrections are fed back into the
-//! strapdown state and the bias estimates, after which the error state is zero again).
+//! strapdown state and the sensor-error estimates, after which the error state is zero again).
 //!
-//! # Error state
+//! # Error state (fixed size [`NX`] = 28; groups switchable, see [`ActiveStates`])
 //! Every error is *truth minus estimate* (so that a measurement residual `y = z − h(x̂)` is
 //! `y = H·δx + v` with `H = ∂h/∂x` and the correction is `x̂ ← x̂ + δx`):
 //!
@@ -12,56 +12,70 @@
 //! | 6..9 | [`idx::ATT`] | `ψ`, attitude error in ECEF: `C_e_b = (I + [ψ×])·Ĉ_e_b` | rad |
 //! | 9..12 | [`idx::BG`] | `δb_g = b_g − b̂_g`, gyro bias, body | rad/s |
 //! | 12..15 | [`idx::BA`] | `δb_a = b_a − b̂_a`, accelerometer bias, body | m/s² |
-//! | 15 | [`idx::BARO`] | `δb_h = b_h − b̂_h`, baro height bias (`h_baro = h + b_h`) | m |
-//! | 16 | [`idx::ODO`] | `δk = k − k̂`, odometer scale-factor error (`s_odo = (1 + k)·v_x`) | – |
+//! | 15 | [`idx::BARO`] | `δb_h`, baro height bias (`h_baro = h + b_h`) | m |
+//! | 16 | [`idx::ODO`] | `δk`, odometer scale-factor error (`s_odo = (1 + k)·v_x`) | – |
+//! | 17..20 | [`idx::SG`] | `δs_g`, gyro scale-factor error per body axis | – |
+//! | 20..23 | [`idx::SA`] | `δs_a`, accelerometer scale-factor error per body axis | – |
+//! | 23..26 | [`idx::KAPPA`] | `δκ`, star-tracker boresight angles κ1..κ3 (paper 000) | rad |
+//! | 26 | [`idx::CLK`] | `δb_clk`, receiver clock bias × c | m |
+//! | 27 | [`idx::CLK_DRIFT`] | `δd_clk`, receiver clock drift × c | m/s |
 //!
-//! The odometer scale factor is a state for the same reason: a 0.2 % scale error at 20 m/s is a
-//! constant 0.04 m/s that white noise cannot represent; treated as noise it biases the along-track
-//! velocity and the position drifts by metres between GNSS fixes (measured: horizontal RMS 1.1 m
-//! with it as noise, 0.2 m with no odometer at all, in the default vehicle scenario).
+//! An inactive group keeps zero covariance rows/columns and zero process noise: its Kalman
+//! gain rows are then zero (`K = P Hᵀ S⁻¹`), so it is never corrected and costs nothing in
+//! accuracy; the matrices stay fixed-size so nothing allocates or changes shape at run time.
 //!
-//! The baro bias is a state rather than extra measurement noise because the simulated (and
-//! real) baro error is dominated by a constant bias (30 Pa ≈ 2.5 m) that white noise cannot
-//! represent: treating it as noise would make the height covariance dishonest after a few
-//! samples. With GNSS it is observable; without GNSS the height stays tied to the baro with
-//! the bias σ as its honest uncertainty.
+//! The odometer scale factor and the baro bias are states because the simulated (and real)
+//! errors are dominated by constants that white noise cannot represent (measured: horizontal
+//! RMS 1.1 m with the odometer scale as noise, 0.24 m as a state, in the default vehicle run).
 //!
-//! New groups (scale factors, star-tracker boresight, receiver clock, odometer scale —
-//! DESIGN.md "Filter") are appended after index 16: raise [`NX`], add their indices in
-//! [`idx`], their dynamics in [`error_dynamics`] and their noise in [`ProcessNoise`]; existing
-//! measurement models only fill the columns they know, so they keep working unchanged.
+//! # Sensor error models (the simulator's, `drivers-sim/src/imu.rs`)
+//! `ω̃ = (1 + s_g)∘ω + b_g + n_g`, `f̃ = (1 + s_a)∘f + b_a + n_a` (∘ element-wise), so the
+//! corrected outputs are `ω̂ = (ω̃ − b̂_g) ⊘ (1 + ŝ_g)` and `f̂ = (f̃ − b̂_a) ⊘ (1 + ŝ_a)`
+//! ([`ErrorStateEkf::correct_increment`]) and, to first order,
+//! `ω − ω̂ = −δb_g − diag(ω̂)·δs_g`, `f − f̂ = −δb_a − diag(f̂)·δs_a`.
 //!
 //! # Dynamics (Groves, *Principles of GNSS, Inertial and Multisensor Integrated Navigation*,
-//! 2nd ed., §14.2.3, ECEF; paper 002 eq. 22)
-//! With the IMU outputs corrected by the bias estimates (`ω̂ = ω̃ − b̂_g`, `f̂ = f̃ − b̂_a`) and
-//! `f̂_e = Ĉ_e_b f̂`:
+//! 2nd ed., §14.2.3 ECEF and §14.2.7 scale factors; paper 002 eq. 22)
+//! With `f̂_e = Ĉ_e_b f̂`:
 //! ```text
 //! δṙ = δv
-//! δv̇ = G·δr − 2[ω_ie×]·δv − [f̂_e×]·ψ − Ĉ_e_b·δb_a − Ĉ_e_b·n_a
-//! ψ̇  = −[ω_ie×]·ψ − Ĉ_e_b·δb_g − Ĉ_e_b·n_g
-//! δḃ_g = w_g,  δḃ_a = w_a,  δḃ_h = w_h          (random walks)
+//! δv̇ = G·δr − 2[ω_ie×]·δv − [f̂_e×]·ψ − Ĉ_e_b·δb_a − Ĉ_e_b·diag(f̂)·δs_a − Ĉ_e_b·n_a
+//! ψ̇  = −[ω_ie×]·ψ − Ĉ_e_b·δb_g − Ĉ_e_b·diag(ω̂)·δs_g − Ĉ_e_b·n_g
+//! δḃ_clk = δd_clk + w_b,   δḋ_clk = w_d                (two-state receiver clock)
+//! biases, baro bias, odometer scale: random walks; scale factors, κ: random constants
 //! ```
 //! `G = ∂g/∂r = GM/r³·(3 u uᵀ − I) − [ω_ie×]²` is the gravity gradient: the `−GM/r³·I` part is
 //! paper 002's `−ν²Δr` (Schuler frequency `ν² = g/r`), `3GM/r³ u uᵀ` its `3ν² r (r·Δr)/r²`
 //! (unstable vertical channel), the last term the centrifugal gradient.
 //!
-//! Discretisation per IMU step: `Φ = I + F dt + ½ (F dt)²`,
-//! `P⁺ = Φ (P + ½ Q_c dt) Φᵀ + ½ Q_c dt` (trapezoidal `Q_d`), with `Q_c` from the noise
-//! densities (ARW, VRW, bias random walks). Because the body→ECEF rotation of isotropic white
-//! noise is isotropic, `Q_c` is diagonal.
+//! # Discretisation and cost
+//! Propagating a dense 28×28 covariance every IMU sample (`Φ P Φᵀ`, 2·28³ ≈ 44 000
+//! multiply-adds) would cap the filter near 30 000 samples/s. Instead the strapdown step only
+//! *accumulates* the integral of `F` over a covariance interval ([`TransitionAccumulator`]:
+//! `∫Ĉ_e_b dt`, `∫f̂_e dt`, `∫Ĉ_e_b diag(f̂) dt`, `∫Ĉ_e_b diag(ω̂) dt`, a few 3×3 sums) and the
+//! covariance is propagated at the end of the interval and always before an update
+//! ([`ErrorStateEkf::propagate_covariance`]), with `Φ = I + F̄T + ½(F̄T)²` (`F̄T = ∫F dt`; the
+//! neglected commutator terms are `O(|F|²T²)` of the varying part, < 10⁻⁶ for T = 50 ms) and
+//! trapezoidal noise `P⁺ = Φ (P + ½ Q_c T) Φᵀ + ½ Q_c T`. `Φ` differs from the identity only
+//! in the 9 navigation rows (and the clock bias–drift entry), so `Φ P Φᵀ` is formed as a
+//! 9×28·28×28 product for the rows and a 28×28·28×9 one for the columns (≈ 14 000
+//! multiply-adds, once per interval).
 //!
 //! # Update
 //! [`update`] is a pure function in the style of nyx `od/kalman`: it returns the correction,
 //! the new covariance and a [`Residual`] record (innovation, its covariance `S`, normalized
 //! innovation squared `NIS = yᵀ S⁻¹ y`, the chi-square gate for `dim y` at the configured
 //! probability and whether the sample was rejected). Joseph form
-//! `P⁺ = (I − K H) P (I − K H)ᵀ + K R Kᵀ`, then symmetrised. Everything is fixed-size
-//! (`SMatrix`/`SVector`): no allocation.
+//! `P⁺ = (I − K H) P (I − K H)ᵀ + K R Kᵀ`, evaluated in its expanded, algebraically identical
+//! `O(n²m)` form `P − K (P Hᵀ)ᵀ − (P Hᵀ) Kᵀ + K S Kᵀ` (valid for any gain, like the factored
+//! form), then symmetrised. Everything is fixed-size (`SMatrix`/`SVector`): no allocation.
 //!
 //! # Measurement models
-//! [`gnss_position`], [`gnss_velocity`], [`star_attitude`], [`baro_height`],
-//! [`odometer_nhc`] / [`odometer_speed`], [`zero_velocity`]; each returns a [`Measurement`]
-//! (innovation, `H`, `R`) evaluated at the inertial state of the sample's time of validity.
+//! [`gnss_position`], [`gnss_velocity`] (loose), [`gnss_pseudorange`], [`gnss_range_rate`]
+//! (tight, one satellite each, paper 003), [`star_attitude`] (with boresight κ),
+//! [`baro_height`], [`odometer_nhc`] / [`odometer_speed`], [`zero_velocity`]; each returns a
+//! [`Measurement`] (innovation, `H`, `R`) evaluated at the inertial state of the sample's time
+//! of validity.
 
 use crate::attitude::skew;
 use crate::earth::Ellipsoid;
@@ -69,7 +83,7 @@ use crate::strapdown::NavState;
 use nalgebra::{Cholesky, Matrix3, Rotation3, SMatrix, SVector, UnitQuaternion, Vector3};
 
 /// Number of error states.
-pub const NX: usize = 17;
+pub const NX: usize = 28;
 
 /// Start index of each state group in the error-state vector.
 pub mod idx {
@@ -87,17 +101,68 @@ pub mod idx {
     pub const BARO: usize = 15;
     /// Odometer scale-factor error (one state, dimensionless).
     pub const ODO: usize = 16;
+    /// Gyro scale-factor errors, body x, y, z (dimensionless).
+    pub const SG: usize = 17;
+    /// Accelerometer scale-factor errors, body x, y, z (dimensionless).
+    pub const SA: usize = 20;
+    /// Star-tracker boresight angles κ1, κ2, κ3, rad.
+    pub const KAPPA: usize = 23;
+    /// Receiver clock bias × c, m.
+    pub const CLK: usize = 26;
+    /// Receiver clock drift × c, m/s.
+    pub const CLK_DRIFT: usize = 27;
 }
 
 /// Error-state vector (see the module table for layout and units).
 pub type StateVector = SVector<f64, NX>;
 /// Error-state covariance.
 pub type Covariance = SMatrix<f64, NX, NX>;
+/// The rows of `Φ` that differ from the identity: position, velocity, attitude.
+type NavRows = SMatrix<f64, 9, NX>;
 
 /// Largest measurement dimension any model produces (for gate tables).
 pub const MAX_MEAS_DIM: usize = 6;
 
-/// Continuous-time noise densities of the IMU error model, SI units.
+/// Which switchable state groups are estimated (the others keep zero covariance).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ActiveStates {
+    /// Gyro scale factors (3).
+    pub gyro_scale: bool,
+    /// Accelerometer scale factors (3).
+    pub accel_scale: bool,
+    /// Star-tracker boresight κ1..κ3 (3).
+    pub boresight: bool,
+    /// Receiver clock bias and drift (2).
+    pub clock: bool,
+}
+
+impl ActiveStates {
+    /// Every group on.
+    pub const ALL: Self = Self {
+        gyro_scale: true,
+        accel_scale: true,
+        boresight: true,
+        clock: true,
+    };
+
+    /// Per-state flag: true when the state is estimated.
+    pub fn mask(&self) -> [bool; NX] {
+        let mut m = [true; NX];
+        for (on, start, len) in [
+            (self.gyro_scale, idx::SG, 3),
+            (self.accel_scale, idx::SA, 3),
+            (self.boresight, idx::KAPPA, 3),
+            (self.clock, idx::CLK, 2),
+        ] {
+            for v in m.iter_mut().skip(start).take(len) {
+                *v = on;
+            }
+        }
+        m
+    }
+}
+
+/// Continuous-time noise densities of the error model, SI units.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ProcessNoise {
     /// Angle random walk (gyro white noise density), rad/√s.
@@ -112,10 +177,15 @@ pub struct ProcessNoise {
     pub baro_bias_rw_m_sqrt_s: f64,
     /// Odometer scale-factor random-walk density, 1/√s.
     pub odo_scale_rw_per_sqrt_s: f64,
+    /// Receiver clock bias (white frequency noise) PSD, m²/s.
+    pub clock_bias_psd_m2_s: f64,
+    /// Receiver clock drift (random-walk frequency noise) PSD, m²/s³.
+    pub clock_drift_psd_m2_s3: f64,
 }
 
 impl ProcessNoise {
-    /// Diagonal of the continuous process-noise spectral density `Q_c` in error-state layout.
+    /// Diagonal of the continuous process-noise spectral density `Q_c` in error-state layout
+    /// (scale factors and κ are random constants: zero).
     pub fn qc_diagonal(&self) -> StateVector {
         let mut q = StateVector::zeros();
         for i in 0..3 {
@@ -126,6 +196,8 @@ impl ProcessNoise {
         }
         q[idx::BARO] = self.baro_bias_rw_m_sqrt_s.powi(2);
         q[idx::ODO] = self.odo_scale_rw_per_sqrt_s.powi(2);
+        q[idx::CLK] = self.clock_bias_psd_m2_s;
+        q[idx::CLK_DRIFT] = self.clock_drift_psd_m2_s3;
         q
     }
 }
@@ -145,13 +217,83 @@ pub fn gravity_gradient(ell: &Ellipsoid, r_e: &Vector3<f64>) -> Matrix3<f64> {
     g
 }
 
-/// Continuous error dynamics matrix `F` (module docs) at the estimated position `r_e` (ECEF,
-/// m), attitude `c_e_b` (body → ECEF) and bias-corrected specific force `f_b` (body, m/s²).
+/// Integral of the error dynamics `F` over a covariance interval, accumulated per IMU step
+/// from the quantities that vary along the trajectory (module docs "Discretisation").
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct TransitionAccumulator {
+    /// Interval length `T`, s.
+    pub dt_s: f64,
+    /// `∫ Ĉ_e_b dt`, s.
+    sum_c_e_b: Matrix3<f64>,
+    /// `∫ f̂_e dt` (ECEF velocity increment), m/s.
+    sum_f_e: Vector3<f64>,
+    /// `∫ Ĉ_e_b diag(f̂) dt`, m/s.
+    sum_c_diag_f: Matrix3<f64>,
+    /// `∫ Ĉ_e_b diag(ω̂) dt`, rad.
+    sum_c_diag_w: Matrix3<f64>,
+}
+
+impl TransitionAccumulator {
+    /// Add one IMU step of `dt_s` with attitude `c_e_b` (body → ECEF) and the corrected
+    /// specific force `f_b` (m/s²) and angular rate `w_b` (rad/s), body.
+    pub fn add(&mut self, c_e_b: &Matrix3<f64>, f_b: &Vector3<f64>, w_b: &Vector3<f64>, dt_s: f64) {
+        let c_dt = c_e_b * dt_s;
+        self.dt_s += dt_s;
+        self.sum_c_e_b += c_dt;
+        self.sum_f_e += c_dt * f_b;
+        for j in 0..3 {
+            for i in 0..3 {
+                self.sum_c_diag_f[(i, j)] += c_dt[(i, j)] * f_b[j];
+                self.sum_c_diag_w[(i, j)] += c_dt[(i, j)] * w_b[j];
+            }
+        }
+    }
+
+    /// The navigation rows (0..9) of `Φ = I + F̄T + ½(F̄T)²` with the gravity gradient taken
+    /// at `r_e` (it changes by < 10⁻⁵ relative over an interval).
+    pub fn nav_rows(&self, ell: &Ellipsoid, r_e: &Vector3<f64>) -> SMatrix<f64, 9, NX> {
+        let t = self.dt_s;
+        let omega = skew(&ell.omega_ie_e());
+        let mut fi = NavRows::zeros();
+        // Rows 0..3 position, 3..6 velocity, 6..9 attitude (state indices equal row indices).
+        fi.fixed_view_mut::<3, 3>(idx::POS, idx::VEL)
+            .copy_from(&(Matrix3::identity() * t));
+        fi.fixed_view_mut::<3, 3>(idx::VEL, idx::POS)
+            .copy_from(&(gravity_gradient(ell, r_e) * t));
+        fi.fixed_view_mut::<3, 3>(idx::VEL, idx::VEL)
+            .copy_from(&(omega * (-2.0 * t)));
+        fi.fixed_view_mut::<3, 3>(idx::VEL, idx::ATT)
+            .copy_from(&(-skew(&self.sum_f_e)));
+        fi.fixed_view_mut::<3, 3>(idx::VEL, idx::BA)
+            .copy_from(&(-self.sum_c_e_b));
+        fi.fixed_view_mut::<3, 3>(idx::VEL, idx::SA)
+            .copy_from(&(-self.sum_c_diag_f));
+        fi.fixed_view_mut::<3, 3>(idx::ATT, idx::ATT)
+            .copy_from(&(omega * (-t)));
+        fi.fixed_view_mut::<3, 3>(idx::ATT, idx::BG)
+            .copy_from(&(-self.sum_c_e_b));
+        fi.fixed_view_mut::<3, 3>(idx::ATT, idx::SG)
+            .copy_from(&(-self.sum_c_diag_w));
+        // F has non-zero rows only in 0..9 (plus the clock row, whose column 27 meets no
+        // non-zero row of F), so (F̄T)² restricted to rows 0..9 is F̄T[:, 0..9] · F̄T[0..9, :].
+        let sq = fi.fixed_columns::<9>(0) * fi;
+        let mut a = fi + sq * 0.5;
+        for i in 0..9 {
+            a[(i, i)] += 1.0;
+        }
+        a
+    }
+}
+
+/// Continuous error dynamics matrix `F` (module docs), dense, at the estimated position
+/// `r_e` (ECEF, m), attitude `c_e_b`, corrected specific force `f_b` (m/s²) and angular rate
+/// `w_b` (rad/s), body. Used by tests and as the reference for [`TransitionAccumulator`].
 pub fn error_dynamics(
     ell: &Ellipsoid,
     r_e: &Vector3<f64>,
     c_e_b: &Matrix3<f64>,
     f_b: &Vector3<f64>,
+    w_b: &Vector3<f64>,
 ) -> Covariance {
     let omega = skew(&ell.omega_ie_e());
     let f_e = c_e_b * f_b;
@@ -166,49 +308,25 @@ pub fn error_dynamics(
         .copy_from(&(-skew(&f_e)));
     f.fixed_view_mut::<3, 3>(idx::VEL, idx::BA)
         .copy_from(&(-c_e_b));
+    f.fixed_view_mut::<3, 3>(idx::VEL, idx::SA)
+        .copy_from(&(-c_e_b * Matrix3::from_diagonal(f_b)));
     f.fixed_view_mut::<3, 3>(idx::ATT, idx::ATT)
         .copy_from(&(-omega));
     f.fixed_view_mut::<3, 3>(idx::ATT, idx::BG)
         .copy_from(&(-c_e_b));
+    f.fixed_view_mut::<3, 3>(idx::ATT, idx::SG)
+        .copy_from(&(-c_e_b * Matrix3::from_diagonal(w_b)));
+    f[(idx::CLK, idx::CLK_DRIFT)] = 1.0;
     f
 }
 
-/// State transition `Φ = I + F dt + ½ (F dt)²` over `dt_s`.
-///
-/// The square is formed block-wise: only the 7 non-zero 3×3 blocks of `F` contribute, so this
-/// costs a handful of 3×3 products instead of a dense 15×15 one.
-pub fn transition(f: &Covariance, dt_s: f64) -> Covariance {
-    // Non-zero blocks of F (row group, column group); all other blocks are zero.
-    const BLOCKS: [(usize, usize); 7] = [
-        (idx::POS, idx::VEL),
-        (idx::VEL, idx::POS),
-        (idx::VEL, idx::VEL),
-        (idx::VEL, idx::ATT),
-        (idx::VEL, idx::BA),
-        (idx::ATT, idx::ATT),
-        (idx::ATT, idx::BG),
-    ];
-    let mut phi = Covariance::identity() + f * dt_s;
-    let half_dt2 = 0.5 * dt_s * dt_s;
-    for &(i, k) in &BLOCKS {
-        let a: Matrix3<f64> = f.fixed_view::<3, 3>(i, k).into_owned();
-        for &(k2, j) in &BLOCKS {
-            if k2 == k {
-                let b: Matrix3<f64> = f.fixed_view::<3, 3>(k, j).into_owned();
-                let mut v = phi.fixed_view_mut::<3, 3>(i, j);
-                v += a * b * half_dt2;
-            }
-        }
-    }
-    phi
-}
-
-/// The filter's own state: error covariance and the bias estimates it feeds back.
+/// The filter's own state: error covariance, the sensor-error estimates it feeds back, and
+/// the transition accumulated since the last covariance propagation.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ErrorStateEkf {
-    /// Error-state covariance (layout in the module docs).
+    /// Error-state covariance (layout in the module docs), valid at the last propagation.
     pub p: Covariance,
-    /// Estimated gyro bias, body, rad/s (subtracted from the IMU before mechanization).
+    /// Estimated gyro bias, body, rad/s.
     pub gyro_bias_rad_s: Vector3<f64>,
     /// Estimated accelerometer bias, body, m/s².
     pub accel_bias_m_s2: Vector3<f64>,
@@ -216,44 +334,162 @@ pub struct ErrorStateEkf {
     pub baro_bias_m: f64,
     /// Estimated odometer scale-factor error `k` (`s_odo = (1 + k)·v_x`).
     pub odo_scale: f64,
+    /// Estimated gyro scale-factor errors, body axes (dimensionless).
+    pub gyro_scale: Vector3<f64>,
+    /// Estimated accelerometer scale-factor errors, body axes (dimensionless).
+    pub accel_scale: Vector3<f64>,
+    /// Estimated star-tracker boresight angles κ1..κ3, rad.
+    pub kappa_rad: Vector3<f64>,
+    /// Estimated receiver clock bias × c, m.
+    pub clock_bias_m: f64,
+    /// Estimated receiver clock drift × c, m/s.
+    pub clock_drift_m_s: f64,
     /// Process noise densities.
     pub noise: ProcessNoise,
+    active: [bool; NX],
     qc: StateVector,
+    acc: TransitionAccumulator,
 }
 
 impl ErrorStateEkf {
-    /// A filter with initial covariance `p0`, zero bias estimates and the given noise.
-    pub fn new(p0: Covariance, noise: ProcessNoise) -> Self {
-        Self {
+    /// A filter with initial covariance `p0` (rows/columns of inactive groups are zeroed),
+    /// zero error estimates, the given noise and active state groups.
+    pub fn new(p0: Covariance, noise: ProcessNoise, active: ActiveStates) -> Self {
+        let mut f = Self {
             p: p0,
             gyro_bias_rad_s: Vector3::zeros(),
             accel_bias_m_s2: Vector3::zeros(),
             baro_bias_m: 0.0,
             odo_scale: 0.0,
-            qc: noise.qc_diagonal(),
+            gyro_scale: Vector3::zeros(),
+            accel_scale: Vector3::zeros(),
+            kappa_rad: Vector3::zeros(),
+            clock_bias_m: 0.0,
+            clock_drift_m_s: 0.0,
             noise,
+            active: [true; NX],
+            qc: StateVector::zeros(),
+            acc: TransitionAccumulator::default(),
+        };
+        f.set_active(active);
+        f
+    }
+
+    /// Switch state groups on or off. Switching a group off zeroes its covariance rows and
+    /// columns (its estimate is kept); switching it on leaves its covariance zero until
+    /// [`Self::set_initial_sigma`] gives it one.
+    pub fn set_active(&mut self, active: ActiveStates) {
+        self.active = active.mask();
+        let q = self.noise.qc_diagonal();
+        for i in 0..NX {
+            self.qc[i] = if self.active[i] { q[i] } else { 0.0 };
+            if !self.active[i] {
+                self.p.row_mut(i).fill(0.0);
+                self.p.column_mut(i).fill(0.0);
+            }
         }
     }
 
-    /// Propagate the covariance over one IMU step of `dt_s` at the (already propagated)
-    /// state `nav`, with bias-corrected specific force `f_b` (body, m/s²). Allocates nothing.
-    pub fn predict(&mut self, ell: &Ellipsoid, nav: &NavState, f_b: &Vector3<f64>, dt_s: f64) {
+    /// Whether state `i` is estimated.
+    pub fn is_active(&self, i: usize) -> bool {
+        self.active.get(i).copied().unwrap_or(false)
+    }
+
+    /// Give state `i` (when active) the variance `sigma²`, uncorrelated with the others.
+    pub fn set_initial_sigma(&mut self, i: usize, sigma: f64) {
+        if self.is_active(i) && sigma.is_finite() {
+            self.p.row_mut(i).fill(0.0);
+            self.p.column_mut(i).fill(0.0);
+            self.p[(i, i)] = sigma * sigma;
+        }
+    }
+
+    /// Correct one raw IMU increment (`delta_angle_rad`, `delta_velocity_m_s`, body, over
+    /// `dt_s`) with the bias and scale-factor estimates: `(x̃ − b̂ dt) ⊘ (1 + ŝ)`.
+    pub fn correct_increment(
+        &self,
+        delta_angle_rad: &Vector3<f64>,
+        delta_velocity_m_s: &Vector3<f64>,
+        dt_s: f64,
+    ) -> (Vector3<f64>, Vector3<f64>) {
+        let dth = (delta_angle_rad - self.gyro_bias_rad_s * dt_s)
+            .component_div(&self.gyro_scale.add_scalar(1.0));
+        let dv = (delta_velocity_m_s - self.accel_bias_m_s2 * dt_s)
+            .component_div(&self.accel_scale.add_scalar(1.0));
+        (dth, dv)
+    }
+
+    /// Accumulate one IMU step of `dt_s` at the (already propagated) state `nav`, with the
+    /// corrected specific force `f_b` (m/s²) and angular rate `w_b` (rad/s), body. Cheap:
+    /// the covariance itself moves in [`Self::propagate_covariance`].
+    pub fn accumulate(
+        &mut self,
+        nav: &NavState,
+        f_b: &Vector3<f64>,
+        w_b: &Vector3<f64>,
+        dt_s: f64,
+    ) {
         let c_e_b = nav.q_e_b.to_rotation_matrix().into_inner();
-        let f = error_dynamics(ell, &nav.r_e, &c_e_b, f_b);
-        let phi = transition(&f, dt_s);
+        self.acc.add(&c_e_b, f_b, w_b, dt_s);
+    }
+
+    /// Time accumulated since the last covariance propagation, s.
+    pub fn pending_s(&self) -> f64 {
+        self.acc.dt_s
+    }
+
+    /// Propagate the covariance over the accumulated interval (module docs), position `r_e`
+    /// (ECEF, m) for the gravity gradient. A no-op when nothing is pending. Allocates nothing.
+    pub fn propagate_covariance(&mut self, ell: &Ellipsoid, r_e: &Vector3<f64>) {
+        let t = self.acc.dt_s;
+        if t <= 0.0 {
+            return;
+        }
+        let a = self.acc.nav_rows(ell, r_e);
+        self.acc = TransitionAccumulator::default();
         let mut p = self.p;
         for i in 0..NX {
-            p[(i, i)] += 0.5 * self.qc[i] * dt_s;
+            p[(i, i)] += 0.5 * self.qc[i] * t;
         }
-        let mut p = phi * p * phi.transpose();
+        // M = Φ P: rows 0..9 from A, clock bias row += T · drift row.
+        let mut m = p;
+        m.fixed_rows_mut::<9>(0).copy_from(&(a * p));
+        if self.active[idx::CLK] {
+            let drift_row = p.row(idx::CLK_DRIFT).into_owned();
+            let mut r = m.row_mut(idx::CLK);
+            r += drift_row * t;
+        }
+        // P⁺ = M Φᵀ: columns 0..9 from Aᵀ, clock bias column += T · drift column.
+        let mut pn = m;
+        pn.fixed_columns_mut::<9>(0).copy_from(&(m * a.transpose()));
+        if self.active[idx::CLK] {
+            let drift_col = m.column(idx::CLK_DRIFT).into_owned();
+            let mut c = pn.column_mut(idx::CLK);
+            c += drift_col * t;
+        }
         for i in 0..NX {
-            p[(i, i)] += 0.5 * self.qc[i] * dt_s;
+            pn[(i, i)] += 0.5 * self.qc[i] * t;
         }
-        self.p = symmetrize(&p);
+        self.p = symmetrize(&pn);
+        // The clock estimate moves with its drift (the error model's δḃ = δd).
+        self.clock_bias_m += self.clock_drift_m_s * t;
     }
 
-    /// Apply an accepted correction `dx` to the navigation state and the bias estimates (closed
-    /// loop); the error state is zero afterwards. The covariance reset Jacobian
+    /// Accumulate one step and propagate at once (tests, benches).
+    pub fn predict(
+        &mut self,
+        ell: &Ellipsoid,
+        nav: &NavState,
+        f_b: &Vector3<f64>,
+        w_b: &Vector3<f64>,
+        dt_s: f64,
+    ) {
+        self.accumulate(nav, f_b, w_b, dt_s);
+        self.propagate_covariance(ell, &nav.r_e);
+    }
+
+    /// Apply an accepted correction `dx` to the navigation state and the error estimates
+    /// (closed loop); the error state is zero afterwards. The covariance reset Jacobian
     /// `I − ½[ψ×]` is ≈ I for the small ψ of a running filter and is not applied.
     pub fn apply_correction(&mut self, nav: &mut NavState, dx: &StateVector) {
         correct_nav_state(nav, dx);
@@ -261,6 +497,11 @@ impl ErrorStateEkf {
         self.accel_bias_m_s2 += dx.fixed_rows::<3>(idx::BA);
         self.baro_bias_m += dx[idx::BARO];
         self.odo_scale += dx[idx::ODO];
+        self.gyro_scale += dx.fixed_rows::<3>(idx::SG);
+        self.accel_scale += dx.fixed_rows::<3>(idx::SA);
+        self.kappa_rad += dx.fixed_rows::<3>(idx::KAPPA);
+        self.clock_bias_m += dx[idx::CLK];
+        self.clock_drift_m_s += dx[idx::CLK_DRIFT];
     }
 }
 
@@ -301,7 +542,8 @@ pub struct Residual<const M: usize> {
     pub nis: f64,
     /// Gate threshold used (chi-square quantile for M dof).
     pub gate: f64,
-    /// True when the sample was not fused (NIS above the gate, or `S` not positive definite).
+    /// True when the sample was not fused (NIS above the gate, `S` not positive definite, or
+    /// anything non-finite in the measurement or the result).
     pub rejected: bool,
 }
 
@@ -318,7 +560,8 @@ pub struct UpdateOutcome<const M: usize> {
 }
 
 /// Kalman update of prior covariance `p` (error state zero) with measurement `m`, gated at
-/// `gate` (NIS threshold; `f64::INFINITY` disables the gate). Pure; allocates nothing.
+/// `gate` (NIS threshold; `f64::INFINITY` disables the gate). Pure; allocates nothing. A
+/// measurement with any non-finite entry is rejected before it can touch anything.
 pub fn update<const M: usize>(p: &Covariance, m: &Measurement<M>, gate: f64) -> UpdateOutcome<M> {
     let pht: SMatrix<f64, NX, M> = p * m.h.transpose();
     let s = symmetrize(&(m.h * pht + m.r));
@@ -333,6 +576,12 @@ pub fn update<const M: usize>(p: &Covariance, m: &Measurement<M>, gate: f64) -> 
             rejected: true,
         },
     };
+    let finite = m.innovation.iter().all(|x| x.is_finite())
+        && m.h.iter().all(|x| x.is_finite())
+        && m.r.iter().all(|x| x.is_finite());
+    if !finite {
+        return rejected_outcome(f64::INFINITY);
+    }
     let Some(chol) = Cholesky::new(s) else {
         return rejected_outcome(f64::INFINITY);
     };
@@ -343,11 +592,16 @@ pub fn update<const M: usize>(p: &Covariance, m: &Measurement<M>, gate: f64) -> 
     let s_inv = chol.inverse();
     let k: SMatrix<f64, NX, M> = pht * s_inv;
     let dx = k * m.innovation;
-    let ikh = Covariance::identity() - k * m.h;
-    let p_new = ikh * p * ikh.transpose() + k * m.r * k.transpose();
+    // Joseph form, expanded: (I−KH)P(I−KH)ᵀ + KRKᵀ = P − K(PHᵀ)ᵀ − (PHᵀ)Kᵀ + K S Kᵀ.
+    let k_pht_t = k * pht.transpose();
+    let p_new = p - k_pht_t - k_pht_t.transpose() + k * s * k.transpose();
+    let p_new = symmetrize(&p_new);
+    if !(dx.iter().all(|x| x.is_finite()) && p_new.iter().all(|x| x.is_finite())) {
+        return rejected_outcome(f64::INFINITY);
+    }
     UpdateOutcome {
         dx,
-        p: symmetrize(&p_new),
+        p: p_new,
         residual: Residual {
             innovation: m.innovation,
             covariance: s,
@@ -383,6 +637,61 @@ pub fn gnss_velocity(nav: &NavState, vel_e: &Vector3<f64>, cov: &Matrix3<f64>) -
     }
 }
 
+/// One satellite's pseudorange (tight coupling, paper 003 eq. 12 linearised at the inertial
+/// solution; antenna at the IMU). The satellite position `sat_pos_e` is the one at
+/// transmission rotated into the ECEF frame of reception (Sagnac included, as the receiver
+/// and `drivers-sim/src/gnss.rs` give it), so `ρ̂ = |r_s − r̂_e| + b̂_clk`,
+/// `H_r = −uᵀ` (u = unit line of sight receiver → satellite), `H_clk = 1`; noise `sigma_m`.
+pub fn gnss_pseudorange(
+    nav: &NavState,
+    sat_pos_e: &Vector3<f64>,
+    pseudorange_m: f64,
+    clock_bias_m: f64,
+    sigma_m: f64,
+) -> Measurement<1> {
+    let d = sat_pos_e - nav.r_e;
+    let range = d.norm();
+    let u = d / range;
+    let mut h = SMatrix::<f64, 1, NX>::zeros();
+    h.fixed_view_mut::<1, 3>(0, idx::POS)
+        .copy_from(&(-u.transpose()));
+    h[(0, idx::CLK)] = 1.0;
+    Measurement {
+        innovation: SVector::<f64, 1>::new(pseudorange_m - range - clock_bias_m),
+        h,
+        r: SMatrix::<f64, 1, 1>::new(sigma_m * sigma_m),
+    }
+}
+
+/// One satellite's Doppler range rate (tight coupling): `ρ̇̂ = (v_s − v̂_e)·u + d̂_clk` with
+/// `u = (r_s − r̂_e)/|r_s − r̂_e|` (the simulator's definition). `H_v = −uᵀ`, `H_d = 1`, and
+/// through the line of sight `H_r = −(v_s − v̂_e)ᵀ (I − u uᵀ)/ρ` (`∂u/∂r̂ = −(I − u uᵀ)/ρ`,
+/// ~10⁻⁴ per m: small but kept exact); noise `sigma_m_s`.
+pub fn gnss_range_rate(
+    nav: &NavState,
+    sat_pos_e: &Vector3<f64>,
+    sat_vel_e: &Vector3<f64>,
+    range_rate_m_s: f64,
+    clock_drift_m_s: f64,
+    sigma_m_s: f64,
+) -> Measurement<1> {
+    let d = sat_pos_e - nav.r_e;
+    let range = d.norm();
+    let u = d / range;
+    let dv = sat_vel_e - nav.v_e;
+    let mut h = SMatrix::<f64, 1, NX>::zeros();
+    let h_r = -(dv.transpose() * (Matrix3::identity() - u * u.transpose())) / range;
+    h.fixed_view_mut::<1, 3>(0, idx::POS).copy_from(&h_r);
+    h.fixed_view_mut::<1, 3>(0, idx::VEL)
+        .copy_from(&(-u.transpose()));
+    h[(0, idx::CLK_DRIFT)] = 1.0;
+    Measurement {
+        innovation: SVector::<f64, 1>::new(range_rate_m_s - dv.dot(&u) - clock_drift_m_s),
+        h,
+        r: SMatrix::<f64, 1, 1>::new(sigma_m_s * sigma_m_s),
+    }
+}
+
 /// Zero-velocity update: `z = 0` for the ECEF velocity, isotropic noise `sigma_m_s`.
 pub fn zero_velocity(nav: &NavState, sigma_m_s: f64) -> Measurement<3> {
     let mut m = gnss_velocity(
@@ -394,23 +703,49 @@ pub fn zero_velocity(nav: &NavState, sigma_m_s: f64) -> Measurement<3> {
     m
 }
 
-/// Star-tracker attitude.
+/// Paper 000 boresight misalignment `M(κ) = R_z(κ1)·R_x(κ2)·R_y(κ3)` (κ in rad); the true
+/// mount is `C_s_b = C_s_b,nominal · M(κ)` (HELPERS.md, `drivers-sim` `kappa_matrix`).
+pub fn kappa_matrix(kappa_rad: &Vector3<f64>) -> Matrix3<f64> {
+    let rz = Rotation3::from_axis_angle(&Vector3::z_axis(), kappa_rad[0]);
+    let rx = Rotation3::from_axis_angle(&Vector3::x_axis(), kappa_rad[1]);
+    let ry = Rotation3::from_axis_angle(&Vector3::y_axis(), kappa_rad[2]);
+    (rz * rx * ry).into_inner()
+}
+
+/// Right Jacobian `B(κ)` of the boresight matrix: `M(κ + δκ) ≈ M(κ)·(I + [B δκ ×])`.
+/// From `∂M/∂κ1 = [e_z×] M`, `∂M/∂κ2 = R_z [e_x×] R_x R_y`, `∂M/∂κ3 = M [e_y×]` and
+/// `Mᵀ[a×]M = [(Mᵀa)×]`: `B = [R_yᵀR_xᵀ e_z, R_yᵀ e_x, e_y]`.
+pub fn kappa_jacobian(kappa_rad: &Vector3<f64>) -> Matrix3<f64> {
+    let rx = Rotation3::from_axis_angle(&Vector3::x_axis(), kappa_rad[1]).into_inner();
+    let ry = Rotation3::from_axis_angle(&Vector3::y_axis(), kappa_rad[2]).into_inner();
+    let c1 = ry.transpose() * rx.transpose() * Vector3::z();
+    let c2 = ry.transpose() * Vector3::x();
+    Matrix3::from_columns(&[c1, c2, Vector3::y()])
+}
+
+/// Star-tracker attitude with boresight states.
 ///
 /// Measured `C̃_s_i` (ICRF → sensor, from `q_s_i_meas`), predicted
-/// `Ĉ_s_i = C_s_b · Ĉ_b_e · C_e_i(t)` with `c_e_i` = GCRS → ITRS at the exposure time and
-/// `c_s_b` the nominal mount (HELPERS.md). With `C_e_b = (I + [ψ×])Ĉ_e_b` and sensor-frame
-/// noise ν (`C̃_s_i = (I − [ν×]) C_s_i`), the residual rotation vector
-/// `y = rotvec(Ĉ_s_i C̃_s_iᵀ) = C_s_b Ĉ_b_e ψ + ν` (sensor axes, rad), so
-/// `H_ψ = C_s_b Ĉ_b_e`, `R = diag(σ_cross², σ_cross², σ_roll²)` (optical axis = sensor z).
+/// `Ĉ_s_i = C_s_b,nom · M(κ̂) · Ĉ_b_e · C_e_i(t)` with `c_e_i` = GCRS → ITRS at the exposure
+/// time (ICRF → ITRS → body → sensor). With `C_b_e = Ĉ_b_e (I − [ψ×])`,
+/// `M(κ) = M(κ̂)(I + [B δκ×])` ([`kappa_jacobian`]) and sensor-frame noise ν
+/// (`C̃_s_i = (I − [ν×]) C_s_i`), the residual rotation vector
+/// `y = rotvec(Ĉ_s_i C̃_s_iᵀ) = Ĉ_s_b Ĉ_b_e ψ − Ĉ_s_b B δκ + ν` (sensor axes, rad), so
+/// `H_ψ = Ĉ_s_e`, `H_κ = −Ĉ_s_b B`, `R = diag(σ_cross², σ_cross², σ_roll²)` (optical axis =
+/// sensor z). Only a heading change separates κ from ψ: a rotation of the mount and one of
+/// the vehicle look the same until the body turns relative to the Earth (or the Earth turns
+/// relative to the stars, which `C_e_i(t)` carries).
 pub fn star_attitude(
     nav: &NavState,
     q_s_i_meas: &UnitQuaternion<f64>,
     c_e_i: &Matrix3<f64>,
-    c_s_b: &Matrix3<f64>,
+    c_s_b_nominal: &Matrix3<f64>,
+    kappa_rad: &Vector3<f64>,
     sigma_cross_rad: f64,
     sigma_roll_rad: f64,
 ) -> Measurement<3> {
     let c_b_e = nav.q_e_b.to_rotation_matrix().into_inner().transpose();
+    let c_s_b = c_s_b_nominal * kappa_matrix(kappa_rad);
     let c_s_e = c_s_b * c_b_e;
     let c_s_i_pred = c_s_e * c_e_i;
     let c_s_i_meas = q_s_i_meas.to_rotation_matrix().into_inner();
@@ -419,6 +754,8 @@ pub fn star_attitude(
         UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(e)).scaled_axis();
     let mut h = SMatrix::<f64, 3, NX>::zeros();
     h.fixed_view_mut::<3, 3>(0, idx::ATT).copy_from(&c_s_e);
+    h.fixed_view_mut::<3, 3>(0, idx::KAPPA)
+        .copy_from(&(-c_s_b * kappa_jacobian(kappa_rad)));
     let r = Matrix3::from_diagonal(&Vector3::new(
         sigma_cross_rad.powi(2),
         sigma_cross_rad.powi(2),
@@ -430,7 +767,6 @@ pub fn star_attitude(
         r,
     }
 }
-
 /// Baro altitude taken as height above the ellipsoid (HELPERS.md): `z = h_baro` (m),
 /// predicted `ĥ + b̂_h` (geodetic height of `r̂_e` plus the estimated baro bias
 /// `baro_bias_m`); `H_r = u_upᵀ` (ECEF unit up vector at the estimated latitude/longitude),
@@ -658,6 +994,8 @@ pub fn chi2_quantile(k: u32, p: f64) -> f64 {
 mod tests {
     use super::*;
     use crate::earth::WGS84;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
 
     fn nav_at_origin() -> NavState {
         NavState {
@@ -665,6 +1003,11 @@ mod tests {
             v_e: Vector3::zeros(),
             q_e_b: UnitQuaternion::identity(),
         }
+    }
+
+    fn random_spd(rng: &mut ChaCha8Rng, scale: f64) -> Covariance {
+        let a = Covariance::from_fn(|_, _| rng.random_range(-1.0..1.0));
+        a * a.transpose() * scale + Covariance::identity() * 1e-6
     }
 
     #[test]
@@ -677,17 +1020,95 @@ mod tests {
     }
 
     #[test]
-    fn transition_matches_dense_second_order_expansion() {
+    fn accumulated_transition_matches_dense_second_order_expansion() {
+        // One step: the block-sparse nav rows must equal the dense I + F dt + ½(F dt)² (the
+        // same polynomial, so only rounding differs).
         let r = Vector3::new(4.0e6, 3.0e6, 3.5e6);
         let c = UnitQuaternion::from_euler_angles(0.1, -0.2, 0.3)
             .to_rotation_matrix()
             .into_inner();
-        let f = error_dynamics(&WGS84, &r, &c, &Vector3::new(0.3, -0.2, -9.8));
+        let f_b = Vector3::new(0.3, -0.2, -9.8);
+        let w_b = Vector3::new(0.01, -0.3, 0.2);
+        let f = error_dynamics(&WGS84, &r, &c, &f_b, &w_b);
         let dt = 0.01;
         let fd = f * dt;
         let dense = Covariance::identity() + fd + fd * fd * 0.5;
-        assert!((transition(&f, dt) - dense).abs().max() < 1e-15);
+        let mut acc = TransitionAccumulator::default();
+        acc.add(&c, &f_b, &w_b, dt);
+        let a = acc.nav_rows(&WGS84, &r);
+        let d = (a - dense.fixed_rows::<9>(0)).abs().max();
+        assert!(d < 1e-15, "{d}");
     }
+
+    #[test]
+    fn sparse_covariance_propagation_equals_dense() {
+        // Φ P Φᵀ formed block-sparse must equal the dense product with the same Φ and the
+        // trapezoidal noise, to rounding (relative 1e-12 of the largest entry).
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let p0 = random_spd(&mut rng, 1e-2);
+        let noise = crate::navigator::ImuSpec::default().process_noise();
+        let mut noise = noise;
+        noise.clock_bias_psd_m2_s = 0.1;
+        noise.clock_drift_psd_m2_s3 = 0.01;
+        let mut f = ErrorStateEkf::new(p0, noise, ActiveStates::ALL);
+        let nav = NavState {
+            r_e: Vector3::new(4.0e6, 3.0e6, 3.5e6),
+            v_e: Vector3::new(10.0, 0.0, 1.0),
+            q_e_b: UnitQuaternion::from_euler_angles(0.1, -0.2, 0.3),
+        };
+        let f_b = Vector3::new(0.3, -0.2, -9.8);
+        let w_b = Vector3::new(0.01, -0.3, 0.2);
+        let dt = 0.05;
+        let c = nav.q_e_b.to_rotation_matrix().into_inner();
+        let fm = error_dynamics(&WGS84, &nav.r_e, &c, &f_b, &w_b) * dt;
+        let phi = Covariance::identity() + fm + fm * fm * 0.5;
+        let q = Covariance::from_diagonal(&(noise.qc_diagonal() * (0.5 * dt)));
+        let dense = phi * (p0 + q) * phi.transpose() + q;
+        f.predict(&WGS84, &nav, &f_b, &w_b, dt);
+        let d = (f.p - dense).abs().max() / dense.abs().max();
+        assert!(d < 1e-12, "{d}");
+    }
+
+    #[test]
+    fn inactive_groups_stay_zero() {
+        let mut rng = ChaCha8Rng::seed_from_u64(4);
+        let p0 = random_spd(&mut rng, 1e-2);
+        let active = ActiveStates {
+            gyro_scale: false,
+            accel_scale: true,
+            boresight: false,
+            clock: false,
+        };
+        let mut noise = crate::navigator::ImuSpec::default().process_noise();
+        noise.clock_bias_psd_m2_s = 0.1;
+        noise.clock_drift_psd_m2_s3 = 0.01;
+        let mut f = ErrorStateEkf::new(p0, noise, active);
+        let nav = nav_at_origin();
+        f.predict(
+            &WGS84,
+            &nav,
+            &Vector3::new(0.0, 0.0, -9.8),
+            &Vector3::new(0.1, 0.0, 0.0),
+            0.1,
+        );
+        let m = star_attitude(
+            &nav,
+            &UnitQuaternion::from_euler_angles(PI_X, 0.0, 0.0),
+            &Matrix3::identity(),
+            &Matrix3::new(1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, -1.0),
+            &Vector3::zeros(),
+            1e-4,
+            1e-4,
+        );
+        let out = update(&f.p, &m, f64::INFINITY);
+        for i in (idx::SG..idx::SG + 3).chain(idx::KAPPA..NX) {
+            assert_eq!(out.p.row(i).abs().max(), 0.0, "row {i}");
+            assert_eq!(out.dx[i], 0.0);
+        }
+        assert!(out.p[(idx::SA, idx::SA)] > 0.0);
+    }
+
+    const PI_X: f64 = std::f64::consts::PI;
 
     #[test]
     fn schuler_frequency_from_gradient() {
@@ -718,25 +1139,127 @@ mod tests {
         assert!(out.residual.nis > out.residual.gate);
         assert_eq!(out.dx, StateVector::zeros());
         assert_eq!(out.p, p);
+        let mut nan = good;
+        nan.innovation[1] = f64::NAN;
+        let out = update(&p, &nan, f64::INFINITY);
+        assert!(out.residual.rejected);
+        assert_eq!(out.p, p);
     }
 
     #[test]
-    fn star_residual_recovers_small_rotation() {
-        let nav = nav_at_origin();
-        let c_s_b = Matrix3::new(1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, -1.0);
-        let c_e_i = UnitQuaternion::from_euler_angles(0.0, 0.0, 1.0)
+    fn random_updates_keep_covariance_symmetric_positive_definite_and_joseph_exact() {
+        // 2000 random sequential updates of random dimension-3 measurements on a random
+        // prior: the expanded Joseph form must equal the factored one (relative 1e-10), the
+        // covariance must stay exactly symmetric and Cholesky-factorisable, and never grow.
+        let mut rng = ChaCha8Rng::seed_from_u64(8);
+        let mut p = random_spd(&mut rng, 1.0);
+        for k in 0..2000 {
+            let h = SMatrix::<f64, 3, NX>::from_fn(|_, _| rng.random_range(-1.0..1.0));
+            let r = Matrix3::from_diagonal(&Vector3::from_fn(|_, _| {
+                10f64.powf(rng.random_range(-6.0..1.0))
+            }));
+            let y = Vector3::from_fn(|_, _| rng.random_range(-1.0..1.0));
+            let m = Measurement {
+                innovation: y,
+                h,
+                r,
+            };
+            let out = update(&p, &m, f64::INFINITY);
+            assert!(!out.residual.rejected, "step {k}");
+            let s = h * p * h.transpose() + r;
+            let kk = p * h.transpose() * s.try_inverse().unwrap();
+            let ikh = Covariance::identity() - kk * h;
+            let factored = ikh * p * ikh.transpose() + kk * r * kk.transpose();
+            let scale = p.abs().max();
+            assert!((out.p - factored).abs().max() < 1e-10 * scale, "step {k}");
+            assert_eq!(out.p, out.p.transpose());
+            assert!(Cholesky::new(out.p).is_some(), "step {k}: not PD");
+            assert!(out.p.trace() <= p.trace() * (1.0 + 1e-12));
+            p = out.p;
+            // Re-inflate occasionally so the test explores well-conditioned priors too.
+            if k % 50 == 49 {
+                p += random_spd(&mut rng, 1e-2);
+            }
+        }
+    }
+
+    #[test]
+    fn star_jacobian_matches_finite_differences() {
+        // Truth = estimate + (ψ, δκ): the innovation must equal H·δx to second order.
+        // With |ψ|, |δκ| ≤ 3e-4 rad the neglected terms are ≲ |δ|² ≈ 1e-7 rad.
+        let mut nav = nav_at_origin();
+        nav.q_e_b = UnitQuaternion::from_euler_angles(0.3, -0.4, 1.2);
+        let c_s_b_nom = Matrix3::new(1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, -1.0);
+        let c_e_i = UnitQuaternion::from_euler_angles(0.1, 0.2, 1.0)
             .to_rotation_matrix()
             .into_inner();
-        // Truth differs from the estimate by psi (ECEF): C_e_b = (I + [psi×]) Ĉ_e_b.
-        let psi = Vector3::new(1e-4, -2e-4, 3e-4);
-        let c_e_b_true = UnitQuaternion::from_scaled_axis(psi)
-            .to_rotation_matrix()
-            .into_inner();
-        let c_s_i_true = c_s_b * c_e_b_true.transpose() * c_e_i;
-        let q = UnitQuaternion::from_matrix(&c_s_i_true);
-        let m = star_attitude(&nav, &q, &c_e_i, &c_s_b, 1e-5, 1e-4);
-        let predicted = m.h.fixed_view::<3, 3>(0, idx::ATT) * psi;
-        assert!((m.innovation - predicted).norm() < 1e-9, "{m:?}");
+        let kappa_hat = Vector3::new(2e-3, -1e-3, 3e-3);
+        for (psi, dk) in [
+            (Vector3::new(1e-4, -2e-4, 3e-4), Vector3::zeros()),
+            (Vector3::zeros(), Vector3::new(3e-4, 0.0, 0.0)),
+            (Vector3::zeros(), Vector3::new(0.0, 3e-4, 0.0)),
+            (Vector3::zeros(), Vector3::new(0.0, 0.0, 3e-4)),
+            (
+                Vector3::new(-2e-4, 1e-4, 0.0),
+                Vector3::new(1e-4, -2e-4, 2e-4),
+            ),
+        ] {
+            let c_e_b_true = UnitQuaternion::from_scaled_axis(psi) * nav.q_e_b;
+            let c_s_b_true = c_s_b_nom * kappa_matrix(&(kappa_hat + dk));
+            let c_s_i_true =
+                c_s_b_true * c_e_b_true.to_rotation_matrix().into_inner().transpose() * c_e_i;
+            let q = UnitQuaternion::from_matrix(&c_s_i_true);
+            let m = star_attitude(&nav, &q, &c_e_i, &c_s_b_nom, &kappa_hat, 1e-5, 1e-4);
+            let mut dx = StateVector::zeros();
+            dx.fixed_rows_mut::<3>(idx::ATT).copy_from(&psi);
+            dx.fixed_rows_mut::<3>(idx::KAPPA).copy_from(&dk);
+            let d = m.innovation - m.h * dx;
+            assert!(d.norm() < 2e-7, "ψ {psi:?} δκ {dk:?}: {d}");
+            assert!(m.innovation.norm() > 1e-4);
+        }
+        // B itself against central differences of M(κ): Mᵀ ∂M/∂κ_j = [b_j×].
+        let h = 1e-6;
+        let b = kappa_jacobian(&kappa_hat);
+        let m0 = kappa_matrix(&kappa_hat);
+        for j in 0..3 {
+            let mut kp = kappa_hat;
+            let mut km = kappa_hat;
+            kp[j] += h;
+            km[j] -= h;
+            let dm = (kappa_matrix(&kp) - kappa_matrix(&km)) / (2.0 * h);
+            let w = m0.transpose() * dm;
+            let col = Vector3::new(w[(2, 1)], w[(0, 2)], w[(1, 0)]);
+            assert!((col - b.column(j)).norm() < 1e-9, "column {j}");
+        }
+    }
+
+    #[test]
+    fn pseudorange_and_range_rate_jacobians_match_finite_differences() {
+        let mut nav = nav_at_origin();
+        nav.v_e = Vector3::new(5.0, -12.0, 3.0);
+        let r_s = Vector3::new(2.0e7, 1.2e7, 0.9e7);
+        let v_s = Vector3::new(-1200.0, 2500.0, 800.0);
+        let m0 = gnss_pseudorange(&nav, &r_s, 2.3e7, 100.0, 3.0);
+        let d0 = gnss_range_rate(&nav, &r_s, &v_s, -300.0, 1.5, 0.05);
+        let mut dx = StateVector::zeros();
+        dx.fixed_rows_mut::<3>(idx::POS)
+            .copy_from(&Vector3::new(30.0, -20.0, 10.0));
+        dx.fixed_rows_mut::<3>(idx::VEL)
+            .copy_from(&Vector3::new(0.5, 0.2, -0.3));
+        dx[idx::CLK] = 7.0;
+        dx[idx::CLK_DRIFT] = 0.3;
+        let mut nav2 = nav;
+        correct_nav_state(&mut nav2, &dx);
+        let m1 = gnss_pseudorange(&nav2, &r_s, 2.3e7, 100.0 + 7.0, 3.0);
+        let d1 = gnss_range_rate(&nav2, &r_s, &v_s, -300.0, 1.5 + 0.3, 0.05);
+        // Second-order terms: |δr|²/(2ρ) ≈ 2e-5 m for the range; |δr||δv|/ρ ≈ 1e-6 m/s and
+        // |δr|²|v|/ρ² ≈ 1e-8 m/s for the rate.
+        let e_pr = m0.innovation[0] - m1.innovation[0] - (m0.h * dx)[0];
+        let e_rr = d0.innovation[0] - d1.innovation[0] - (d0.h * dx)[0];
+        assert!(e_pr.abs() < 1e-4, "{e_pr}");
+        assert!(e_rr.abs() < 1e-5, "{e_rr}");
+        // The position column of the rate Jacobian is not negligible against its noise.
+        assert!((d0.h.fixed_view::<1, 3>(0, idx::POS) * dx.fixed_rows::<3>(0))[0].abs() > 1e-4);
     }
 
     #[test]

@@ -32,7 +32,8 @@ use crate::attitude::{quat_from_wire, quat_to_wire, rpy_from_q_n_b};
 use crate::celestial::EarthOrientation;
 use crate::earth::{self, Ellipsoid, Geodetic, GravityModel, PZ90, WGS84};
 use crate::ekf::{
-    self, Covariance, ErrorStateEkf, GateTable, Measurement, ProcessNoise, StateVector, idx,
+    self, ActiveStates, Covariance, ErrorStateEkf, GateTable, Measurement, ProcessNoise,
+    StateVector, idx,
 };
 use crate::strapdown::{ImuIncrement, Integrator, MechanizationConfig, NavState, Strapdown, q_e_n};
 use crate::time::GpsTime;
@@ -83,6 +84,10 @@ pub struct ImuSpec {
     pub gyro_bias_rw_deg_h_sqrt_h: f64,
     /// Accelerometer bias random walk, µg/√h.
     pub accel_bias_rw_ug_sqrt_h: f64,
+    /// Gyro scale-factor error, ppm: initial σ of the gyro scale-factor states.
+    pub gyro_scale_ppm: f64,
+    /// Accelerometer scale-factor error, ppm: initial σ of the accelerometer scale states.
+    pub accel_scale_ppm: f64,
     /// Largest plausible angular rate, rad/s (input validation).
     pub max_rate_rad_s: f64,
     /// Largest plausible specific force, m/s² (input validation).
@@ -98,6 +103,8 @@ impl Default for ImuSpec {
             vrw_ug_sqrt_hz: 20.0,
             gyro_bias_rw_deg_h_sqrt_h: 0.002,
             accel_bias_rw_ug_sqrt_h: 5.0,
+            gyro_scale_ppm: 50.0,
+            accel_scale_ppm: 100.0,
             max_rate_rad_s: 10.0,
             max_specific_force_m_s2: 300.0,
         }
@@ -122,8 +129,49 @@ impl ImuSpec {
             accel_bias_rw_m_s2_sqrt_s: self.accel_bias_rw_ug_sqrt_h * 1e-6 * G0 / 60.0,
             baro_bias_rw_m_sqrt_s: 0.0,
             odo_scale_rw_per_sqrt_s: 0.0,
+            clock_bias_psd_m2_s: 0.0,
+            clock_drift_psd_m2_s3: 0.0,
         }
     }
+}
+
+/// Switchable state groups (`[states]` in `config/filter.toml`); an inactive group keeps
+/// zero covariance and zero process noise ([`crate::ekf`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct StateSwitches {
+    /// Gyro scale factors (3 states).
+    pub gyro_scale: bool,
+    /// Accelerometer scale factors (3 states).
+    pub accel_scale: bool,
+    /// Star-tracker boresight κ1..κ3 (3 states; only with star-tracker updates).
+    pub boresight: bool,
+    /// Receiver clock bias and drift (2 states; only with `gnss_mode = "tight"`, which
+    /// requires them).
+    pub clock: bool,
+}
+
+impl Default for StateSwitches {
+    fn default() -> Self {
+        Self {
+            gyro_scale: true,
+            accel_scale: true,
+            boresight: true,
+            clock: true,
+        }
+    }
+}
+
+/// How GNSS is fused.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum GnssMode {
+    /// The receiver's position/velocity fix with its covariance (needs ≥ 4 satellites).
+    #[default]
+    Loose,
+    /// Each satellite's pseudorange and range rate as scalar updates with the receiver clock
+    /// states: usable with any number of satellites from 1 (paper 003).
+    Tight,
 }
 
 /// Initial uncertainties of the filter after coarse alignment.
@@ -206,6 +254,12 @@ pub struct AidingNoise {
     pub nhc_sigma_m_s: f64,
     /// Zero-velocity update σ per axis, m/s.
     pub zupt_sigma_m_s: f64,
+    /// Initial σ of each star-tracker boresight angle κ1..κ3, deg.
+    pub boresight_sigma_deg: f64,
+    /// Receiver clock bias PSD (white frequency noise), m²/s (tight coupling).
+    pub clock_bias_psd_m2_s: f64,
+    /// Receiver clock drift PSD (random-walk frequency noise), m²/s³ (tight coupling).
+    pub clock_drift_psd_m2_s3: f64,
     /// Minimum time between two zero-velocity updates, s.
     pub zupt_interval_s: f64,
     /// The IMU must look static this long before zero-velocity updates start, s.
@@ -230,6 +284,9 @@ impl Default for AidingNoise {
             odometer_scale_sigma: 0.003,
             nhc_sigma_m_s: 0.05,
             zupt_sigma_m_s: 0.005,
+            boresight_sigma_deg: 0.1,
+            clock_bias_psd_m2_s: 0.1,
+            clock_drift_psd_m2_s3: 0.01,
             zupt_interval_s: 0.1,
             zupt_window_s: 1.0,
             zupt_max_rate_rad_s: 0.002,
@@ -297,6 +354,13 @@ pub struct NavigatorConfig {
     pub gate_probability: f64,
     /// How far behind the IMU time a sample may arrive and still be fused, s (≤ 2).
     pub buffer_window_s: f64,
+    /// Covariance propagation interval, s: the transition is accumulated over IMU steps and
+    /// the covariance propagated at this interval and before every update ([`crate::ekf`]).
+    pub covariance_interval_s: f64,
+    /// GNSS coupling.
+    pub gnss_mode: GnssMode,
+    /// Estimated state groups.
+    pub states: StateSwitches,
     /// Initial position for alignment; when absent, the first valid GNSS fix is used.
     pub initial_position: Option<InitialPosition>,
     /// Earth orientation parameters (UT1 − UTC, polar motion) for the star-tracker model.
@@ -323,6 +387,9 @@ impl Default for NavigatorConfig {
             coning_sculling: true,
             gate_probability: 0.999,
             buffer_window_s: 1.0,
+            covariance_interval_s: 0.05,
+            gnss_mode: GnssMode::Loose,
+            states: StateSwitches::default(),
             initial_position: None,
             eop: EarthOrientation::default(),
             imu: ImuSpec::default(),
@@ -469,6 +536,39 @@ impl NavigatorConfig {
             "imu.max_specific_force_m_s2",
             "must exceed 2 g",
         )?;
+        self.validate_filter_keys()
+    }
+
+    /// Checks of the state-group and coupling keys (filter engineer's part of `validate`).
+    fn validate_filter_keys(&self) -> Result<(), FusionError> {
+        check(
+            pos(self.covariance_interval_s) && self.covariance_interval_s <= 1.0,
+            "covariance_interval_s",
+            "must be in (0, 1] s",
+        )?;
+        for (v, k) in [
+            (self.imu.gyro_scale_ppm, "imu.gyro_scale_ppm"),
+            (self.imu.accel_scale_ppm, "imu.accel_scale_ppm"),
+            (
+                self.aiding.boresight_sigma_deg,
+                "aiding.boresight_sigma_deg",
+            ),
+            (
+                self.aiding.clock_bias_psd_m2_s,
+                "aiding.clock_bias_psd_m2_s",
+            ),
+            (
+                self.aiding.clock_drift_psd_m2_s3,
+                "aiding.clock_drift_psd_m2_s3",
+            ),
+        ] {
+            check(nonneg(v), k, "must be a finite number >= 0")?;
+        }
+        check(
+            self.gnss_mode == GnssMode::Loose || self.states.clock,
+            "states.clock",
+            "must be true with gnss_mode = \"tight\"",
+        )?;
         Ok(())
     }
 
@@ -549,6 +649,79 @@ struct GnssFix {
     vel_valid: bool,
 }
 
+/// One satellite's raw measurements as queued for tight coupling.
+#[derive(Debug, Clone, Copy, Default)]
+struct SatObs {
+    pos: Vector3<f64>,
+    vel: Vector3<f64>,
+    pseudorange_m: f64,
+    range_rate_m_s: f64,
+    sigma_pr_m: f64,
+    sigma_rr_m_s: f64,
+    has_pr: bool,
+    has_rr: bool,
+}
+
+/// GNSS epoch as queued: the fix (loose) and the usable satellites (tight).
+#[derive(Debug, Clone, Copy, Default)]
+struct GnssObs {
+    fix: Option<GnssFix>,
+    n_sats: usize,
+    sats: [SatObs; MAX_SATELLITES],
+}
+
+/// Satellite flag bits of `msgs::GnssSatellite::flags`.
+const SAT_FLAG_PSEUDORANGE: u32 = 1;
+const SAT_FLAG_DOPPLER: u32 = 2;
+
+/// The satellites of a sample that are usable for tight coupling: finite values, a position
+/// at orbital distance (|r| in 10 000–100 000 km), positive finite sigmas. Others are skipped
+/// (never reach the filter). Allocates nothing.
+fn usable_satellites(s: &GnssSample) -> (usize, [SatObs; MAX_SATELLITES]) {
+    let mut out = [SatObs::default(); MAX_SATELLITES];
+    let mut n = 0;
+    for sat in s
+        .satellites
+        .iter()
+        .take((s.n_satellites as usize).min(MAX_SATELLITES))
+    {
+        let r_sat = Vector3::from(sat.sat_pos_ecef_m);
+        let v_sat = Vector3::from(sat.sat_vel_ecef_m_s);
+        let geometry_ok = r_sat.iter().all(|x| x.is_finite())
+            && v_sat.iter().all(|x| x.is_finite())
+            && (1.0e7..=1.0e8).contains(&r_sat.norm())
+            && v_sat.norm() < 2.0e4;
+        if !geometry_ok {
+            continue;
+        }
+        let has_pr = sat.flags & SAT_FLAG_PSEUDORANGE != 0
+            && sat.pseudorange_m.is_finite()
+            && sat.pseudorange_m.abs() < 1.0e9
+            && pos(sat.sigma_pseudorange_m)
+            && sat.sigma_pseudorange_m < 1.0e4;
+        let has_rr = sat.flags & SAT_FLAG_DOPPLER != 0
+            && sat.range_rate_m_s.is_finite()
+            && sat.range_rate_m_s.abs() < 1.0e5
+            && pos(sat.sigma_range_rate_m_s)
+            && sat.sigma_range_rate_m_s < 1.0e3;
+        if !(has_pr || has_rr) {
+            continue;
+        }
+        out[n] = SatObs {
+            pos: r_sat,
+            vel: v_sat,
+            pseudorange_m: sat.pseudorange_m,
+            range_rate_m_s: sat.range_rate_m_s,
+            sigma_pr_m: sat.sigma_pseudorange_m,
+            sigma_rr_m_s: sat.sigma_range_rate_m_s,
+            has_pr,
+            has_rr,
+        };
+        n += 1;
+    }
+    (n, out)
+}
+
 #[derive(Debug, Clone, Copy, Default)]
 struct StarObs {
     q: [f64; 4],
@@ -574,6 +747,19 @@ enum Phase {
     Initializing,
     Aligning,
     Navigating,
+}
+
+/// Receiver clock estimate (tight coupling).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ClockEstimate {
+    /// Clock bias × c, m.
+    pub bias_m: f64,
+    /// Clock drift × c, m/s.
+    pub drift_m_s: f64,
+    /// 1-σ of the bias, m.
+    pub bias_sigma_m: f64,
+    /// 1-σ of the drift, m/s.
+    pub drift_sigma_m_s: f64,
 }
 
 /// Counters of the zero-velocity updates (not a sensor slot of `msgs::Status`).
@@ -605,7 +791,8 @@ pub struct Navigator {
     last_time: [Option<i64>; MAX_SENSORS],
     health: [SensorHealth; MAX_SENSORS],
     last_fused_ns: [Option<i64>; MAX_SENSORS],
-    gnss_q: TimeQueue<GnssFix, GNSS_CAP>,
+    gnss_q: TimeQueue<GnssObs, GNSS_CAP>,
+    clock_initialized: bool,
     star_q: TimeQueue<StarObs, STAR_CAP>,
     odo_q: TimeQueue<f64, ODO_CAP>,
     baro_q: TimeQueue<f64, BARO_CAP>,
@@ -646,13 +833,18 @@ impl Navigator {
             init_fix: None,
             strapdown: Strapdown::new(config.mechanization()),
             nav,
-            ekf: ErrorStateEkf::new(Covariance::identity(), config.imu.process_noise()),
+            ekf: ErrorStateEkf::new(
+                Covariance::identity(),
+                config.imu.process_noise(),
+                ActiveStates::ALL,
+            ),
             time_ns: 0,
             last_seq: [None; MAX_SENSORS],
             last_time: [None; MAX_SENSORS],
             health: [SensorHealth::default(); MAX_SENSORS],
             last_fused_ns: [None; MAX_SENSORS],
             gnss_q: TimeQueue::new(),
+            clock_initialized: false,
             star_q: TimeQueue::new(),
             odo_q: TimeQueue::new(),
             baro_q: TimeQueue::new(),
@@ -716,14 +908,20 @@ impl Navigator {
                 } else {
                     (1.0, s.dt_s)
                 };
+                let (dth_c, dv_c) = self
+                    .ekf
+                    .correct_increment(&(dth * scale), &(dv * scale), dt);
                 let inc = ImuIncrement {
                     dt_s: dt,
-                    delta_angle_rad: dth * scale - self.ekf.gyro_bias_rad_s * dt,
-                    delta_velocity_m_s: dv * scale - self.ekf.accel_bias_m_s2 * dt,
+                    delta_angle_rad: dth_c,
+                    delta_velocity_m_s: dv_c,
                 };
                 self.strapdown.step(&mut self.nav, &inc);
-                let f_b = inc.delta_velocity_m_s / dt;
-                self.ekf.predict(&self.ell, &self.nav, &f_b, dt);
+                self.ekf
+                    .accumulate(&self.nav, &(dv_c / dt), &(dth_c / dt), dt);
+                if self.ekf.pending_s() >= self.config.covariance_interval_s - 1e-9 {
+                    self.ekf.propagate_covariance(&self.ell, &self.nav.r_e);
+                }
                 self.time_ns = t;
                 self.health[id].fused += 1;
                 self.push_history();
@@ -799,10 +997,16 @@ impl Navigator {
             }
         };
         self.accept_header(id, &s.header);
-        if let Some(fix) = fix
-            && (self.too_late(s.header.time_ns)
-                || self.gnss_q.insert(s.header.time_ns, fix).is_some())
-        {
+        let (n_sats, sats) = if self.config.gnss_mode == GnssMode::Tight {
+            usable_satellites(s)
+        } else {
+            (0, [SatObs::default(); MAX_SATELLITES])
+        };
+        if fix.is_none() && n_sats == 0 {
+            return Ok(());
+        }
+        let obs = GnssObs { fix, n_sats, sats };
+        if self.too_late(s.header.time_ns) || self.gnss_q.insert(s.header.time_ns, obs).is_some() {
             self.health[id].dropped_late += 1;
         }
         Ok(())
@@ -921,6 +1125,41 @@ impl Navigator {
         self.ekf.baro_bias_m
     }
 
+    /// Estimated star-tracker boresight angles κ1..κ3 (paper 000) and their 1-σ, rad.
+    pub fn boresight_rad(&self) -> (Vector3<f64>, Vector3<f64>) {
+        (
+            self.ekf.kappa_rad,
+            Vector3::from(diag_sigma(&self.ekf.p, idx::KAPPA)),
+        )
+    }
+
+    /// Receiver clock: bias × c (m), drift × c (m/s) and their 1-σ; zeros before tight
+    /// coupling has initialised the clock states.
+    pub fn clock(&self) -> ClockEstimate {
+        let p = &self.ekf.p;
+        ClockEstimate {
+            bias_m: self.ekf.clock_bias_m,
+            drift_m_s: self.ekf.clock_drift_m_s,
+            bias_sigma_m: p[(idx::CLK, idx::CLK)].max(0.0).sqrt(),
+            drift_sigma_m_s: p[(idx::CLK_DRIFT, idx::CLK_DRIFT)].max(0.0).sqrt(),
+        }
+    }
+
+    /// Estimated gyro and accelerometer scale-factor errors per body axis (dimensionless).
+    pub fn scale_factors(&self) -> (Vector3<f64>, Vector3<f64>) {
+        (self.ekf.gyro_scale, self.ekf.accel_scale)
+    }
+
+    /// 1-σ of every error state (layout in [`crate::ekf`]); zero for inactive groups.
+    pub fn state_sigma(&self) -> StateVector {
+        StateVector::from_fn(|i, _| self.ekf.p[(i, i)].max(0.0).sqrt())
+    }
+
+    /// The error-state filter (covariance as of its last propagation, estimates).
+    pub fn filter(&self) -> &ErrorStateEkf {
+        &self.ekf
+    }
+
     /// True once alignment is complete and the filter runs.
     pub fn is_navigating(&self) -> bool {
         self.phase == Phase::Navigating
@@ -993,8 +1232,10 @@ impl Navigator {
     // ---------------------------------------------------------------- alignment
 
     fn consume_during_alignment(&mut self, t: i64) {
-        while let Some((_, fix)) = self.gnss_q.pop_due(t) {
-            if self.init_fix.is_none() {
+        while let Some((_, obs)) = self.gnss_q.pop_due(t) {
+            if self.init_fix.is_none()
+                && let Some(fix) = obs.fix
+            {
                 self.init_fix = Some((fix.pos, fix.pos_cov));
             }
         }
@@ -1038,6 +1279,8 @@ impl Navigator {
         let imu = &self.config.imu;
         let mut noise = imu.process_noise();
         noise.baro_bias_rw_m_sqrt_s = self.config.aiding.baro_bias_rw_m_sqrt_s;
+        noise.clock_bias_psd_m2_s = self.config.aiding.clock_bias_psd_m2_s;
+        noise.clock_drift_psd_m2_s3 = self.config.aiding.clock_drift_psd_m2_s3;
         let spec = alignment::AlignmentErrorSpec {
             gyro_bias_rad_s: imu.gyro_bias_rad_s(),
             accel_bias_m_s2: imu.accel_bias_m_s2(),
@@ -1081,7 +1324,16 @@ impl Navigator {
         }
         p0[(idx::BARO, idx::BARO)] = self.config.aiding.baro_bias_sigma_m.powi(2);
         p0[(idx::ODO, idx::ODO)] = self.config.aiding.odometer_scale_sigma.powi(2);
-        self.ekf = ErrorStateEkf::new(p0, noise);
+        let sg = imu.gyro_scale_ppm * 1e-6;
+        let sa = imu.accel_scale_ppm * 1e-6;
+        let sk = self.config.aiding.boresight_sigma_deg * DEG;
+        for k in 0..3 {
+            p0[(idx::SG + k, idx::SG + k)] = sg * sg;
+            p0[(idx::SA + k, idx::SA + k)] = sa * sa;
+            p0[(idx::KAPPA + k, idx::KAPPA + k)] = sk * sk;
+        }
+        self.ekf = ErrorStateEkf::new(p0, noise, self.active_states(false));
+        self.clock_initialized = false;
         self.strapdown = Strapdown::new(self.config.mechanization());
         self.phase = Phase::Navigating;
         self.time_ns = t;
@@ -1163,11 +1415,19 @@ impl Navigator {
     /// Run one gated update (health counters of sensor `id`, or the ZUPT counters for None);
     /// returns whether it was accepted.
     fn run_update<const M: usize>(&mut self, id: Option<usize>, m: &Measurement<M>) -> bool {
+        // The covariance must be at the current time before any update.
+        self.ekf.propagate_covariance(&self.ell, &self.nav.r_e);
         let out = ekf::update(&self.ekf.p, m, self.gates.threshold(M));
         if let Some(id) = id {
             self.health[id].last_nis = out.residual.nis;
             if out.residual.rejected {
                 self.health[id].rejected_gate += 1;
+            } else {
+                // Mean NIS over accepted updates (nis_sum / nis_count) should be ≈ the mean
+                // dimension (nis_dof_sum / nis_count) for a consistent filter.
+                self.health[id].nis_sum += out.residual.nis;
+                self.health[id].nis_count += 1;
+                self.health[id].nis_dof_sum += M as u64;
             }
         } else {
             self.zupt.last_nis = out.residual.nis;
@@ -1190,10 +1450,19 @@ impl Navigator {
         self.last_fused_ns[id] = Some(self.last_fused_ns[id].map_or(ts, |p| p.max(ts)));
     }
 
-    fn fuse_gnss(&mut self, ts: i64, fix: &GnssFix) {
+    fn fuse_gnss(&mut self, ts: i64, obs: &GnssObs) {
         let id = sid(SensorId::Gnss);
         let Some(hi) = self.history_at(ts) else {
             self.health[id].dropped_late += 1;
+            return;
+        };
+        if self.config.gnss_mode == GnssMode::Tight {
+            if obs.n_sats > 0 {
+                self.fuse_gnss_tight(ts, hi, obs);
+            }
+            return;
+        }
+        let Some(fix) = obs.fix else {
             return;
         };
         // Position and velocity are gated separately; the sample's NIS is the larger one.
@@ -1217,6 +1486,118 @@ impl Navigator {
         }
     }
 
+    /// Tight coupling: every satellite's pseudorange and range rate as a sequential scalar
+    /// update (each gated on its own 1-dof NIS) at the inertial state of the epoch; the clock
+    /// states are initialised from the first epoch. The sample's NIS is the largest one.
+    fn fuse_gnss_tight(&mut self, ts: i64, hi: usize, obs: &GnssObs) {
+        let id = sid(SensorId::Gnss);
+        // The clock estimate is kept at the filter time; move it back to the sample's time.
+        let back_s = (self.time_ns - ts) as f64 * 1e-9;
+        if !self.clock_initialized {
+            self.initialize_clock(hi, obs, back_s);
+        }
+        let mut fused = false;
+        let mut nis = f64::NEG_INFINITY;
+        for sat in obs.sats.iter().take(obs.n_sats) {
+            if sat.has_pr {
+                let b = self.ekf.clock_bias_m - self.ekf.clock_drift_m_s * back_s;
+                let m = ekf::gnss_pseudorange(
+                    &self.hist[hi].nav,
+                    &sat.pos,
+                    sat.pseudorange_m,
+                    b,
+                    sat.sigma_pr_m,
+                );
+                fused |= self.run_update(Some(id), &m);
+                nis = nis.max(self.health[id].last_nis);
+            }
+            if sat.has_rr && self.config.updates.gnss_velocity {
+                let m = ekf::gnss_range_rate(
+                    &self.hist[hi].nav,
+                    &sat.pos,
+                    &sat.vel,
+                    sat.range_rate_m_s,
+                    self.ekf.clock_drift_m_s,
+                    sat.sigma_rr_m_s,
+                );
+                fused |= self.run_update(Some(id), &m);
+                nis = nis.max(self.health[id].last_nis);
+            }
+        }
+        if nis > f64::NEG_INFINITY {
+            self.health[id].last_nis = nis;
+        }
+        if fused {
+            self.mark_fused(id, ts);
+        }
+    }
+
+    /// Clock bias and drift from the first tight epoch: the mean residual of the
+    /// pseudoranges (range rates) against the inertial position (velocity), with variance
+    /// σ² = mean line-of-sight position (velocity) variance + measurement variance, times 4
+    /// for margin (the residuals share the inertial error, so averaging does not reduce it).
+    /// Works from one satellite; no 4-satellite fix is needed.
+    fn initialize_clock(&mut self, hi: usize, obs: &GnssObs, back_s: f64) {
+        self.ekf.propagate_covariance(&self.ell, &self.nav.r_e);
+        let nav = self.hist[hi].nav;
+        let p_r: Matrix3<f64> = self
+            .ekf
+            .p
+            .fixed_view::<3, 3>(idx::POS, idx::POS)
+            .into_owned();
+        let p_v: Matrix3<f64> = self
+            .ekf
+            .p
+            .fixed_view::<3, 3>(idx::VEL, idx::VEL)
+            .into_owned();
+        let (mut nb, mut sb, mut vb) = (0.0, 0.0, 0.0);
+        let (mut nd, mut sd, mut vd) = (0.0, 0.0, 0.0);
+        for sat in obs.sats.iter().take(obs.n_sats) {
+            let d = sat.pos - nav.r_e;
+            let u = d / d.norm();
+            if sat.has_pr {
+                nb += 1.0;
+                sb += sat.pseudorange_m - d.norm();
+                vb += (u.transpose() * p_r * u)[0] + sat.sigma_pr_m.powi(2);
+            }
+            if sat.has_rr {
+                nd += 1.0;
+                sd += sat.range_rate_m_s - (sat.vel - nav.v_e).dot(&u);
+                vd += (u.transpose() * p_v * u)[0] + sat.sigma_rr_m_s.powi(2);
+            }
+        }
+        if nb == 0.0 {
+            return;
+        }
+        let mut active = self.active_states(true);
+        active.clock = true;
+        self.ekf.set_active(active);
+        let drift = if nd > 0.0 { sd / nd } else { 0.0 };
+        let sigma_d = if nd > 0.0 {
+            2.0 * (vd / nd).sqrt()
+        } else {
+            // Unknown drift: a TCXO-class 10⁻⁶ (300 m/s).
+            300.0
+        };
+        self.ekf.clock_drift_m_s = drift;
+        // Stored at the filter time (module docs of fuse_gnss_tight).
+        self.ekf.clock_bias_m = sb / nb + drift * back_s;
+        self.ekf.set_initial_sigma(idx::CLK, 2.0 * (vb / nb).sqrt());
+        self.ekf.set_initial_sigma(idx::CLK_DRIFT, sigma_d);
+        self.clock_initialized = true;
+    }
+
+    /// The state groups to estimate, from the configuration (clock only once initialised).
+    fn active_states(&self, clock: bool) -> ActiveStates {
+        let s = &self.config.states;
+        ActiveStates {
+            gyro_scale: s.gyro_scale,
+            accel_scale: s.accel_scale,
+            boresight: s.boresight && self.config.updates.star_tracker,
+            clock: clock && s.clock && self.config.gnss_mode == GnssMode::Tight,
+        }
+    }
+
     fn fuse_star(&mut self, ts: i64, obs: &StarObs) {
         let id = sid(SensorId::StarTracker);
         if !self.config.updates.star_tracker {
@@ -1233,6 +1614,7 @@ impl Navigator {
             &q,
             &c_e_i,
             &self.c_s_b,
+            &self.ekf.kappa_rad,
             obs.sigma_cross,
             obs.sigma_roll,
         );
@@ -1419,9 +1801,14 @@ impl Navigator {
             imu_send_mono_ns: s.header.send_mono_ns,
             gyro_bias_sigma_rad_s: diag_sigma(p, idx::BG),
             accel_bias_sigma_m_s2: diag_sigma(p, idx::BA),
+            gyro_scale_ppm: (self.ekf.gyro_scale * 1e6).into(),
+            accel_scale_ppm: (self.ekf.accel_scale * 1e6).into(),
+            boresight_rad: self.ekf.kappa_rad.into(),
+            boresight_sigma_rad: diag_sigma(p, idx::KAPPA),
+            clock_bias_m: self.ekf.clock_bias_m,
+            clock_drift_m_s: self.ekf.clock_drift_m_s,
             baro_bias_m: self.ekf.baro_bias_m,
             odometer_scale: self.ekf.odo_scale,
-            ..Default::default()
         }
     }
 }

@@ -179,7 +179,15 @@ fn filter_allocates_nothing_in_steady_state() {
         .nis,
         ekf::update(
             &p,
-            &ekf::star_attitude(&state, &q, &c_e_i_now, &c_s_b, 2e-5, 1e-4),
+            &ekf::star_attitude(
+                &state,
+                &q,
+                &c_e_i_now,
+                &c_s_b,
+                &Vector3::zeros(),
+                2e-5,
+                1e-4,
+            ),
             gates.threshold(3),
         )
         .residual
