@@ -18,6 +18,7 @@ pub mod alignment;
 pub mod atmosphere;
 pub mod astro_fix;
 pub mod attitude;
+pub mod boresight;
 pub mod celestial;
 pub mod earth;
 pub mod ekf;
