@@ -7,7 +7,9 @@
 //! a stand-in before (and independently of) the real filter.
 
 use crate::config::SystemConfig;
-use crate::recorder::{Record, Recorder, RecorderError, RecorderOptions, RecorderStats};
+use crate::recorder::{
+    Record, Recorder, RecorderError, RecorderOptions, RecorderStats, SensorAliveEvent,
+};
 use fusion::FusionError;
 use fusion::navigator::Navigator;
 use iceoryx2::prelude::*;
@@ -16,6 +18,7 @@ use msgs::{
     BaroSample, GnssSample, ImuSample, MAX_SENSORS, Message, NavSolution, OdometerSample,
     SensorHealth, SensorId, StarTrackerSample, Status, TruthSample,
 };
+use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -67,6 +70,37 @@ impl NavEngine for Navigator {
     }
 }
 
+/// Push one recorded input into the engine: the single code path by which both the live daemon
+/// and offline replay drive the engine, so that replaying a recording's inputs in file order
+/// reproduces the live solution bit for bit. Sensor samples go to their `push_*`, alive/dead
+/// transitions to `set_sensor_alive`; outputs and truth are not inputs and are ignored.
+/// Returns the solution an IMU sample produced.
+pub fn feed<E: NavEngine>(
+    engine: &mut E,
+    record: &Record,
+) -> Result<Option<NavSolution>, FusionError> {
+    match record {
+        Record::Imu(s) => engine.push_imu(s),
+        Record::StarTracker(s) => engine.push_star_tracker(s).map(|()| None),
+        Record::Gnss(s) => engine.push_gnss(s).map(|()| None),
+        Record::Odometer(s) => engine.push_odometer(s).map(|()| None),
+        Record::Baro(s) => engine.push_baro(s).map(|()| None),
+        Record::SensorAlive(e) => {
+            engine.set_sensor_alive(e.sensor as usize, e.alive);
+            Ok(None)
+        }
+        Record::Truth(_) | Record::Nav(_) | Record::Status(_) => Ok(None),
+    }
+}
+
+/// Stamp a solution the engine produced the way the daemon publishes it: `seq` = solution
+/// count (from 1), `imu_send_mono_ns` = send time of the IMU sample that produced it.
+/// (`header.send_mono_ns` is the wall clock of publication and is not reproducible offline.)
+pub fn stamp_solution(sol: &mut NavSolution, imu: &ImuSample, solutions: u64) {
+    sol.imu_send_mono_ns = imu.header.send_mono_ns;
+    sol.header.seq = solutions;
+}
+
 /// Errors of the daemon.
 #[derive(Debug, thiserror::Error)]
 pub enum DaemonError {
@@ -94,6 +128,9 @@ pub struct DaemonOptions {
     pub system: SystemConfig,
     /// iceoryx2 node name.
     pub node_name: String,
+    /// MCAP metadata written first in the recording (name, key/value map): the configuration
+    /// under [`crate::recorder::CONFIG_METADATA_NAME`], so that replay needs no outside file.
+    pub metadata: Vec<(String, BTreeMap<String, String>)>,
 }
 
 /// Totals of a finished run.
@@ -124,17 +161,35 @@ struct State<'a, E: NavEngine> {
     published: u64,
     filter_time_ns: i64,
     errors_logged: u64,
+    alive_events: u64,
     stop: &'a AtomicBool,
 }
 
 impl<E: NavEngine> State<'_, E> {
+    /// Push an alive/dead transition into the engine and record it (an engine input).
+    fn set_alive(&mut self, sensor: SensorId, alive: bool) {
+        let i = sensor as usize;
+        self.alive[i] = alive;
+        self.alive_events += 1;
+        let mut ev = SensorAliveEvent {
+            sensor: i as u32,
+            alive,
+            ..Default::default()
+        };
+        ev.header.time_ns = self.filter_time_ns;
+        ev.header.seq = self.alive_events;
+        ev.header.send_mono_ns = msgs::monotonic_ns();
+        let rec = Record::SensorAlive(ev);
+        let _ = feed(&mut self.engine, &rec);
+        self.recorder.record(rec, ev.header.send_mono_ns);
+    }
+
     fn mark_received(&mut self, sensor: SensorId) {
         let i = sensor as usize;
         self.got[i] = true;
         self.seen[i] = true;
         if !self.alive[i] {
-            self.alive[i] = true;
-            self.engine.set_sensor_alive(i, true);
+            self.set_alive(sensor, true);
             tracing::info!("{} alive", sensor.name());
         }
     }
@@ -146,20 +201,16 @@ impl<E: NavEngine> State<'_, E> {
         }
     }
 
-    fn drain_aiding<T: Message>(
-        &mut self,
-        sub: &Sub<T>,
-        sensor: SensorId,
-        wrap: fn(T) -> Record,
-        push: fn(&mut E, &T) -> Result<(), FusionError>,
-    ) {
+    fn drain_aiding<T: Message>(&mut self, sub: &Sub<T>, sensor: SensorId, wrap: fn(T) -> Record) {
         loop {
             match sub.receive() {
                 Ok(Some(s)) => {
                     let now = msgs::monotonic_ns();
                     self.mark_received(sensor);
-                    self.recorder.record(wrap(s), now);
-                    if let Err(e) = push(&mut self.engine, &s) {
+                    let rec = wrap(s);
+                    let r = feed(&mut self.engine, &rec);
+                    self.recorder.record(rec, now);
+                    if let Err(e) = r {
                         self.log_push_error(e);
                     }
                 }
@@ -179,13 +230,14 @@ impl<E: NavEngine> State<'_, E> {
                     let now = msgs::monotonic_ns();
                     self.imu_received += 1;
                     self.mark_received(SensorId::Imu);
-                    self.recorder.record(Record::Imu(s), now);
-                    match self.engine.push_imu(&s) {
+                    let rec = Record::Imu(s);
+                    let r = feed(&mut self.engine, &rec);
+                    self.recorder.record(rec, now);
+                    match r {
                         Ok(Some(mut sol)) => {
                             self.filter_time_ns = sol.header.time_ns;
                             self.solutions += 1;
-                            sol.imu_send_mono_ns = s.header.send_mono_ns;
-                            sol.header.seq = self.solutions;
+                            stamp_solution(&mut sol, &s, self.solutions);
                             sol.header.send_mono_ns = msgs::monotonic_ns();
                             if self.solutions.is_multiple_of(self.decimation) {
                                 match self.nav_pub.send_raw(sol) {
@@ -234,8 +286,7 @@ impl<E: NavEngine> State<'_, E> {
             self.misses[i] = self.misses[i].saturating_add(1);
         }
         if self.alive[i] {
-            self.alive[i] = false;
-            self.engine.set_sensor_alive(i, false);
+            self.set_alive(sensor, false);
             tracing::warn!("{} silent beyond its deadline", sensor.name());
         }
     }
@@ -246,6 +297,7 @@ impl<E: NavEngine> State<'_, E> {
             solutions_published: self.published,
             records_written: self.recorder.written(),
             records_dropped: self.recorder.dropped(),
+            recorder_errors: self.recorder.errors(),
             sensors: self.engine.health(),
             ..Default::default()
         };
@@ -296,14 +348,17 @@ pub fn run<E: NavEngine>(
     let nav_pub = bus.publisher::<NavSolution>()?;
     let status_pub = bus.publisher::<Status>()?;
     let rc = &opts.system.recorder;
-    let recorder = Recorder::start(
+    // An unwritable or full output disk must not stop navigation: the recorder degrades to
+    // counting drops (Status.records_dropped / recorder_errors) and the error is logged.
+    let recorder = Recorder::start_or_degrade(
         &opts.out,
         &RecorderOptions {
             queue_capacity: rc.queue_capacity,
             chunk_size_bytes: rc.chunk_size_bytes,
             flush_interval: Duration::from_secs_f64(rc.flush_interval_s),
+            metadata: opts.metadata.clone(),
         },
-    )?;
+    );
     let mut st = State {
         engine,
         recorder,
@@ -319,6 +374,7 @@ pub fn run<E: NavEngine>(
         published: 0,
         filter_time_ns: 0,
         errors_logged: 0,
+        alive_events: 0,
         stop,
     };
 
@@ -379,20 +435,10 @@ pub fn run<E: NavEngine>(
             let _ = l.try_wait(|_| {});
         }
         // Aiding first: the navigator buffers it until the inertial solution reaches its time.
-        st.drain_aiding(
-            &star,
-            SensorId::StarTracker,
-            Record::StarTracker,
-            E::push_star_tracker,
-        );
-        st.drain_aiding(
-            &gnss,
-            SensorId::Gnss,
-            |s| Record::Gnss(Box::new(s)),
-            E::push_gnss,
-        );
-        st.drain_aiding(&odo, SensorId::Odometer, Record::Odometer, E::push_odometer);
-        st.drain_aiding(&baro, SensorId::Baro, Record::Baro, E::push_baro);
+        st.drain_aiding(&star, SensorId::StarTracker, Record::StarTracker);
+        st.drain_aiding(&gnss, SensorId::Gnss, |s| Record::Gnss(Box::new(s)));
+        st.drain_aiding(&odo, SensorId::Odometer, Record::Odometer);
+        st.drain_aiding(&baro, SensorId::Baro, Record::Baro);
         st.drain_imu(&imu);
         st.drain_truth(&truth);
     };
@@ -505,6 +551,7 @@ mod tests {
             speed: 1.0,
             system,
             node_name: "test-fusion".into(),
+            metadata: Vec::new(),
         };
         let fake = Fake::default();
         let engine = fake.clone();

@@ -21,4 +21,5 @@ pub mod recorder;
 pub mod scenario;
 pub mod signals;
 pub mod stats;
+pub mod recording;
 pub mod bench;

@@ -59,6 +59,39 @@ pub enum RecorderError {
     Thread(String),
 }
 
+/// MCAP topic of the sensor alive/dead transitions the daemon decides from the WaitSet deadlines
+/// (an input of the engine that does not come from a sensor, recorded for bit-exact replay).
+pub const SENSOR_ALIVE_TOPIC: &str = "fusion/sensor_alive";
+
+/// Name of the MCAP metadata record holding the configuration the fusion ran with.
+pub const CONFIG_METADATA_NAME: &str = "sextant/config";
+
+/// Key (in [`CONFIG_METADATA_NAME`]) of the filter configuration, TOML as serialized from the
+/// `NavigatorConfig` the engine was built with (authoritative for replay).
+pub const CONFIG_KEY_FILTER_TOML: &str = "filter_toml";
+
+/// A sensor alive/dead transition decided by the daemon and pushed into the engine with
+/// `set_sensor_alive` (topic [`SENSOR_ALIVE_TOPIC`]).
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    Default,
+    PartialEq,
+    serde::Serialize,
+    serde::Deserialize,
+    schemars::JsonSchema,
+)]
+pub struct SensorAliveEvent {
+    /// `time_ns` = filter time (time of validity of the last IMU sample pushed, GPS ns; 0 before
+    /// the first), `seq` = event counter, `send_mono_ns` = CLOCK_MONOTONIC of the decision.
+    pub header: msgs::Header,
+    /// Sensor index (`msgs::SensorId`).
+    pub sensor: u32,
+    /// True: the sensor delivers again; false: silent beyond its deadline.
+    pub alive: bool,
+}
+
 /// One record: a message of one channel.
 #[derive(Debug, Clone)]
 pub enum Record {
@@ -78,12 +111,14 @@ pub enum Record {
     Nav(NavSolution),
     /// Status (boxed: it is large).
     Status(Box<Status>),
+    /// Sensor alive/dead transition pushed into the engine.
+    SensorAlive(SensorAliveEvent),
 }
 
 impl Record {
-    /// The channel of the record.
-    pub fn channel(&self) -> Channel {
-        match self {
+    /// The channel of the record (`None` for the daemon's own events).
+    pub fn channel(&self) -> Option<Channel> {
+        Some(match self {
             Record::Imu(_) => Channel::Imu,
             Record::StarTracker(_) => Channel::StarTracker,
             Record::Gnss(_) => Channel::Gnss,
@@ -92,10 +127,20 @@ impl Record {
             Record::Truth(_) => Channel::Truth,
             Record::Nav(_) => Channel::Nav,
             Record::Status(_) => Channel::Status,
+            Record::SensorAlive(_) => return None,
+        })
+    }
+
+    /// The MCAP topic of the record.
+    pub fn topic(&self) -> &'static str {
+        match self.channel() {
+            Some(c) => c.name(),
+            None => SENSOR_ALIVE_TOPIC,
         }
     }
 
-    fn header(&self) -> &msgs::Header {
+    /// The message header.
+    pub fn header(&self) -> &msgs::Header {
         match self {
             Record::Imu(m) => &m.header,
             Record::StarTracker(m) => &m.header,
@@ -105,6 +150,7 @@ impl Record {
             Record::Truth(m) => &m.header,
             Record::Nav(m) => &m.header,
             Record::Status(m) => &m.header,
+            Record::SensorAlive(m) => &m.header,
         }
     }
 
@@ -119,6 +165,7 @@ impl Record {
             Record::Truth(m) => serde_json::to_writer(buf, m),
             Record::Nav(m) => serde_json::to_writer(buf, m),
             Record::Status(m) => serde_json::to_writer(buf, m.as_ref()),
+            Record::SensorAlive(m) => serde_json::to_writer(buf, m),
         }
     }
 }
@@ -132,6 +179,9 @@ pub struct RecorderOptions {
     pub chunk_size_bytes: u64,
     /// Close the current chunk at least this often.
     pub flush_interval: Duration,
+    /// MCAP metadata records written first in the file (name, key/value map), e.g. the
+    /// configuration under [`CONFIG_METADATA_NAME`].
+    pub metadata: Vec<(String, BTreeMap<String, String>)>,
 }
 
 impl Default for RecorderOptions {
@@ -140,6 +190,7 @@ impl Default for RecorderOptions {
             queue_capacity: 16384,
             chunk_size_bytes: 1 << 20,
             flush_interval: Duration::from_secs(1),
+            metadata: Vec::new(),
         }
     }
 }
@@ -148,6 +199,7 @@ impl Default for RecorderOptions {
 struct Counters {
     written: AtomicU64,
     dropped: AtomicU64,
+    errors: AtomicU64,
 }
 
 /// Totals of a finished recording.
@@ -155,8 +207,10 @@ struct Counters {
 pub struct RecorderStats {
     /// Messages written (including the Foxglove views of the solution).
     pub written: u64,
-    /// Records dropped (queue full or write failed).
+    /// Records dropped (queue full, write failed, or recording impossible).
     pub dropped: u64,
+    /// Write errors (file could not be created, disk full, I/O error); each also drops records.
+    pub errors: u64,
 }
 
 struct Item {
@@ -170,6 +224,7 @@ pub struct Recorder {
     counters: Arc<Counters>,
     thread: Option<JoinHandle<Result<(), RecorderError>>>,
     path: PathBuf,
+    failure: Option<String>,
 }
 
 struct Sink {
@@ -179,8 +234,12 @@ struct Sink {
     location_fix: u16,
     pose: u16,
     ned_origin: Option<foxglove::NedOrigin>,
+    sensor_alive: u16,
     buf: Vec<u8>,
     dirty: bool,
+    /// Messages handed to the writer since the last successful flush: lost if the next flush
+    /// fails (they sit in the in-memory chunk).
+    unflushed: u64,
 }
 
 impl Sink {
@@ -201,6 +260,16 @@ impl Sink {
             .chunk_size(Some(opts.chunk_size_bytes))
             .create(BufWriter::new(file))
             .map_err(mcap_err)?;
+        // Metadata first (top level, before any chunk), so that a reader has the configuration
+        // before the first input.
+        for (name, metadata) in &opts.metadata {
+            writer
+                .write_metadata(&mcap::records::Metadata {
+                    name: name.clone(),
+                    metadata: metadata.clone(),
+                })
+                .map_err(mcap_err)?;
+        }
         let no_meta = BTreeMap::new();
         let mut channels = BTreeMap::new();
         for ch in Channel::ALL {
@@ -233,6 +302,21 @@ impl Sink {
         let pose = writer
             .add_channel(sid, foxglove::POSE_TOPIC, "json", &no_meta)
             .map_err(mcap_err)?;
+        let alive_schema = serde_json::to_string(&schemars::schema_for!(SensorAliveEvent))
+            .map_err(|e| RecorderError::Mcap {
+                path: path.to_path_buf(),
+                detail: e.to_string(),
+            })?;
+        let sid = writer
+            .add_schema(
+                "sextant::SensorAliveEvent",
+                "jsonschema",
+                alive_schema.as_bytes(),
+            )
+            .map_err(mcap_err)?;
+        let sensor_alive = writer
+            .add_channel(sid, SENSOR_ALIVE_TOPIC, "json", &no_meta)
+            .map_err(mcap_err)?;
         // Make the header, schemas and channels durable at once.
         writer.flush().map_err(mcap_err)?;
         Ok(Self {
@@ -242,8 +326,10 @@ impl Sink {
             location_fix,
             pose,
             ned_origin: None,
+            sensor_alive,
             buf: Vec::with_capacity(16 * 1024),
             dirty: false,
+            unflushed: 0,
         })
     }
 
@@ -274,16 +360,19 @@ impl Sink {
                 detail: e.to_string(),
             })?;
         self.dirty = true;
+        self.unflushed += 1;
         Ok(())
     }
 
     /// Write one record; returns the number of messages written.
     fn write(&mut self, item: &Item) -> Result<u64, RecorderError> {
-        let ch = item.record.channel();
-        let cid = *self
-            .channels
-            .get(ch.name())
-            .ok_or_else(|| self.err(format!("no channel {}", ch.name())))?;
+        let cid = match item.record.channel() {
+            Some(ch) => *self
+                .channels
+                .get(ch.name())
+                .ok_or_else(|| self.err(format!("no channel {}", ch.name())))?,
+            None => self.sensor_alive,
+        };
         let h = *item.record.header();
         let mut buf = std::mem::take(&mut self.buf);
         let r = item.record.to_json(&mut buf);
@@ -312,6 +401,7 @@ impl Sink {
         if self.dirty {
             self.dirty = false;
             self.writer.flush().map_err(|e| self.err(e))?;
+            self.unflushed = 0;
         }
         Ok(())
     }
@@ -330,26 +420,37 @@ impl Sink {
     }
 }
 
+/// Count a write failure: the failing record and every message still in the unflushed chunk
+/// are lost. After the first failure the sink is abandoned (the MCAP writer's state is undefined
+/// after an I/O error); everything that follows is counted as dropped.
+fn count_failure(counters: &Counters, lost: u64, e: &RecorderError) {
+    counters.errors.fetch_add(1, Ordering::Relaxed);
+    counters.dropped.fetch_add(lost, Ordering::Relaxed);
+    tracing::error!("recorder: {e}; recording stopped, further records are counted as dropped");
+}
+
 fn run(
-    mut sink: Sink,
+    sink: Sink,
     rx: Receiver<Item>,
     counters: Arc<Counters>,
     flush_interval: Duration,
 ) -> Result<(), RecorderError> {
     let mut last_flush = Instant::now();
-    let mut warned = false;
+    let mut sink = Some(sink);
     loop {
         match rx.recv_timeout(flush_interval) {
-            Ok(item) => match sink.write(&item) {
-                Ok(n) => {
-                    counters.written.fetch_add(n, Ordering::Relaxed);
-                }
-                Err(e) => {
-                    counters.dropped.fetch_add(1, Ordering::Relaxed);
-                    if !warned {
-                        tracing::error!("recorder: {e} (further failures only counted)");
-                        warned = true;
+            Ok(item) => match sink.as_mut() {
+                Some(sk) => match sk.write(&item) {
+                    Ok(n) => {
+                        counters.written.fetch_add(n, Ordering::Relaxed);
                     }
+                    Err(e) => {
+                        count_failure(&counters, 1 + sk.unflushed, &e);
+                        sink = None;
+                    }
+                },
+                None => {
+                    counters.dropped.fetch_add(1, Ordering::Relaxed);
                 }
             },
             Err(RecvTimeoutError::Timeout) => {}
@@ -357,18 +458,53 @@ fn run(
         }
         if last_flush.elapsed() >= flush_interval {
             last_flush = Instant::now();
-            if let Err(e) = sink.flush() {
-                tracing::error!("recorder: flush failed: {e}");
+            if let Some(sk) = sink.as_mut()
+                && let Err(e) = sk.flush()
+            {
+                count_failure(&counters, sk.unflushed, &e);
+                sink = None;
             }
         }
     }
-    sink.finish()
+    match sink {
+        Some(sk) => {
+            let unflushed = sk.unflushed;
+            sk.finish()
+                .inspect_err(|e| count_failure(&counters, unflushed, e))
+        }
+        None => Ok(()),
+    }
 }
 
 impl Recorder {
     /// Create the MCAP file at `path` (header, schemas, channels) and start the writer thread.
     pub fn start(path: &Path, opts: &RecorderOptions) -> Result<Self, RecorderError> {
         let sink = Sink::create(path, opts)?;
+        Self::spawn(sink, path, opts)
+    }
+
+    /// Like [`Recorder::start`], but when the recording cannot be created (unwritable path, full
+    /// disk) log the error and return a recorder that counts every record as dropped, so that
+    /// the fusion keeps navigating without a recording. [`Recorder::failure`] tells why.
+    pub fn start_or_degrade(path: &Path, opts: &RecorderOptions) -> Self {
+        match Sink::create(path, opts).and_then(|sink| Self::spawn(sink, path, opts)) {
+            Ok(r) => r,
+            Err(e) => {
+                tracing::error!("{e}; navigating without a recording (records counted as dropped)");
+                let counters = Arc::new(Counters::default());
+                counters.errors.fetch_add(1, Ordering::Relaxed);
+                Self {
+                    tx: None,
+                    counters,
+                    thread: None,
+                    path: path.to_path_buf(),
+                    failure: Some(e.to_string()),
+                }
+            }
+        }
+    }
+
+    fn spawn(sink: Sink, path: &Path, opts: &RecorderOptions) -> Result<Self, RecorderError> {
         let (tx, rx) = sync_channel(opts.queue_capacity);
         let counters = Arc::new(Counters::default());
         let c = counters.clone();
@@ -382,6 +518,7 @@ impl Recorder {
             counters,
             thread: Some(thread),
             path: path.to_path_buf(),
+            failure: None,
         })
     }
 
@@ -413,6 +550,16 @@ impl Recorder {
         self.counters.dropped.load(Ordering::Relaxed)
     }
 
+    /// Write errors so far (creation failure, full disk, I/O error).
+    pub fn errors(&self) -> u64 {
+        self.counters.errors.load(Ordering::Relaxed)
+    }
+
+    /// Why the recording could not be created, when it could not.
+    pub fn failure(&self) -> Option<&str> {
+        self.failure.as_deref()
+    }
+
     /// The recording's path.
     pub fn path(&self) -> &Path {
         &self.path
@@ -432,6 +579,7 @@ impl Recorder {
         Ok(RecorderStats {
             written: self.written(),
             dropped: self.dropped(),
+            errors: self.errors(),
         })
     }
 }
@@ -514,10 +662,7 @@ mod tests {
             .filter(|m| Channel::from_name(&m.channel.topic).is_some())
             .map(|m| m.channel.topic.clone())
             .collect();
-        let expected: Vec<_> = records
-            .iter()
-            .map(|r| r.channel().name().to_string())
-            .collect();
+        let expected: Vec<_> = records.iter().map(|r| r.topic().to_string()).collect();
         assert_eq!(order, expected);
         // Messages validate against their schemas; log_time is GPS ns, publish_time receive.
         for m in &msgs {

@@ -4,6 +4,7 @@
 use anyhow::Context;
 use clap::Parser;
 use sextant_daemons::{config, daemon, signals};
+use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 /// Sextant fusion daemon: sensors in, navigation solution and status out, everything recorded.
@@ -50,12 +51,14 @@ fn main() -> anyhow::Result<()> {
     }
     let navigator = fusion::navigator::Navigator::new(cfg.navigator.clone())
         .with_context(|| format!("filter configuration {}", cfg.filter_path.display()))?;
+    let metadata = recording_metadata(&cfg, &prefix, args.speed)?;
     let opts = daemon::DaemonOptions {
         prefix,
         out: args.out,
         speed: args.speed,
         system: cfg.system,
         node_name: "sextant-fusion".into(),
+        metadata,
     };
     let report = daemon::run(navigator, &opts, stop)?;
     tracing::info!(
@@ -66,5 +69,47 @@ fn main() -> anyhow::Result<()> {
         report.recorder.written,
         report.recorder.dropped
     );
+    if report.recorder.errors > 0 {
+        tracing::error!(
+            "the recording {} is incomplete: {} write errors, {} records dropped",
+            opts.out.display(),
+            report.recorder.errors,
+            report.recorder.dropped
+        );
+    }
     Ok(())
+}
+
+/// The configuration embedded in the recording (MCAP metadata `sextant/config`): the filter
+/// configuration exactly as the engine got it (serialized `NavigatorConfig`), the files it came
+/// from, prefix and speed. Offline replay rebuilds the engine from `filter_toml` alone.
+fn recording_metadata(
+    cfg: &config::LoadedConfig,
+    prefix: &str,
+    speed: f64,
+) -> anyhow::Result<Vec<(String, BTreeMap<String, String>)>> {
+    use sextant_daemons::recorder::{CONFIG_KEY_FILTER_TOML, CONFIG_METADATA_NAME};
+    let mut m = BTreeMap::new();
+    m.insert(
+        CONFIG_KEY_FILTER_TOML.to_string(),
+        toml::to_string(&cfg.navigator).context("serializing the filter configuration")?,
+    );
+    m.insert(
+        "filter_path".to_string(),
+        cfg.filter_path.display().to_string(),
+    );
+    if let Ok(text) = std::fs::read_to_string(&cfg.filter_path) {
+        m.insert("filter_file_text".to_string(), text);
+    }
+    m.insert("system_path".to_string(), cfg.path.display().to_string());
+    if let Ok(text) = std::fs::read_to_string(&cfg.path) {
+        m.insert("system_file_text".to_string(), text);
+    }
+    m.insert("prefix".to_string(), prefix.to_string());
+    m.insert("speed".to_string(), speed.to_string());
+    m.insert(
+        "sextant_version".to_string(),
+        env!("CARGO_PKG_VERSION").to_string(),
+    );
+    Ok(vec![(CONFIG_METADATA_NAME.to_string(), m)])
 }

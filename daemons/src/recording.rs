@@ -1,0 +1,867 @@
+//! The one reader of Sextant recordings: [`Recording::open`] walks an MCAP file record by record
+//! (no summary or index needed, so a file cut short by a crash reads up to its last complete
+//! chunk) and yields typed [`Entry`]s — the recorder's [`Record`] enum with log time, publish
+//! time, sequence and topic — in file order, which is the order the fusion daemon pushed its
+//! inputs into the engine (see [`crate::recorder`] for the layout).
+//!
+//! Corruption and truncation are typed errors naming the byte offset of the record that could
+//! not be read and what was wrong ([`RecordingError`]). Every record before it has been yielded
+//! already: the iterator yields `Ok` entries, then at most one `Err`, then ends. A chunk is
+//! released only after it decompressed completely and its CRC matched, so a flipped byte never
+//! produces a plausible but wrong record.
+//!
+//! The configuration the fusion ran with is the MCAP metadata record
+//! [`crate::recorder::CONFIG_METADATA_NAME`], read by `open` (it precedes every chunk).
+
+use crate::recorder::{Record, SENSOR_ALIVE_TOPIC, SensorAliveEvent};
+use msgs::{
+    BaroSample, Channel, GnssSample, ImuSample, NavSolution, OdometerSample, StarTrackerSample,
+    Status, TruthSample,
+};
+use std::collections::{BTreeMap, HashMap, VecDeque};
+use std::fs::File;
+use std::io::{BufReader, Read, Seek, SeekFrom};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+/// The 8 magic bytes at the start and end of an MCAP file.
+pub const MCAP_MAGIC: &[u8; 8] = b"\x89MCAP0\r\n";
+
+/// Largest record accepted, bytes: far above any chunk the recorder writes (1 MiB uncompressed
+/// by default), small enough that a corrupted length never makes us allocate the address space.
+const MAX_RECORD_LEN: u64 = 1 << 30;
+
+/// Errors of the recording reader. `offset` is the byte offset in the file of the record that
+/// could not be read (for a record inside a chunk: the offset of the chunk).
+#[derive(Debug, thiserror::Error)]
+pub enum RecordingError {
+    /// The file could not be opened or read.
+    #[error("cannot read recording {path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// The file does not start with the MCAP magic.
+    #[error("{path} is not an MCAP file: {detail}")]
+    NotMcap {
+        /// The file.
+        path: PathBuf,
+        /// What was found.
+        detail: String,
+    },
+    /// The file ends in the middle of a record or before the footer (crash, copy cut short).
+    #[error("{path} is truncated at byte offset {offset}: {detail}")]
+    Truncated {
+        /// The file.
+        path: PathBuf,
+        /// Offset of the incomplete record.
+        offset: u64,
+        /// What was expected.
+        detail: String,
+    },
+    /// A record is malformed (bad length, opcode, CRC, compression, JSON, unknown channel).
+    #[error("{path} is corrupt at byte offset {offset}: {detail}")]
+    Corrupt {
+        /// The file.
+        path: PathBuf,
+        /// Offset of the malformed record (or of the chunk containing it).
+        offset: u64,
+        /// What was wrong.
+        detail: String,
+    },
+}
+
+impl RecordingError {
+    /// The byte offset named by the error, if any.
+    pub fn offset(&self) -> Option<u64> {
+        match self {
+            Self::Truncated { offset, .. } | Self::Corrupt { offset, .. } => Some(*offset),
+            Self::Io { .. } | Self::NotMcap { .. } => None,
+        }
+    }
+}
+
+/// One message of a recording.
+#[derive(Debug, Clone)]
+pub struct Entry {
+    /// Byte offset of the message record, or of the chunk containing it.
+    pub offset: u64,
+    /// MCAP log time = the message's time of validity, GPS ns.
+    pub log_time_ns: u64,
+    /// MCAP publish time = CLOCK_MONOTONIC when the daemon received or produced it, ns.
+    pub publish_time_ns: u64,
+    /// MCAP sequence (low 32 bits of the header's sequence number).
+    pub sequence: u32,
+    /// The topic.
+    pub topic: Arc<str>,
+    /// The decoded message; `None` for topics that are views of others (Foxglove schemas) or
+    /// unknown to this version.
+    pub record: Option<Record>,
+}
+
+#[derive(Debug, Clone)]
+struct ChannelInfo {
+    topic: Arc<str>,
+    kind: Kind,
+}
+
+#[derive(Debug, Clone, Copy)]
+enum Kind {
+    Channel(Channel),
+    SensorAlive,
+    Other,
+}
+
+/// Everything [`Recording::read_to_end`] could read.
+#[derive(Debug, Default)]
+pub struct ReadOutcome {
+    /// The entries read, in file order.
+    pub entries: Vec<Entry>,
+    /// The error that stopped reading, if the file is truncated or corrupt.
+    pub error: Option<RecordingError>,
+}
+
+/// A recording opened for reading; iterate it for its entries.
+pub struct Recording {
+    path: PathBuf,
+    reader: BufReader<File>,
+    file_len: u64,
+    offset: u64,
+    metadata: BTreeMap<String, BTreeMap<String, String>>,
+    channels: HashMap<u16, ChannelInfo>,
+    schemas: HashMap<u16, String>,
+    pending: VecDeque<Entry>,
+    done: bool,
+    /// An error met while reading the leading metadata, reported by the iterator.
+    deferred: Option<RecordingError>,
+    /// Footer seen and the end magic verified.
+    complete: bool,
+}
+
+impl std::fmt::Debug for Recording {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Recording")
+            .field("path", &self.path)
+            .field("offset", &self.offset)
+            .finish_non_exhaustive()
+    }
+}
+
+enum Step {
+    /// A record was consumed (maybe queuing entries).
+    Continue,
+    /// The footer and end magic were read: the file is complete.
+    End,
+}
+
+impl Recording {
+    /// Open `path`, check the magic and read the metadata records that precede the data.
+    pub fn open(path: &Path) -> Result<Self, RecordingError> {
+        let io = |source| RecordingError::Io {
+            path: path.to_path_buf(),
+            source,
+        };
+        let file = File::open(path).map_err(io)?;
+        let file_len = file.metadata().map_err(io)?.len();
+        let mut reader = BufReader::with_capacity(1 << 16, file);
+        let mut magic = [0u8; 8];
+        let n = read_up_to(&mut reader, &mut magic).map_err(io)?;
+        if n < 8 || &magic != MCAP_MAGIC {
+            return Err(RecordingError::NotMcap {
+                path: path.to_path_buf(),
+                detail: format!(
+                    "the first {n} bytes are {:02x?}, not the MCAP magic",
+                    &magic[..n]
+                ),
+            });
+        }
+        let mut rec = Self {
+            path: path.to_path_buf(),
+            reader,
+            file_len,
+            offset: 8,
+            metadata: BTreeMap::new(),
+            channels: HashMap::new(),
+            schemas: HashMap::new(),
+            pending: VecDeque::new(),
+            done: false,
+            deferred: None,
+            complete: false,
+        };
+        // Header and metadata precede every chunk: read them now, stop at the first other
+        // record. An error here is reported by the iterator, like any other.
+        loop {
+            match rec.peek_header() {
+                Ok(Some((opcode, _))) if opcode == op::HEADER || opcode == op::METADATA => {
+                    if let Err(e) = rec.step() {
+                        rec.deferred = Some(e);
+                        break;
+                    }
+                }
+                Ok(_) => break,
+                Err(e) => {
+                    rec.deferred = Some(e);
+                    break;
+                }
+            }
+        }
+        Ok(rec)
+    }
+
+    /// The file.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Metadata records read so far (all of them once `open` returned, for Sextant files).
+    pub fn metadata(&self) -> &BTreeMap<String, BTreeMap<String, String>> {
+        &self.metadata
+    }
+
+    /// True once the footer and the closing magic have been read (a finished recording).
+    pub fn is_complete(&self) -> bool {
+        self.complete
+    }
+
+    /// Read every remaining entry; a truncated or corrupt file gives what was readable and the
+    /// error.
+    pub fn read_to_end(mut self) -> ReadOutcome {
+        let mut out = ReadOutcome::default();
+        for e in &mut self {
+            match e {
+                Ok(e) => out.entries.push(e),
+                Err(e) => out.error = Some(e),
+            }
+        }
+        out
+    }
+
+    fn truncated(&self, offset: u64, detail: String) -> RecordingError {
+        RecordingError::Truncated {
+            path: self.path.clone(),
+            offset,
+            detail,
+        }
+    }
+
+    fn corrupt(&self, offset: u64, detail: impl Into<String>) -> RecordingError {
+        RecordingError::Corrupt {
+            path: self.path.clone(),
+            offset,
+            detail: detail.into(),
+        }
+    }
+
+    /// Opcode and length of the next record without consuming it; `None` at the end of file.
+    fn peek_header(&mut self) -> Result<Option<(u8, u64)>, RecordingError> {
+        let at = self.offset;
+        let Some((op, len)) = self.read_record_header()? else {
+            return Ok(None);
+        };
+        self.reader
+            .seek(SeekFrom::Start(at))
+            .map_err(|source| RecordingError::Io {
+                path: self.path.clone(),
+                source,
+            })?;
+        self.offset = at;
+        Ok(Some((op, len)))
+    }
+
+    fn read_record_header(&mut self) -> Result<Option<(u8, u64)>, RecordingError> {
+        let at = self.offset;
+        if at == self.file_len {
+            return Ok(None);
+        }
+        let mut h = [0u8; 9];
+        let n = read_up_to(&mut self.reader, &mut h).map_err(|source| RecordingError::Io {
+            path: self.path.clone(),
+            source,
+        })?;
+        if n < 9 {
+            return Err(self.truncated(
+                at,
+                format!(
+                    "{n} bytes left where a 9-byte record header (opcode, length) was expected"
+                ),
+            ));
+        }
+        self.offset += 9;
+        let len = u64::from_le_bytes(h[1..9].try_into().unwrap_or([0; 8]));
+        Ok(Some((h[0], len)))
+    }
+
+    /// Consume one top-level record.
+    fn step(&mut self) -> Result<Step, RecordingError> {
+        let at = self.offset;
+        let Some((opcode, len)) = self.read_record_header()? else {
+            return Err(self.truncated(
+                at,
+                "end of file without a footer and closing magic (recording not finished)".into(),
+            ));
+        };
+        let known = (op::HEADER..=op::DATA_END).contains(&opcode);
+        let left = self.file_len - self.offset;
+        if len > left {
+            // A length beyond the file is a cut-short file when opcode and length are plausible,
+            // otherwise a corrupted header.
+            if known && len <= MAX_RECORD_LEN {
+                return Err(self.truncated(
+                    at,
+                    format!(
+                        "record opcode 0x{opcode:02x} of {len} bytes, only {left} bytes left in the file"
+                    ),
+                ));
+            }
+            return Err(self.corrupt(
+                at,
+                format!("record opcode 0x{opcode:02x} claims {len} bytes, only {left} left"),
+            ));
+        }
+        if !known {
+            return Err(self.corrupt(at, format!("unknown record opcode 0x{opcode:02x}")));
+        }
+        if len > MAX_RECORD_LEN {
+            return Err(self.corrupt(at, format!("record length {len} bytes is implausible")));
+        }
+        let mut body = vec![0u8; len as usize];
+        self.reader
+            .read_exact(&mut body)
+            .map_err(|source| RecordingError::Io {
+                path: self.path.clone(),
+                source,
+            })?;
+        self.offset += len;
+        let what = |e: String| format!("record opcode 0x{opcode:02x} ({len} bytes): {e}");
+        match opcode {
+            op::FOOTER => {
+                let mut c = Cur::new(&body);
+                c.u64()
+                    .and_then(|_| c.u64())
+                    .and_then(|_| c.u32())
+                    .map_err(|e| self.corrupt(at, what(e)))?;
+                let mut magic = [0u8; 8];
+                let n = read_up_to(&mut self.reader, &mut magic).map_err(|source| {
+                    RecordingError::Io {
+                        path: self.path.clone(),
+                        source,
+                    }
+                })?;
+                let end = self.offset;
+                if n < 8 {
+                    return Err(self.truncated(end, "closing magic cut short".into()));
+                }
+                if &magic != MCAP_MAGIC {
+                    return Err(self.corrupt(end, "bad closing magic after the footer"));
+                }
+                self.offset += 8;
+                if self.offset != self.file_len {
+                    return Err(self.corrupt(
+                        self.offset,
+                        format!(
+                            "{} bytes after the closing magic",
+                            self.file_len - self.offset
+                        ),
+                    ));
+                }
+                self.complete = true;
+                return Ok(Step::End);
+            }
+            op::HEADER => {
+                let mut c = Cur::new(&body);
+                c.string()
+                    .and_then(|_| c.string())
+                    .map_err(|e| self.corrupt(at, what(e)))?;
+            }
+            op::METADATA => {
+                let mut c = Cur::new(&body);
+                let name = c.string().map_err(|e| self.corrupt(at, what(e)))?;
+                let map = c.map().map_err(|e| self.corrupt(at, what(e)))?;
+                self.metadata.insert(name, map);
+            }
+            op::CHUNK => {
+                let data = self
+                    .decompress_chunk(&body)
+                    .map_err(|e| self.corrupt(at, what(e)))?;
+                // Decode the whole chunk before releasing any of it (its CRC was checked).
+                let mut entries = Vec::new();
+                let mut p = 0usize;
+                while p < data.len() {
+                    let (iop, ibody, next) = inner_record(&data, p).map_err(|e| {
+                        self.corrupt(at, format!("chunk, uncompressed offset {p}: {e}"))
+                    })?;
+                    if let Some(e) = self.inner(iop, ibody, at).map_err(|e| {
+                        self.corrupt(at, format!("chunk, uncompressed offset {p}: {e}"))
+                    })? {
+                        entries.push(e);
+                    }
+                    p = next;
+                }
+                self.pending.extend(entries);
+            }
+            op::SCHEMA | op::CHANNEL | op::MESSAGE => {
+                if let Some(e) = self
+                    .inner(opcode, &body, at)
+                    .map_err(|e| self.corrupt(at, what(e)))?
+                {
+                    self.pending.push_back(e);
+                }
+            }
+            // Indexes, attachments, statistics, summary offsets, data end: nothing we need.
+            _ => {}
+        }
+        Ok(Step::Continue)
+    }
+
+    /// Decompress and CRC-check a chunk record's body.
+    fn decompress_chunk(&self, body: &[u8]) -> Result<Vec<u8>, String> {
+        let mut c = Cur::new(body);
+        let _start = c.u64()?;
+        let _end = c.u64()?;
+        let uncompressed_size = c.u64()?;
+        let crc = c.u32()?;
+        let compression = c.string()?;
+        let compressed_size = c.u64()?;
+        let data = c.bytes(compressed_size)?;
+        if uncompressed_size > MAX_CHUNK_LEN {
+            return Err(format!(
+                "chunk claims {uncompressed_size} bytes uncompressed (limit {MAX_CHUNK_LEN})"
+            ));
+        }
+        let out = match compression.as_str() {
+            "" => data.to_vec(),
+            "zstd" => zstd::bulk::decompress(data, uncompressed_size as usize)
+                .map_err(|e| format!("zstd: {e}"))?,
+            other => return Err(format!("unsupported chunk compression {other:?}")),
+        };
+        if out.len() as u64 != uncompressed_size {
+            return Err(format!(
+                "chunk decompressed to {} bytes, header says {uncompressed_size}",
+                out.len()
+            ));
+        }
+        if crc != 0 {
+            let calc = crc32fast::hash(&out);
+            if calc != crc {
+                return Err(format!(
+                    "chunk CRC mismatch: stored 0x{crc:08x}, computed 0x{calc:08x}"
+                ));
+            }
+        }
+        Ok(out)
+    }
+
+    /// Handle a schema, channel or message record (top level or inside a chunk at `at`).
+    fn inner(&mut self, opcode: u8, body: &[u8], at: u64) -> Result<Option<Entry>, String> {
+        let mut c = Cur::new(body);
+        match opcode {
+            op::SCHEMA => {
+                let id = c.u16()?;
+                let name = c.string()?;
+                let _encoding = c.string()?;
+                let n = c.u32()?;
+                c.bytes(u64::from(n))?;
+                self.schemas.insert(id, name);
+                Ok(None)
+            }
+            op::CHANNEL => {
+                let id = c.u16()?;
+                let schema_id = c.u16()?;
+                let topic = c.string()?;
+                let _encoding = c.string()?;
+                let _meta = c.map()?;
+                if schema_id != 0 && !self.schemas.contains_key(&schema_id) {
+                    return Err(format!(
+                        "channel {topic} refers to unknown schema {schema_id}"
+                    ));
+                }
+                let kind = if topic == SENSOR_ALIVE_TOPIC {
+                    Kind::SensorAlive
+                } else {
+                    Channel::from_name(&topic).map_or(Kind::Other, Kind::Channel)
+                };
+                self.channels.insert(
+                    id,
+                    ChannelInfo {
+                        topic: topic.into(),
+                        kind,
+                    },
+                );
+                Ok(None)
+            }
+            op::MESSAGE => {
+                let channel_id = c.u16()?;
+                let sequence = c.u32()?;
+                let log_time_ns = c.u64()?;
+                let publish_time_ns = c.u64()?;
+                let data = c.rest();
+                let Some(ch) = self.channels.get(&channel_id) else {
+                    return Err(format!("message on unknown channel id {channel_id}"));
+                };
+                let (topic, kind) = (ch.topic.clone(), ch.kind);
+                let record = decode(kind, data)
+                    .map_err(|e| format!("message on topic {topic}: bad JSON: {e}"))?;
+                Ok(Some(Entry {
+                    offset: at,
+                    log_time_ns,
+                    publish_time_ns,
+                    sequence,
+                    topic,
+                    record,
+                }))
+            }
+            // Anything else inside a chunk is not allowed by the MCAP spec.
+            other => Err(format!("record opcode 0x{other:02x} inside a chunk")),
+        }
+    }
+}
+
+/// MCAP opcodes (spec: https://mcap.dev/spec).
+mod op {
+    pub const HEADER: u8 = 0x01;
+    pub const FOOTER: u8 = 0x02;
+    pub const SCHEMA: u8 = 0x03;
+    pub const CHANNEL: u8 = 0x04;
+    pub const MESSAGE: u8 = 0x05;
+    pub const CHUNK: u8 = 0x06;
+    pub const METADATA: u8 = 0x0C;
+    pub const DATA_END: u8 = 0x0F;
+}
+
+/// Largest uncompressed chunk accepted, bytes (the recorder's default is 1 MiB).
+const MAX_CHUNK_LEN: u64 = 256 << 20;
+
+/// The record at `p` of a chunk's uncompressed data: opcode, body, offset of the next record.
+fn inner_record(data: &[u8], p: usize) -> Result<(u8, &[u8], usize), String> {
+    let left = data.len() - p;
+    if left < 9 {
+        return Err(format!(
+            "{left} bytes left where a record header was expected"
+        ));
+    }
+    let opcode = data[p];
+    let mut c = Cur::new(&data[p + 1..p + 9]);
+    let len = c.u64()?;
+    if len > (left - 9) as u64 {
+        return Err(format!(
+            "record opcode 0x{opcode:02x} claims {len} bytes, {} left in the chunk",
+            left - 9
+        ));
+    }
+    let start = p + 9;
+    let end = start + len as usize;
+    Ok((opcode, &data[start..end], end))
+}
+
+/// Bounds-checked little-endian cursor over a record body (MCAP's primitive types).
+struct Cur<'a> {
+    b: &'a [u8],
+    p: usize,
+}
+
+impl<'a> Cur<'a> {
+    fn new(b: &'a [u8]) -> Self {
+        Self { b, p: 0 }
+    }
+    fn bytes(&mut self, n: u64) -> Result<&'a [u8], String> {
+        let left = self.b.len() - self.p;
+        if n > left as u64 {
+            return Err(format!(
+                "field of {n} bytes at body offset {}, only {left} left",
+                self.p
+            ));
+        }
+        let s = &self.b[self.p..self.p + n as usize];
+        self.p += n as usize;
+        Ok(s)
+    }
+    fn u16(&mut self) -> Result<u16, String> {
+        let b = self.bytes(2)?;
+        Ok(u16::from_le_bytes([b[0], b[1]]))
+    }
+    fn u32(&mut self) -> Result<u32, String> {
+        let b = self.bytes(4)?;
+        Ok(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+    }
+    fn u64(&mut self) -> Result<u64, String> {
+        let b = self.bytes(8)?;
+        let mut a = [0u8; 8];
+        a.copy_from_slice(b);
+        Ok(u64::from_le_bytes(a))
+    }
+    fn string(&mut self) -> Result<String, String> {
+        let n = self.u32()?;
+        let at = self.p;
+        let b = self.bytes(u64::from(n))?;
+        String::from_utf8(b.to_vec())
+            .map_err(|_| format!("string at body offset {at} is not UTF-8"))
+    }
+    fn map(&mut self) -> Result<BTreeMap<String, String>, String> {
+        let n = self.u32()?;
+        let body = self.bytes(u64::from(n))?;
+        let mut c = Cur::new(body);
+        let mut m = BTreeMap::new();
+        while c.p < body.len() {
+            let k = c.string()?;
+            let v = c.string()?;
+            m.insert(k, v);
+        }
+        Ok(m)
+    }
+    fn rest(&mut self) -> &'a [u8] {
+        let s = &self.b[self.p..];
+        self.p = self.b.len();
+        s
+    }
+}
+
+fn decode(kind: Kind, data: &[u8]) -> serde_json::Result<Option<Record>> {
+    let ch = match kind {
+        Kind::Other => return Ok(None),
+        Kind::SensorAlive => {
+            return Ok(Some(Record::SensorAlive(serde_json::from_slice::<
+                SensorAliveEvent,
+            >(data)?)));
+        }
+        Kind::Channel(c) => c,
+    };
+    Ok(Some(match ch {
+        Channel::Imu => Record::Imu(serde_json::from_slice::<ImuSample>(data)?),
+        Channel::StarTracker => {
+            Record::StarTracker(serde_json::from_slice::<StarTrackerSample>(data)?)
+        }
+        Channel::Gnss => Record::Gnss(Box::new(serde_json::from_slice::<GnssSample>(data)?)),
+        Channel::Odometer => Record::Odometer(serde_json::from_slice::<OdometerSample>(data)?),
+        Channel::Baro => Record::Baro(serde_json::from_slice::<BaroSample>(data)?),
+        Channel::Truth => Record::Truth(serde_json::from_slice::<TruthSample>(data)?),
+        Channel::Nav => Record::Nav(serde_json::from_slice::<NavSolution>(data)?),
+        Channel::Status => Record::Status(Box::new(serde_json::from_slice::<Status>(data)?)),
+    }))
+}
+
+impl Iterator for Recording {
+    type Item = Result<Entry, RecordingError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        loop {
+            if let Some(e) = self.pending.pop_front() {
+                return Some(Ok(e));
+            }
+            if let Some(e) = self.deferred.take() {
+                self.done = true;
+                return Some(Err(e));
+            }
+            if self.done {
+                return None;
+            }
+            match self.step() {
+                Ok(Step::Continue) => {}
+                Ok(Step::End) => self.done = true,
+                Err(e) => {
+                    self.done = true;
+                    return Some(Err(e));
+                }
+            }
+        }
+    }
+}
+
+/// Read into `buf` until it is full or the reader is exhausted; the number of bytes read.
+fn read_up_to(r: &mut impl Read, buf: &mut [u8]) -> std::io::Result<usize> {
+    let mut n = 0;
+    while n < buf.len() {
+        match r.read(&mut buf[n..]) {
+            Ok(0) => break,
+            Ok(k) => n += k,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(n)
+}
+
+/// Open `path` and read all of it: the entries readable and the error that stopped reading.
+/// Only a file that cannot be opened or is not MCAP at all is an `Err`.
+pub fn read_all(path: &Path) -> Result<ReadOutcome, RecordingError> {
+    Ok(Recording::open(path)?.read_to_end())
+}
+
+#[cfg(test)]
+#[allow(clippy::field_reassign_with_default)]
+mod tests {
+    use super::*;
+    use crate::recorder::{Recorder, RecorderOptions};
+    use proptest::prelude::*;
+
+    fn tmp(name: &str) -> PathBuf {
+        let d =
+            std::env::temp_dir().join(format!("sextant-recording-{}-{name}", std::process::id()));
+        std::fs::create_dir_all(&d).unwrap();
+        d.join("recording.mcap")
+    }
+
+    /// A small recording with several chunks (64 kB chunk size) and the config metadata.
+    fn make_recording(name: &str) -> (PathBuf, Vec<Record>) {
+        let path = tmp(name);
+        let mut meta = BTreeMap::new();
+        meta.insert("filter_toml".to_string(), "x = 1\n".to_string());
+        let opts = RecorderOptions {
+            chunk_size_bytes: 16 * 1024,
+            metadata: vec![(crate::recorder::CONFIG_METADATA_NAME.into(), meta)],
+            ..Default::default()
+        };
+        let rec = Recorder::start(&path, &opts).unwrap();
+        let mut records = Vec::new();
+        for k in 1..=300i64 {
+            let mut imu = ImuSample::default();
+            imu.header.time_ns = k * 5_000_000;
+            imu.header.seq = k as u64;
+            // Values that need all 17 significant digits to round-trip.
+            imu.delta_angle_rad = [0.1 / k as f64, -1.0 / 3.0, std::f64::consts::PI * k as f64];
+            records.push(Record::Imu(imu));
+            if k % 50 == 0 {
+                records.push(Record::SensorAlive(SensorAliveEvent {
+                    header: imu.header,
+                    sensor: 2,
+                    alive: k % 100 == 0,
+                }));
+            }
+            let mut nav = NavSolution::default();
+            nav.header = imu.header;
+            nav.q_ned_body = [1.0, 0.0, 0.0, 0.0];
+            nav.pos_ecef_m = [6378137.0 + 1e-9 * k as f64, 0.1, 0.2];
+            records.push(Record::Nav(nav));
+        }
+        for r in &records {
+            assert!(rec.record(r.clone(), 7));
+        }
+        let st = rec.finish().unwrap();
+        assert_eq!(st.dropped, 0);
+        (path, records)
+    }
+
+    fn same(a: &Record, b: &Record) -> bool {
+        format!("{a:?}") == format!("{b:?}")
+    }
+
+    #[test]
+    fn reads_back_every_record_bit_exact_with_metadata() {
+        let (path, records) = make_recording("roundtrip");
+        let rec = Recording::open(&path).unwrap();
+        assert_eq!(
+            rec.metadata()[crate::recorder::CONFIG_METADATA_NAME]["filter_toml"],
+            "x = 1\n"
+        );
+        let out = rec.read_to_end();
+        assert!(out.error.is_none(), "{:?}", out.error);
+        let got: Vec<_> = out
+            .entries
+            .iter()
+            .filter_map(|e| e.record.clone())
+            .collect();
+        assert_eq!(got.len(), records.len());
+        for (a, b) in got.iter().zip(&records) {
+            assert!(same(a, b), "{a:?} != {b:?}");
+            if let (Record::Imu(a), Record::Imu(b)) = (a, b) {
+                for i in 0..3 {
+                    assert_eq!(
+                        a.delta_angle_rad[i].to_bits(),
+                        b.delta_angle_rad[i].to_bits()
+                    );
+                }
+            }
+        }
+        // Foxglove views are entries without a record.
+        assert_eq!(out.entries.len(), records.len() + 2 * 300);
+        assert_eq!(out.entries[0].log_time_ns, 5_000_000);
+        assert_eq!(out.entries[0].publish_time_ns, 7);
+    }
+
+    #[test]
+    fn not_mcap_and_missing_file_are_errors_naming_the_file() {
+        let p = tmp("notmcap");
+        std::fs::write(&p, b"hello world, not mcap").unwrap();
+        let e = Recording::open(&p).unwrap_err().to_string();
+        assert!(
+            e.contains(&p.display().to_string()) && e.contains("not an MCAP"),
+            "{e}"
+        );
+        let e = Recording::open(Path::new("/nonexistent/x.mcap"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("/nonexistent/x.mcap"), "{e}");
+    }
+
+    /// Number of records readable from `bytes` written to a file, and the error.
+    fn read_bytes(path: &Path, bytes: &[u8]) -> Result<ReadOutcome, RecordingError> {
+        std::fs::write(path, bytes).unwrap();
+        read_all(path)
+    }
+
+    #[test]
+    fn truncation_at_every_record_boundary_and_inside_keeps_the_prefix() {
+        let (path, records) = make_recording("trunc");
+        let full = std::fs::read(&path).unwrap();
+        let cut = path.with_file_name("cut.mcap");
+        let mut last = 0usize;
+        // Every 97th offset plus the very last bytes: never a panic; an error naming an offset
+        // within the file; the number of records read never decreases as the cut moves on.
+        let mut offsets: Vec<usize> = (8..full.len()).step_by(97).collect();
+        offsets.extend(full.len() - 9..full.len());
+        for len in offsets {
+            let out = read_bytes(&cut, &full[..len]).unwrap();
+            let e = out.error.expect("truncated file must report an error");
+            let off = e.offset().expect("offset");
+            assert!(off <= len as u64, "{e}");
+            assert!(e.to_string().contains("offset"), "{e}");
+            let n = out.entries.iter().filter(|e| e.record.is_some()).count();
+            assert!(n >= last, "cut at {len}: {n} records < {last}");
+            // The prefix read is exactly the first n records written.
+            for (a, b) in out
+                .entries
+                .iter()
+                .filter_map(|e| e.record.as_ref())
+                .zip(&records)
+            {
+                assert!(same(a, b));
+            }
+            last = n;
+        }
+        // Cut just before the summary: the whole data section is there.
+        assert_eq!(last, records.len());
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(200))]
+        /// Flipping any byte never panics; either the flip is harmless (padding, an index) and
+        /// reading completes, or reading stops with an error naming an offset at or before the
+        /// flipped byte's record, and every record returned is one that was written, in order.
+        #[test]
+        fn flipped_bytes_never_panic_and_never_invent_records(pos_frac in 0.0f64..1.0, bits in 1u8..=255) {
+            let (path, records) = FIXTURE.get_or_init(|| make_recording("flip")).clone();
+            let mut bytes = std::fs::read(&path).unwrap();
+            let pos = 8 + ((bytes.len() - 8) as f64 * pos_frac) as usize;
+            let pos = pos.min(bytes.len() - 1);
+            bytes[pos] ^= bits;
+            let p = path.with_file_name(format!("flip-{pos}-{bits}.mcap"));
+            let out = read_bytes(&p, &bytes);
+            let _ = std::fs::remove_file(&p);
+            let out = match out { Ok(o) => o, Err(e) => { prop_assert!(e.to_string().contains("MCAP")); return Ok(()); } };
+            if let Some(e) = &out.error {
+                // The offset names where reading broke down: the flipped record itself, or
+                // (a flipped length field) the misaligned record after it.
+                prop_assert!(e.offset().is_some(), "{}", e);
+                prop_assert!(e.offset().unwrap() <= bytes.len() as u64, "{} (flip at {})", e, pos);
+            }
+            let got: Vec<_> = out.entries.iter().filter_map(|e| e.record.as_ref()).collect();
+            for (a, b) in got.iter().zip(&records) {
+                // Log/publish times live in the (CRC-checked) chunk too, so records are intact.
+                prop_assert!(same(a, b), "flip at {}: {:?} != {:?}", pos, a, b);
+            }
+        }
+    }
+
+    static FIXTURE: std::sync::OnceLock<(PathBuf, Vec<Record>)> = std::sync::OnceLock::new();
+}
