@@ -235,3 +235,295 @@ impl ImuErrorModel {
         )
     }
 }
+
+/// Errors of one single-axis sensor (gyro or accelerometer) of a redundant channel, SI units.
+#[derive(Debug, Clone, Copy)]
+struct AxisErrors {
+    bias0: f64,
+    bias_rw: f64,
+    bias_rw_per_rt_s: f64,
+    temp_coeff: f64,
+    scale: f64,
+    /// True sensitive axis (nominal axis tilted by the misalignment), unit, body frame.
+    true_axis: Vector3<f64>,
+    white_per_rt_s: f64,
+    lsb: f64,
+}
+
+impl AxisErrors {
+    #[allow(clippy::too_many_arguments)]
+    fn draw(
+        rng: &mut ChaCha20Rng,
+        axis: &Vector3<f64>,
+        bias_sigma: f64,
+        bias_rw_per_rt_s: f64,
+        temp_coeff_sigma: f64,
+        scale_sigma: f64,
+        mis_sigma_rad: f64,
+        white_per_rt_s: f64,
+        lsb: f64,
+    ) -> Self {
+        let g = gauss3(rng);
+        let tilt = gauss3(rng) * mis_sigma_rad;
+        // Two misalignment angles about axes perpendicular to the sensitive axis.
+        let tilt_perp = tilt - axis * axis.dot(&tilt);
+        let true_axis = (axis + tilt_perp.cross(axis)).normalize();
+        Self {
+            bias0: bias_sigma * g.x,
+            bias_rw: 0.0,
+            bias_rw_per_rt_s,
+            temp_coeff: temp_coeff_sigma * g.y,
+            scale: scale_sigma * g.z,
+            true_axis,
+            white_per_rt_s,
+            lsb,
+        }
+    }
+}
+
+/// Per-interval outputs of the redundant channels.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ChannelOutputs {
+    /// Number of channels.
+    pub n: usize,
+    /// Gyro delta-angles, rad.
+    pub delta_angle_rad: [f64; msgs::MAX_IMU_CHANNELS],
+    /// Accelerometer delta-velocities, m/s.
+    pub delta_velocity_m_s: [f64; msgs::MAX_IMU_CHANNELS],
+    /// Channel temperatures, °C.
+    pub temperature_c: [f64; msgs::MAX_IMU_CHANNELS],
+    /// Bias applied to each gyro channel over the interval (incl. temperature and failures
+    /// of bias type), rad/s.
+    pub gyro_bias_rad_s: [f64; msgs::MAX_IMU_CHANNELS],
+    /// Bias applied to each accelerometer channel, m/s².
+    pub accel_bias_m_s2: [f64; msgs::MAX_IMU_CHANNELS],
+}
+
+/// Error model of N redundant single-axis gyro + accelerometer channels (paper 004).
+///
+/// Each channel's gyro and accelerometer get the grade's per-axis 1-σ values, drawn
+/// independently: constant bias, bias random walk, temperature coefficient (bias changes by
+/// `coeff · (T − T_ref)`, T the channel temperature), scale factor, axis misalignment (the
+/// true sensitive axis is the nominal one tilted by two angles of σ `misalignment_arcsec`),
+/// white noise (ARW/VRW) and 12-bit (grade `adc_bits`) quantisation of the rate output over
+/// ±`full_scale` (mems grade: ±150 °/s, LSB 0.073 °/s; ±4 g, LSB 1.95 mg). Failures from the
+/// scenario are applied after quantisation (a stuck channel repeats its last healthy output).
+///
+/// Draws come from the stream `"imu_channels"`, so the orthogonal triad's stream `"imu"` and
+/// every default run are unchanged.
+#[derive(Debug, Clone)]
+pub struct ChannelErrorModel {
+    rng: ChaCha20Rng,
+    axes: Vec<[f64; 3]>,
+    gyro: Vec<AxisErrors>,
+    accel: Vec<AxisErrors>,
+    temperature: TemperatureProfile,
+    temperature_offsets_c: Vec<f64>,
+    reference_temperature_c: f64,
+    failures: Vec<crate::scenario::ChannelFailure>,
+    last_healthy: ChannelOutputs,
+    /// When false, outputs are the exact projections of the truth (tests).
+    pub enabled: bool,
+}
+
+impl ChannelErrorModel {
+    /// The channels of the scenario, or None if `[imu.channels]` is absent.
+    pub fn new(scn: &Scenario) -> Option<Self> {
+        let ch = scn.spec.imu.channels.as_ref()?;
+        Some(Self::from_grade(
+            &ch.unit_axes(),
+            &scn.imu,
+            scn.spec.imu.temperature,
+            &ch.temperature_offsets_c,
+            &ch.failures,
+            crate::sensor_rng(scn.spec.scenario.seed, "imu_channels"),
+        ))
+    }
+
+    /// Channels on unit `axes` with the per-axis errors of `grade`, drawn from `rng`.
+    pub fn from_grade(
+        axes: &[[f64; 3]],
+        grade: &ImuGrade,
+        temperature: TemperatureProfile,
+        temperature_offsets_c: &[f64],
+        failures: &[crate::scenario::ChannelFailure],
+        mut rng: ChaCha20Rng,
+    ) -> Self {
+        let g = &grade.gyro;
+        let a = &grade.accel;
+        let gyro_lsb = if g.adc_bits > 0 {
+            2.0 * g.full_scale_deg_s.to_radians() / 2f64.powi(g.adc_bits as i32)
+        } else {
+            0.0
+        };
+        let accel_lsb = if a.adc_bits > 0 {
+            2.0 * a.full_scale_g * G0_M_S2 / 2f64.powi(a.adc_bits as i32)
+        } else {
+            0.0
+        };
+        let ug = 1e-6 * G0_M_S2;
+        let mut gyro = Vec::with_capacity(axes.len());
+        let mut accel = Vec::with_capacity(axes.len());
+        for ax in axes {
+            let e = Vector3::from(*ax);
+            gyro.push(AxisErrors::draw(
+                &mut rng,
+                &e,
+                g.bias_deg_h * DEG_H_TO_RAD_S,
+                g.bias_rw_deg_h_per_rt_h * DEG_H_TO_RAD_S / 60.0,
+                g.temp_coeff_deg_h_per_c * DEG_H_TO_RAD_S,
+                g.scale_factor_ppm * 1e-6,
+                g.misalignment_arcsec * ARCSEC_TO_RAD,
+                g.arw_deg_per_rt_h.to_radians() / 60.0,
+                gyro_lsb,
+            ));
+            accel.push(AxisErrors::draw(
+                &mut rng,
+                &e,
+                a.bias_ug * ug,
+                a.bias_rw_ug_per_rt_h * ug / 60.0,
+                a.temp_coeff_ug_per_c * ug,
+                a.scale_factor_ppm * 1e-6,
+                a.misalignment_arcsec * ARCSEC_TO_RAD,
+                a.vrw_ug_per_rt_hz * ug,
+                accel_lsb,
+            ));
+        }
+        Self {
+            rng,
+            axes: axes.to_vec(),
+            gyro,
+            accel,
+            temperature,
+            temperature_offsets_c: temperature_offsets_c.to_vec(),
+            reference_temperature_c: grade.reference_temperature_c,
+            failures: failures.to_vec(),
+            last_healthy: ChannelOutputs::default(),
+            enabled: true,
+        }
+    }
+
+    /// Nominal unit axes, body frame.
+    pub fn axes(&self) -> &[[f64; 3]] {
+        &self.axes
+    }
+
+    /// 1-σ white noise of one gyro channel's delta-angle over `dt_s` (ARW and quantisation),
+    /// rad, and of one accelerometer channel's delta-velocity, m/s. The quantisation error is
+    /// taken as uniform over one LSB (variance LSB²/12), which holds when the noise dithers.
+    pub fn interval_sigmas(&self, dt_s: f64) -> (f64, f64) {
+        let s = |e: &AxisErrors| {
+            let w = e.white_per_rt_s * dt_s.sqrt();
+            let q = e.lsb * dt_s / 12f64.sqrt();
+            (w * w + q * q).sqrt()
+        };
+        (
+            self.gyro.first().map_or(0.0, s),
+            self.accel.first().map_or(0.0, s),
+        )
+    }
+
+    /// Channel outputs of the interval `(t_end_s − dt, t_end_s]` with true body increments
+    /// `inc`. Draw order per interval: for each channel, gyro white, accel white, gyro bias
+    /// walk, accel bias walk (always drawn, so the stream does not depend on the failures),
+    /// then one draw per active noise-burst failure.
+    pub fn sample(&mut self, t_end_s: f64, inc: &Increments) -> ChannelOutputs {
+        let dt = inc.dt_s;
+        let t_mid = t_end_s - 0.5 * dt;
+        let block_t = temperature_c(&self.temperature, t_mid);
+        let n = self.axes.len();
+        let mut out = ChannelOutputs {
+            n,
+            ..Default::default()
+        };
+        let sq = dt.sqrt();
+        for i in 0..n {
+            let temp = block_t + self.temperature_offsets_c.get(i).copied().unwrap_or(0.0);
+            let dtemp = temp - self.reference_temperature_c;
+            out.temperature_c[i] = temp;
+            let wg: f64 = self.rng.sample(StandardNormal);
+            let wa: f64 = self.rng.sample(StandardNormal);
+            let rg: f64 = self.rng.sample(StandardNormal);
+            let ra: f64 = self.rng.sample(StandardNormal);
+            let quant = |y: f64, lsb: f64| {
+                if lsb > 0.0 {
+                    (y / dt / lsb).round() * lsb * dt
+                } else {
+                    y
+                }
+            };
+            let (g, a) = (&mut self.gyro[i], &mut self.accel[i]);
+            if !self.enabled {
+                let e = Vector3::from(self.axes[i]);
+                out.delta_angle_rad[i] = e.dot(&inc.delta_angle_b_rad);
+                out.delta_velocity_m_s[i] = e.dot(&inc.delta_velocity_b_m_s);
+                continue;
+            }
+            let gb = g.bias0 + g.bias_rw + g.temp_coeff * dtemp;
+            let ab = a.bias0 + a.bias_rw + a.temp_coeff * dtemp;
+            out.gyro_bias_rad_s[i] = gb;
+            out.accel_bias_m_s2[i] = ab;
+            let yg = (1.0 + g.scale) * g.true_axis.dot(&inc.delta_angle_b_rad)
+                + gb * dt
+                + g.white_per_rt_s * sq * wg;
+            let ya = (1.0 + a.scale) * a.true_axis.dot(&inc.delta_velocity_b_m_s)
+                + ab * dt
+                + a.white_per_rt_s * sq * wa;
+            out.delta_angle_rad[i] = quant(yg, g.lsb);
+            out.delta_velocity_m_s[i] = quant(ya, a.lsb);
+            g.bias_rw += g.bias_rw_per_rt_s * sq * rg;
+            a.bias_rw += a.bias_rw_per_rt_s * sq * ra;
+        }
+        let ug = 1e-6 * G0_M_S2;
+        let mut healthy = out;
+        for f in &self.failures {
+            if f.channel >= n || !f.active(t_mid) {
+                continue;
+            }
+            use crate::scenario::{FailedSensor, FailureKind};
+            let unit = match f.sensor {
+                FailedSensor::Gyro => DEG_H_TO_RAD_S,
+                FailedSensor::Accel => ug,
+            };
+            let add = match f.kind {
+                FailureKind::Stuck => None,
+                FailureKind::BiasStep => Some(f.magnitude * unit * dt),
+                FailureKind::DriftRamp => Some(f.magnitude * unit * (t_mid - f.start_s) * dt),
+                FailureKind::NoiseBurst => {
+                    let w: f64 = self.rng.sample(StandardNormal);
+                    Some(f.magnitude * unit * dt * w)
+                }
+            };
+            let (val, last, bias) = match f.sensor {
+                FailedSensor::Gyro => (
+                    &mut out.delta_angle_rad[f.channel],
+                    self.last_healthy.delta_angle_rad[f.channel],
+                    &mut out.gyro_bias_rad_s[f.channel],
+                ),
+                FailedSensor::Accel => (
+                    &mut out.delta_velocity_m_s[f.channel],
+                    self.last_healthy.delta_velocity_m_s[f.channel],
+                    &mut out.accel_bias_m_s2[f.channel],
+                ),
+            };
+            match add {
+                None => {
+                    *val = last;
+                    // Keep repeating the frozen value.
+                    match f.sensor {
+                        FailedSensor::Gyro => healthy.delta_angle_rad[f.channel] = last,
+                        FailedSensor::Accel => healthy.delta_velocity_m_s[f.channel] = last,
+                    }
+                }
+                Some(d) => {
+                    *val += d;
+                    if f.kind != FailureKind::NoiseBurst {
+                        *bias += d / dt;
+                    }
+                }
+            }
+        }
+        self.last_healthy = healthy;
+        out
+    }
+}

@@ -84,6 +84,72 @@ pub enum Trajectory {
     Static(StaticTrajectory),
     /// A ground vehicle driving a list of segments on the ellipsoid at constant height.
     GroundVehicle(GroundVehicleTrajectory),
+    /// A fixed-wing aircraft (UAV, paper 004): take-off roll, climb, cruise with coordinated
+    /// (banked) turns, descent.
+    Aircraft(AircraftTrajectory),
+}
+
+/// `kind = "aircraft"`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AircraftTrajectory {
+    /// Heading at the start, degrees from north, clockwise.
+    pub initial_heading_deg: f64,
+    /// Segments flown in order; after the last one the aircraft keeps its final speed, heading
+    /// and flight-path angle.
+    pub segments: Vec<FlightSegment>,
+}
+
+/// One piece of an aircraft trajectory. Body x is along the velocity (no angle of attack or
+/// sideslip), so pitch is the flight-path angle; turns are coordinated, with the bank
+/// `φ = atan(V ψ̇ / g0)`. Every change follows a raised-cosine profile.
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(tag = "type", rename_all = "snake_case", deny_unknown_fields)]
+pub enum FlightSegment {
+    /// Stand still on the ground (speed must be zero) for `duration_s`.
+    Hold {
+        /// Duration, s.
+        duration_s: f64,
+    },
+    /// Change the airspeed (= ground speed, no wind) to `to_m_s`.
+    Speed {
+        /// Target speed, m/s.
+        to_m_s: f64,
+        /// Duration, s.
+        duration_s: f64,
+    },
+    /// Coordinated turn by `angle_deg` (positive = right).
+    Turn {
+        /// Heading change, degrees.
+        angle_deg: f64,
+        /// Duration, s.
+        duration_s: f64,
+    },
+    /// Change the flight-path angle (= pitch) to `to_deg` (positive = climb).
+    Pitch {
+        /// Target pitch, degrees.
+        to_deg: f64,
+        /// Duration, s.
+        duration_s: f64,
+    },
+    /// Keep speed, heading and flight-path angle for `duration_s`.
+    Cruise {
+        /// Duration, s.
+        duration_s: f64,
+    },
+}
+
+impl FlightSegment {
+    /// Duration of the segment, s.
+    pub fn duration_s(&self) -> f64 {
+        match *self {
+            FlightSegment::Hold { duration_s }
+            | FlightSegment::Speed { duration_s, .. }
+            | FlightSegment::Turn { duration_s, .. }
+            | FlightSegment::Pitch { duration_s, .. }
+            | FlightSegment::Cruise { duration_s } => duration_s,
+        }
+    }
 }
 
 /// `kind = "static"`.
@@ -221,6 +287,123 @@ pub struct ImuSection {
     /// Partial `[imu]` grade table merged over the grade file.
     #[serde(default)]
     pub overrides: Option<toml::Table>,
+    /// Redundant single-axis channels (paper 004). Absent: the orthogonal triad only.
+    #[serde(default)]
+    pub channels: Option<ImuChannelsSpec>,
+}
+
+/// Layout of the single-axis channels.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ChannelLayout {
+    /// The paper's pyramid: `n` channels, azimuth β_k = 45° + k·360°/n, elevation `alpha_deg`
+    /// above the body x-y plane: `e_k = (cosα cosβ_k, cosα sinβ_k, sinα)`.
+    Pyramid,
+    /// Three channels on body x, y, z (the conventional triad as single-axis channels).
+    Orthogonal,
+    /// Explicit unit axes in `axes` (body frame).
+    Axes,
+}
+
+/// `[imu.channels]`: N ≥ 3 single-axis gyro + accelerometer channels. Each channel has the
+/// grade's per-axis error model drawn independently (bias, bias random walk, temperature
+/// coefficient, scale factor, axis misalignment, white noise, ADC quantisation at the grade's
+/// full scale).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ImuChannelsSpec {
+    /// Layout kind.
+    pub layout: ChannelLayout,
+    /// Number of pyramid channels (default 4).
+    #[serde(default)]
+    pub n: Option<usize>,
+    /// Elevation of the pyramid axes above the body x-y plane, degrees (paper: 28.7°;
+    /// 35.26° makes four axes isotropic).
+    #[serde(default)]
+    pub alpha_deg: Option<f64>,
+    /// Explicit axes (layout `axes`), body frame; normalised on load.
+    #[serde(default)]
+    pub axes: Vec<[f64; 3]>,
+    /// Temperature of each channel relative to the block profile, °C (default 0).
+    #[serde(default)]
+    pub temperature_offsets_c: Vec<f64>,
+    /// Injected channel failures.
+    #[serde(default)]
+    pub failures: Vec<ChannelFailure>,
+}
+
+/// Which sensor of a combined channel fails.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FailedSensor {
+    /// The single-axis gyro.
+    Gyro,
+    /// The single-axis accelerometer.
+    Accel,
+}
+
+/// Kind of an injected failure.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FailureKind {
+    /// The output freezes at its last healthy increment (`magnitude` unused).
+    Stuck,
+    /// A constant bias of `magnitude` is added from `start_s`.
+    BiasStep,
+    /// A bias growing at `magnitude` per second from `start_s`.
+    DriftRamp,
+    /// Extra white noise of 1-σ `magnitude` (rate units) on every sample.
+    NoiseBurst,
+}
+
+/// One injected channel failure. Units of `magnitude`: gyro °/h (bias step, noise burst) and
+/// °/h per s (drift ramp); accelerometer µg and µg per s.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct ChannelFailure {
+    /// Channel index (0-based).
+    pub channel: usize,
+    /// Failing sensor of the channel.
+    pub sensor: FailedSensor,
+    /// Failure kind.
+    pub kind: FailureKind,
+    /// Onset, s since the scenario epoch.
+    pub start_s: f64,
+    /// Length, s (default: to the end of the run).
+    #[serde(default)]
+    pub duration_s: Option<f64>,
+    /// Size (units above).
+    #[serde(default)]
+    pub magnitude: f64,
+}
+
+impl ChannelFailure {
+    /// Whether the failure is active at `t_s`.
+    pub fn active(&self, t_s: f64) -> bool {
+        t_s >= self.start_s && self.duration_s.is_none_or(|d| t_s < self.start_s + d)
+    }
+}
+
+impl ImuChannelsSpec {
+    /// The unit axes of the channels, body frame.
+    pub fn unit_axes(&self) -> Vec<[f64; 3]> {
+        match self.layout {
+            ChannelLayout::Pyramid => {
+                let n = self.n.unwrap_or(4);
+                let alpha = self.alpha_deg.unwrap_or(28.7).to_radians();
+                fusion::redundancy::pyramid_axes(n, alpha)[..n.min(msgs::MAX_IMU_CHANNELS)].to_vec()
+            }
+            ChannelLayout::Orthogonal => fusion::redundancy::orthogonal_axes()[..3].to_vec(),
+            ChannelLayout::Axes => self
+                .axes
+                .iter()
+                .map(|a| {
+                    let n = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
+                    [a[0] / n, a[1] / n, a[2] / n]
+                })
+                .collect(),
+        }
+    }
 }
 
 /// `[star_tracker]`.
@@ -761,6 +944,7 @@ impl Scenario {
             ));
         }
         match &spec.trajectory {
+            Trajectory::Aircraft(ac) => validate_aircraft(f, ac)?,
             Trajectory::Static(st) => {
                 finite("trajectory.roll_deg", st.roll_deg)?;
                 finite("trajectory.pitch_deg", st.pitch_deg)?;
@@ -824,6 +1008,9 @@ impl Scenario {
             }
         }
         rate("imu.rate_hz", spec.imu.rate_hz)?;
+        if let Some(ch) = &spec.imu.channels {
+            validate_channels(f, ch, spec.scenario.duration_s)?;
+        }
         finite("imu.temperature.initial_c", spec.imu.temperature.initial_c)?;
         finite(
             "imu.temperature.rate_c_per_h",
@@ -1052,6 +1239,150 @@ impl Scenario {
         let s = &self.start;
         fusion::time::GpsTime::from_utc(s.year, s.month, s.day, s.hour, s.minute, s.second)
     }
+}
+
+/// Checks of `[imu.channels]` (paper 004 channels).
+fn validate_channels(f: &Path, ch: &ImuChannelsSpec, duration_s: f64) -> Result<(), SimError> {
+    let max = msgs::MAX_IMU_CHANNELS;
+    match ch.layout {
+        ChannelLayout::Pyramid => {
+            let n = ch.n.unwrap_or(4);
+            if !(3..=max).contains(&n) {
+                return Err(invalid(
+                    f,
+                    "imu.channels.n",
+                    format!("needs 3..={max}, got {n}"),
+                ));
+            }
+            let a = ch.alpha_deg.unwrap_or(28.7);
+            if !(a.is_finite() && a.abs() < 89.0 && a.abs() > 1.0) {
+                return Err(invalid(
+                    f,
+                    "imu.channels.alpha_deg",
+                    format!("{a} must be within 1..89° in magnitude (axes must span 3-D)"),
+                ));
+            }
+        }
+        ChannelLayout::Orthogonal => {}
+        ChannelLayout::Axes => {
+            let n = ch.axes.len();
+            if !(3..=max).contains(&n) {
+                return Err(invalid(
+                    f,
+                    "imu.channels.axes",
+                    format!("needs 3..={max} axes, got {n}"),
+                ));
+            }
+            for (i, a) in ch.axes.iter().enumerate() {
+                let norm = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
+                if !(norm.is_finite() && norm > 1e-6) {
+                    return Err(invalid(
+                        f,
+                        format!("imu.channels.axes[{i}]"),
+                        "must be a finite non-zero vector",
+                    ));
+                }
+            }
+        }
+    }
+    let axes = ch.unit_axes();
+    let h = fusion::redundancy::measurement_matrix(
+        &{
+            let mut a = [[0.0; 3]; msgs::MAX_IMU_CHANNELS];
+            a[..axes.len()].copy_from_slice(&axes);
+            a
+        },
+        (1u32 << axes.len()) - 1,
+    );
+    if fusion::redundancy::ls_covariance_per_unit_variance(&h).is_none() {
+        return Err(invalid(
+            f,
+            "imu.channels",
+            "the channel axes do not span 3-D",
+        ));
+    }
+    if ch.temperature_offsets_c.len() > axes.len()
+        || ch.temperature_offsets_c.iter().any(|t| !t.is_finite())
+    {
+        return Err(invalid(
+            f,
+            "imu.channels.temperature_offsets_c",
+            "one finite value per channel at most",
+        ));
+    }
+    for (i, fl) in ch.failures.iter().enumerate() {
+        let k = format!("imu.channels.failures[{i}]");
+        if fl.channel >= axes.len() {
+            return Err(invalid(
+                f,
+                format!("{k}.channel"),
+                format!("{} is not a channel (0..{})", fl.channel, axes.len()),
+            ));
+        }
+        if !(fl.start_s.is_finite() && (0.0..=duration_s).contains(&fl.start_s)) {
+            return Err(invalid(f, format!("{k}.start_s"), "outside the run"));
+        }
+        if fl.duration_s.is_some_and(|d| !(d.is_finite() && d > 0.0)) {
+            return Err(invalid(f, format!("{k}.duration_s"), "must be > 0"));
+        }
+        if !fl.magnitude.is_finite() {
+            return Err(invalid(f, format!("{k}.magnitude"), "must be finite"));
+        }
+    }
+    Ok(())
+}
+
+/// Checks of an aircraft trajectory.
+fn validate_aircraft(f: &Path, ac: &AircraftTrajectory) -> Result<(), SimError> {
+    if !ac.initial_heading_deg.is_finite() {
+        return Err(invalid(
+            f,
+            "trajectory.initial_heading_deg",
+            "must be finite",
+        ));
+    }
+    let mut speed = 0.0;
+    for (i, seg) in ac.segments.iter().enumerate() {
+        let k = format!("trajectory.segments[{i}]");
+        let d = seg.duration_s();
+        if !(d.is_finite() && d > 0.0) {
+            return Err(invalid(f, format!("{k}.duration_s"), "must be > 0"));
+        }
+        match *seg {
+            FlightSegment::Hold { .. } if speed != 0.0 => {
+                return Err(invalid(f, format!("{k}.type"), "`hold` needs speed 0"));
+            }
+            FlightSegment::Speed { to_m_s, .. } => {
+                if !(to_m_s.is_finite() && (0.0..=300.0).contains(&to_m_s)) {
+                    return Err(invalid(f, format!("{k}.to_m_s"), "outside 0..300 m/s"));
+                }
+                speed = to_m_s;
+            }
+            FlightSegment::Turn {
+                angle_deg,
+                duration_s,
+            } => {
+                // Peak turn rate of the raised-cosine profile is 2·Δψ/T; its bank must stay
+                // below 60°.
+                let peak = 2.0 * angle_deg.to_radians().abs() / duration_s;
+                if !angle_deg.is_finite() || speed == 0.0 || (speed * peak / 9.806_65) > 3f64.sqrt()
+                {
+                    return Err(invalid(
+                        f,
+                        format!("{k}.angle_deg"),
+                        "needs speed > 0 and a peak bank below 60°",
+                    ));
+                }
+            }
+            FlightSegment::Pitch { to_deg, .. } => {
+                if !(to_deg.is_finite() && to_deg.abs() <= 30.0) {
+                    return Err(invalid(f, format!("{k}.to_deg"), "outside ±30°"));
+                }
+            }
+            _ => {}
+        }
+    }
+    Ok(())
 }
 
 /// Sample period of a rate validated by [`Scenario::validate`], ns.

@@ -26,11 +26,20 @@ fn secs(t_ns: i64) -> f64 {
 }
 
 /// IMU: delta-angle / delta-velocity with the error model.
+///
+/// With `[imu.channels]` in the scenario the sample carries the N single-axis channels
+/// (`n_channels`, `channel_axis`, `channel_delta_*`, `channel_temperature_c`), and the triad
+/// fields `delta_angle_rad` / `delta_velocity_m_s` hold the least-squares combination of all
+/// channels `(HᵀH)⁻¹Hᵀz` (no fault exclusion), so that a consumer unaware of channels still
+/// navigates; the fusion's own combination with fault detection replaces it.
 #[derive(Debug, Clone)]
 pub struct ImuSource {
     gen_: TruthGenerator,
     /// The error model (public so tests can disable it).
     pub model: ImuErrorModel,
+    /// The redundant channels, if configured.
+    pub channels: Option<crate::imu::ChannelErrorModel>,
+    ls: Option<fusion::redundancy::LsMatrix>,
     epoch_ns: i64,
     period_ns: i64,
 }
@@ -38,9 +47,18 @@ pub struct ImuSource {
 impl ImuSource {
     /// For scenario `scn` whose epoch is GPS `epoch_ns`.
     pub fn new(scn: &Scenario, epoch_ns: i64) -> Self {
+        let channels = crate::imu::ChannelErrorModel::new(scn);
+        let ls = channels.as_ref().and_then(|c| {
+            let mut a = [[0.0; 3]; msgs::MAX_IMU_CHANNELS];
+            a[..c.axes().len()].copy_from_slice(c.axes());
+            let h = fusion::redundancy::measurement_matrix(&a, (1u32 << c.axes().len()) - 1);
+            fusion::redundancy::ls_covariance_per_unit_variance(&h).map(|inv| inv * h.transpose())
+        });
         Self {
             gen_: TruthGenerator::new(scn),
             model: ImuErrorModel::new(scn),
+            channels,
+            ls,
             epoch_ns,
             period_ns: period_ns(scn.spec.imu.rate_hz),
         }
@@ -66,6 +84,20 @@ impl SampleSource for ImuSource {
             turntable_angle_rad: self.gen_.current().turntable_rad,
             ..Default::default()
         };
+        if let (Some(ch), Some(ls)) = (self.channels.as_mut(), self.ls.as_ref()) {
+            let out = ch.sample(secs(t_ns), &inc);
+            s.n_channels = out.n as u32;
+            for (i, a) in ch.axes().iter().enumerate() {
+                s.channel_axis[i] = *a;
+            }
+            s.channel_delta_angle_rad = out.delta_angle_rad;
+            s.channel_delta_velocity_m_s = out.delta_velocity_m_s;
+            s.channel_temperature_c = out.temperature_c;
+            let da = ls * fusion::redundancy::ChannelVector::from(out.delta_angle_rad);
+            let dv = ls * fusion::redundancy::ChannelVector::from(out.delta_velocity_m_s);
+            s.delta_angle_rad = [da.x, da.y, da.z];
+            s.delta_velocity_m_s = [dv.x, dv.y, dv.z];
+        }
         s.header.time_ns = self.epoch_ns + t_ns;
         s
     }

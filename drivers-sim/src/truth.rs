@@ -10,7 +10,7 @@
 //! time of grid point k is `k·1e-3` s computed the same way everywhere, so all processes follow
 //! bit-identical floating-point paths without talking to each other.
 
-use crate::scenario::{Scenario, Segment, TRUTH_GRID_NS, Trajectory};
+use crate::scenario::{FlightSegment, Scenario, Segment, TRUTH_GRID_NS, Trajectory};
 use fusion::earth::{self, Ellipsoid, Geodetic, GravityModel, WGS84};
 use nalgebra::{Matrix3, Vector3};
 use std::f64::consts::{PI, TAU};
@@ -88,6 +88,64 @@ pub enum Profile {
         /// Pieces in time order.
         pieces: Vec<VehiclePiece>,
     },
+    /// Fixed-wing aircraft with coordinated turns and flight-path-angle changes.
+    Aircraft {
+        /// Pieces in time order.
+        pieces: Vec<AircraftPiece>,
+    },
+}
+
+/// An aircraft segment resolved to start time and the start/change of speed, heading and
+/// pitch (SI). Exactly one of the changes is non-zero per piece.
+#[derive(Debug, Clone, Copy)]
+pub struct AircraftPiece {
+    t0_s: f64,
+    dur_s: f64,
+    v0_m_s: f64,
+    dv_m_s: f64,
+    psi0_rad: f64,
+    dpsi_rad: f64,
+    theta0_rad: f64,
+    dtheta_rad: f64,
+}
+
+/// Standard gravity for the coordinated-turn bank, m/s².
+const G0_BANK_M_S2: f64 = 9.806_65;
+
+impl AircraftPiece {
+    fn kinematics(&self, t_s: f64) -> Kinematics {
+        if self.dur_s.is_infinite() {
+            return Kinematics {
+                speed_m_s: self.v0_m_s,
+                heading_rad: self.psi0_rad,
+                pitch_rad: self.theta0_rad,
+                ..Default::default()
+            };
+        }
+        let (frac, rate) = ramp(t_s - self.t0_s, self.dur_s);
+        // d(rate)/dt of the raised cosine: 2π sin(2πx)/T².
+        let x = ((t_s - self.t0_s) / self.dur_s).clamp(0.0, 1.0);
+        let rate_dot = TAU * (TAU * x).sin() / (self.dur_s * self.dur_s);
+        let speed = self.v0_m_s + self.dv_m_s * frac;
+        let psi_dot = self.dpsi_rad * rate;
+        let psi_ddot = self.dpsi_rad * rate_dot;
+        // Coordinated turn: φ = atan(k ψ̇), k = V/g (V constant while turning), so
+        // φ̇ = k ψ̈ / (1 + (k ψ̇)²).
+        let k = speed / G0_BANK_M_S2;
+        let roll = (k * psi_dot).atan();
+        let roll_rate = k * psi_ddot / (1.0 + (k * psi_dot).powi(2));
+        Kinematics {
+            speed_m_s: speed,
+            speed_rate_m_s2: self.dv_m_s * rate,
+            heading_rad: self.psi0_rad + self.dpsi_rad * frac,
+            heading_rate_rad_s: psi_dot,
+            pitch_rad: self.theta0_rad + self.dtheta_rad * frac,
+            pitch_rate_rad_s: self.dtheta_rad * rate,
+            roll_rad: roll,
+            roll_rate_rad_s: roll_rate,
+            turntable_rad: 0.0,
+        }
+    }
 }
 
 /// A turntable move in SI units (see [`crate::scenario::TurntableMove`]).
@@ -161,6 +219,48 @@ impl Profile {
                 }));
                 Profile::Vehicle { pieces }
             }
+            Trajectory::Aircraft(ac) => {
+                let mut t = 0.0;
+                let (mut v, mut th) = (0.0, 0.0);
+                let mut psi = ac.initial_heading_deg.to_radians();
+                let mut pieces = Vec::with_capacity(ac.segments.len() + 1);
+                for seg in &ac.segments {
+                    let dur = seg.duration_s();
+                    let (dv, dpsi, dth) = match *seg {
+                        FlightSegment::Speed { to_m_s, .. } => (to_m_s - v, 0.0, 0.0),
+                        FlightSegment::Turn { angle_deg, .. } => (0.0, angle_deg.to_radians(), 0.0),
+                        FlightSegment::Pitch { to_deg, .. } => (0.0, 0.0, to_deg.to_radians() - th),
+                        FlightSegment::Hold { .. } | FlightSegment::Cruise { .. } => {
+                            (0.0, 0.0, 0.0)
+                        }
+                    };
+                    pieces.push(AircraftPiece {
+                        t0_s: t,
+                        dur_s: dur,
+                        v0_m_s: v,
+                        dv_m_s: dv,
+                        psi0_rad: psi,
+                        dpsi_rad: dpsi,
+                        theta0_rad: th,
+                        dtheta_rad: dth,
+                    });
+                    t += dur;
+                    v += dv;
+                    psi += dpsi;
+                    th += dth;
+                }
+                pieces.push(AircraftPiece {
+                    t0_s: t,
+                    dur_s: f64::INFINITY,
+                    v0_m_s: v,
+                    dv_m_s: 0.0,
+                    psi0_rad: psi,
+                    dpsi_rad: 0.0,
+                    theta0_rad: th,
+                    dtheta_rad: 0.0,
+                });
+                Profile::Aircraft { pieces }
+            }
         }
     }
 
@@ -216,7 +316,53 @@ impl Profile {
                     ..Default::default()
                 }
             }
+            Profile::Aircraft { pieces } => {
+                let i = pieces.partition_point(|p| p.t0_s <= t_s).saturating_sub(1);
+                pieces[i].kinematics(t_s)
+            }
         }
+    }
+}
+
+/// Kinematics of a body on a turntable whose axis is the body z axis (the table top carries
+/// the IMU square; roll and pitch are the tilt of the table, heading its zero direction):
+/// `C_n_b(β) = C_n_b0 · R_z(β)`, so the body rate relative to NED is exactly `(0, 0, β̇)` in
+/// body axes. With a level table this is a pure heading change `ψ0 + β`; with a tilted table
+/// all three Euler angles vary, and a 0°/180° indexing reverses the horizontal body axes
+/// (paper 003: the half-differences of the horizontal sensors then cancel their biases).
+/// The Euler rates are the exact inverse of [`w_nb_b`] for that body rate:
+/// `φ̇ = β̇ cos φ tan θ`, `θ̇ = −β̇ sin φ`, `ψ̇ = β̇ cos φ / cos θ`.
+fn turntable_kinematics(
+    roll0: f64,
+    pitch0: f64,
+    heading0: f64,
+    beta_rad: f64,
+    beta_rate_rad_s: f64,
+) -> Kinematics {
+    let (roll, pitch, heading) = if beta_rad == 0.0 {
+        (roll0, pitch0, heading0)
+    } else {
+        let (sb, cb) = beta_rad.sin_cos();
+        let r_z = Matrix3::new(cb, -sb, 0.0, sb, cb, 0.0, 0.0, 0.0, 1.0);
+        let c = c_n_b_from_rph(roll0, pitch0, heading0) * r_z;
+        let roll = c[(2, 1)].atan2(c[(2, 2)]);
+        let pitch = -c[(2, 0)].clamp(-1.0, 1.0).asin();
+        // Heading unwrapped around ψ0 + β so that it is continuous through the move.
+        let h = c[(1, 0)].atan2(c[(0, 0)]);
+        let nominal = heading0 + beta_rad;
+        (roll, pitch, nominal + wrap_pi(h - nominal))
+    };
+    let (sr, cr) = roll.sin_cos();
+    let (sp, cp) = pitch.sin_cos();
+    Kinematics {
+        heading_rad: heading,
+        heading_rate_rad_s: beta_rate_rad_s * cr / cp,
+        pitch_rad: pitch,
+        pitch_rate_rad_s: -beta_rate_rad_s * sr,
+        roll_rad: roll,
+        roll_rate_rad_s: beta_rate_rad_s * cr * sp / cp,
+        turntable_rad: beta_rad,
+        ..Default::default()
     }
 }
 
