@@ -749,6 +749,41 @@ enum Phase {
     Navigating,
 }
 
+/// GCRS → ITRS for the star tracker with the expensive part cached.
+///
+/// `C_e_i = W(x_p, y_p, s') · R3(ERA) · C_cirs_gcrs` ([`crate::celestial::c_e_i`], IAU
+/// 2006/2000A, ~1 400 sin/cos pairs). Only `C_cirs_gcrs` (precession–nutation) is cached; it
+/// is recomputed when the sample is more than [`CelestialCache::REFRESH_NS`] from the cached
+/// epoch. Its largest rates are precession, 50.3″/yr ≈ 1.6·10⁻⁶ ″/s, and the short-period
+/// nutation terms (e.g. 0.23″ at 13.66 d: 2π·0.23″/13.66 d ≈ 1.2·10⁻⁶ ″/s), so over 60 s the
+/// cached matrix is off by < 0.2 mas — four orders below star-tracker noise (arcseconds). The
+/// Earth rotation angle and polar motion are evaluated exactly at every call.
+#[derive(Debug, Clone, Copy, Default)]
+struct CelestialCache {
+    epoch_ns: Option<i64>,
+    c_cirs_gcrs: Matrix3<f64>,
+}
+
+impl CelestialCache {
+    /// Largest distance between a sample and the cached precession–nutation epoch, ns.
+    const REFRESH_NS: i64 = 60_000_000_000;
+
+    fn c_e_i(&mut self, t: GpsTime, eop: &EarthOrientation) -> Matrix3<f64> {
+        use crate::celestial::{NutationModel, c_cirs_gcrs, era, polar_motion_matrix};
+        if self
+            .epoch_ns
+            .is_none_or(|e| (t.ns - e).abs() > Self::REFRESH_NS)
+        {
+            self.c_cirs_gcrs = c_cirs_gcrs(t, NutationModel::Iau2000A);
+            self.epoch_ns = Some(t.ns);
+        }
+        let (s, c) = era(t, eop.dut1_s).sin_cos();
+        let r3 = Matrix3::new(c, s, 0.0, -s, c, 0.0, 0.0, 0.0, 1.0);
+        let sp = crate::celestial::tio_locator_sp00(t.tt_centuries());
+        polar_motion_matrix(eop.xp_rad, eop.yp_rad, sp) * r3 * self.c_cirs_gcrs
+    }
+}
+
 /// Receiver clock estimate (tight coupling).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct ClockEstimate {
@@ -793,6 +828,7 @@ pub struct Navigator {
     last_fused_ns: [Option<i64>; MAX_SENSORS],
     gnss_q: TimeQueue<GnssObs, GNSS_CAP>,
     clock_initialized: bool,
+    celestial: CelestialCache,
     star_q: TimeQueue<StarObs, STAR_CAP>,
     odo_q: TimeQueue<f64, ODO_CAP>,
     baro_q: TimeQueue<f64, BARO_CAP>,
@@ -807,6 +843,11 @@ pub struct Navigator {
     solutions: u64,
     mode: NavMode,
     aiding_mask: u32,
+    /// Redundant-channel combination and FDI (paper 004), built from the first sample with
+    /// channels.
+    redundancy: Option<crate::redundancy::RedundantImu>,
+    /// FDI settings (None: derived from `config.imu` and the sample interval).
+    redundancy_config: Option<crate::redundancy::FdiConfig>,
 }
 
 /// Slot of a sensor in the health array.
@@ -845,6 +886,7 @@ impl Navigator {
             last_fused_ns: [None; MAX_SENSORS],
             gnss_q: TimeQueue::new(),
             clock_initialized: false,
+            celestial: CelestialCache::default(),
             star_q: TimeQueue::new(),
             odo_q: TimeQueue::new(),
             baro_q: TimeQueue::new(),
@@ -859,6 +901,8 @@ impl Navigator {
             solutions: 0,
             mode: NavMode::Initializing,
             aiding_mask: 0,
+            redundancy: None,
+            redundancy_config: None,
             ell,
             config,
         })
@@ -880,8 +924,8 @@ impl Navigator {
         let prev_t = self.last_time[id];
         self.accept_header(id, &s.header);
         let t = s.header.time_ns;
-        let dth = Vector3::from(s.delta_angle_rad);
-        let dv = Vector3::from(s.delta_velocity_m_s);
+        // Paper 004: redundant channels combined with fault detection and exclusion.
+        let (dth, dv) = self.imu_increments(s);
         match self.phase {
             Phase::Initializing => {
                 self.phase = Phase::Aligning;
@@ -1607,7 +1651,7 @@ impl Navigator {
             self.health[id].dropped_late += 1;
             return;
         };
-        let c_e_i = crate::celestial::c_e_i(GpsTime { ns: ts }, &self.config.eop);
+        let c_e_i = self.celestial.c_e_i(GpsTime { ns: ts }, &self.config.eop);
         let q = quat_from_wire(&obs.q);
         let m = ekf::star_attitude(
             &self.hist[hi].nav,
@@ -1885,6 +1929,62 @@ fn validate_gnss(s: &GnssSample) -> Result<Option<GnssFix>, FusionError> {
     }))
 }
 
+/// Redundant IMU channels (paper 004, [`crate::redundancy`]).
+impl Navigator {
+    /// Body increments of an IMU sample: with `n_channels` ≥ 3 finite channels, their
+    /// least-squares combination after parity-space fault detection and exclusion; otherwise
+    /// (or if the channels are unusable) the sample's triad. Allocates nothing.
+    fn imu_increments(&mut self, s: &ImuSample) -> (Vector3<f64>, Vector3<f64>) {
+        let triad = (
+            Vector3::from(s.delta_angle_rad),
+            Vector3::from(s.delta_velocity_m_s),
+        );
+        let n = s.n_channels as usize;
+        if !(3..=MAX_IMU_CHANNELS).contains(&n) {
+            return triad;
+        }
+        let (g, a, axes) = (
+            &s.channel_delta_angle_rad[..n],
+            &s.channel_delta_velocity_m_s[..n],
+            &s.channel_axis[..n],
+        );
+        if !(g.iter().chain(a).all(|x| x.is_finite())) {
+            return triad;
+        }
+        if !self
+            .redundancy
+            .as_ref()
+            .is_some_and(|r| r.same_layout(axes))
+        {
+            let cfg = self.redundancy_config.unwrap_or_else(|| {
+                let noise = self.config.imu.process_noise();
+                crate::redundancy::FdiConfig {
+                    gyro_sigma_rad: noise.arw_rad_sqrt_s * s.dt_s.sqrt(),
+                    accel_sigma_m_s: noise.vrw_m_s_sqrt_s * s.dt_s.sqrt(),
+                    ..Default::default()
+                }
+            });
+            self.redundancy = crate::redundancy::RedundantImu::new(axes, cfg).ok();
+        }
+        match self.redundancy.as_mut() {
+            Some(r) => r.step(g, a),
+            None => triad,
+        }
+    }
+
+    /// Set the fault-detection settings of the redundant channels (before the first sample
+    /// with channels; a later call takes effect at the next layout change).
+    pub fn set_redundancy_config(&mut self, cfg: crate::redundancy::FdiConfig) {
+        self.redundancy_config = Some(cfg);
+    }
+
+    /// Health of the redundant channels (excluded / suspect masks, faults detected) for
+    /// `sextant/status`; None when the IMU has no channels.
+    pub fn redundancy_status(&self) -> Option<crate::redundancy::RedundancyStatus> {
+        self.redundancy.as_ref().map(|r| r.status())
+    }
+}
+
 #[cfg(test)]
 mod tests_support {
     pub use super::tests::StaticSim;
@@ -2061,6 +2161,29 @@ mod tests {
                 .to_string()
                 .contains("gate_probability")
         );
+    }
+
+    #[test]
+    fn cached_celestial_matrix_matches_full_model() {
+        // Within the refresh interval the cached GCRS → ITRS differs from the full IAU
+        // 2006/2000A matrix by < 0.2 mas (bound derived in CelestialCache's docs).
+        let eop = EarthOrientation {
+            dut1_s: 0.1,
+            xp_rad: 1e-6,
+            yp_rad: 2e-6,
+        };
+        let mut cache = CelestialCache::default();
+        let mas = 1e-3 / 3600.0 * DEG;
+        for k in 0..=8 {
+            let t = GpsTime {
+                ns: T0 + k * 15_000_000_000,
+            };
+            let full = crate::celestial::c_e_i(t, &eop);
+            let cached = cache.c_e_i(t, &eop);
+            let d = crate::celestial::dcm_angle_between(&full, &cached);
+            assert!(d < 0.2 * mas, "k {k}: {} mas", d / mas);
+        }
+        assert!(cache.epoch_ns.is_some_and(|e| e > T0));
     }
 
     #[test]

@@ -1,7 +1,9 @@
 //! Proves that the filter allocates nothing in steady state: a counting global allocator wraps
 //! the system allocator for this test binary; after alignment, `Navigator::push_imu` (with
 //! GNSS, star-tracker, odometer and baro samples fused inside it, and zero-velocity updates),
-//! the `push_*` queueing calls and every `ekf` measurement update must not move the count.
+//! the `push_*` queueing calls and every `ekf` measurement update must not move the count;
+//! likewise a second navigator in tight GNSS mode (per-satellite pseudorange and range-rate
+//! updates, clock states).
 //! One `#[test]` only, so that no other test thread allocates concurrently.
 
 use msgs::{
@@ -11,7 +13,7 @@ use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use sextant_fusion::celestial::{EarthOrientation, c_e_i};
 use sextant_fusion::earth::{Geodetic, GravityModel, WGS84, geodetic_to_ecef};
 use sextant_fusion::ekf::{self, GateTable};
-use sextant_fusion::navigator::{Navigator, NavigatorConfig};
+use sextant_fusion::navigator::{GnssMode, Navigator, NavigatorConfig};
 use sextant_fusion::strapdown::{q_e_n, stationary_increment};
 use sextant_fusion::time::GpsTime;
 use std::alloc::{GlobalAlloc, Layout, System};
@@ -70,6 +72,21 @@ fn filter_allocates_nothing_in_steady_state() {
         ..NavigatorConfig::default()
     };
     let mut nav = Box::new(Navigator::new(cfg).unwrap());
+    let tight = NavigatorConfig {
+        alignment_s: 5.0,
+        gnss_mode: GnssMode::Tight,
+        ..NavigatorConfig::default()
+    };
+    let mut nav_tight = Box::new(Navigator::new(tight).unwrap());
+    // Six satellites 20 000 km away at elevations 25°–75° (ECEF line of sight from NED).
+    let c_e_n = q_e_n(site.lat_rad, site.lon_rad)
+        .to_rotation_matrix()
+        .into_inner();
+    let sats: [Vector3<f64>; 6] = std::array::from_fn(|i| {
+        let az = i as f64 * 1.1;
+        let el = (25.0 + 10.0 * i as f64).to_radians();
+        r_e + c_e_n * Vector3::new(az.cos() * el.cos(), az.sin() * el.cos(), -el.sin()) * 2.0e7
+    });
     let rate = 100;
     let dt = 1.0 / rate as f64;
     let mut seq = 0u64;
@@ -91,6 +108,17 @@ fn filter_allocates_nothing_in_steady_state() {
             g.pos_ecef_m = r_e.into();
             g.pos_cov_ecef_m2 = [4.0, 0.0, 0.0, 0.0, 4.0, 0.0, 0.0, 0.0, 4.0];
             g.vel_cov_ecef_m2_s2 = [1e-4, 0.0, 0.0, 0.0, 1e-4, 0.0, 0.0, 0.0, 1e-4];
+            g.n_satellites = sats.len() as u32;
+            for (i, r_s) in sats.iter().enumerate() {
+                let sat = &mut g.satellites[i];
+                sat.prn = i as u32 + 1;
+                sat.flags = 3;
+                sat.pseudorange_m = (r_s - r_e).norm() + 150.0;
+                sat.range_rate_m_s = 0.2;
+                sat.sigma_pseudorange_m = 3.0;
+                sat.sigma_range_rate_m_s = 0.05;
+                sat.sat_pos_ecef_m = (*r_s).into();
+            }
             nav.push_gnss(&g).unwrap();
             let c_s_i = c_s_b
                 * q_e_b.to_rotation_matrix().into_inner().transpose()
@@ -126,6 +154,7 @@ fn filter_allocates_nothing_in_steady_state() {
     while k < 10 * rate {
         k += 1;
         step(&mut nav, k);
+        step(&mut nav_tight, k);
     }
     assert!(nav.is_navigating());
     let before = count();
@@ -133,6 +162,8 @@ fn filter_allocates_nothing_in_steady_state() {
         k += 1;
         let sol = step(&mut nav, k).expect("navigating");
         assert!(sol.lat_rad.is_finite());
+        let sol = step(&mut nav_tight, k).expect("navigating");
+        assert!(sol.clock_bias_m.is_finite());
     }
     let used = count() - before;
     assert_eq!(
@@ -154,6 +185,14 @@ fn filter_allocates_nothing_in_steady_state() {
         );
     }
     assert!(nav.zupt_health().fused > 0);
+    // Tight coupling fused satellites and estimated the clock (150 m, 0.2 m/s in the data).
+    let g = nav_tight.health()[SensorId::Gnss as usize];
+    assert!(g.fused > 0 && g.nis_count >= 12, "{g:?}");
+    assert!(
+        (nav_tight.clock().bias_m - 150.0).abs() < 10.0,
+        "{:?}",
+        nav_tight.clock()
+    );
 
     // Each update function on its own.
     let p = *nav.covariance();
@@ -216,6 +255,20 @@ fn filter_allocates_nothing_in_steady_state() {
         ekf::update(&p, &ekf::zero_velocity(&state, 0.005), gates.threshold(3))
             .residual
             .nis,
+        ekf::update(
+            &p,
+            &ekf::gnss_pseudorange(&state, &(r_e * 4.0), 3.0 * r_e.norm(), 0.0, 3.0),
+            gates.threshold(1),
+        )
+        .residual
+        .nis,
+        ekf::update(
+            &p,
+            &ekf::gnss_range_rate(&state, &(r_e * 4.0), &Vector3::zeros(), 0.0, 0.0, 0.05),
+            gates.threshold(1),
+        )
+        .residual
+        .nis,
     ];
     let used = count() - before;
     assert_eq!(used, 0, "ekf updates allocated {used} times");
