@@ -1,0 +1,87 @@
+//! `sextant bench --quick`: every figure present and sane (the targets themselves are reported by
+//! the bench, not asserted here: they depend on the machine's load).
+
+use sextant_tests::*;
+use std::process::Command;
+
+fn f(v: &serde_json::Value, ptr: &str) -> f64 {
+    v.pointer(ptr)
+        .and_then(|x| x.as_f64())
+        .unwrap_or_else(|| panic!("summary lacks {ptr}"))
+}
+
+#[test]
+fn quick_bench_reports_every_figure() {
+    let out = std::env::temp_dir().join(format!("sextant-bench-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&out);
+    let o = Command::new(bin("sextant").unwrap())
+        .current_dir(repo_root())
+        .args(["bench", "--quick", "--out"])
+        .arg(&out)
+        .output()
+        .expect("start sextant bench");
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(stdout.contains("p99.9 us"), "{stdout}");
+    let s: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert!(f(&s, "/machine/nproc") >= 1.0);
+    assert!(s["machine"]["cpu_model"].as_str().is_some());
+    // Quick mode: 4 s live runs, 1 s of which is the shortened alignment.
+    for (key, hz) in [("imu_200hz", 200.0), ("imu_1000hz", 1000.0)] {
+        let p = |name: &str| format!("/live/{key}/{name}");
+        let (p50, p99, p999, max) = (
+            f(&s, &p("latency_p50_us")),
+            f(&s, &p("latency_p99_us")),
+            f(&s, &p("latency_p99_9_us")),
+            f(&s, &p("latency_max_us")),
+        );
+        assert!(
+            0.0 < p50 && p50 <= p99 && p99 <= p999 && p999 <= max,
+            "{key}: {p50} {p99} {p999} {max}"
+        );
+        // A median above one IMU period would mean the loop cannot keep up at all.
+        assert!(p50 < 1e6 / hz, "{key}: p50 {p50} us");
+        let n = f(&s, &p("solutions"));
+        let want = hz * 3.0;
+        assert!(
+            (n - want).abs() < 0.1 * want,
+            "{key}: {n} solutions, expected about {want}"
+        );
+        for proc_name in ["sextant-fusion", "sextant-sim-imu", "sextant-sim-gnss"] {
+            let cpu = f(&s, &p(&format!("processes/{proc_name}/cpu_percent")));
+            let rss = f(&s, &p(&format!("processes/{proc_name}/peak_rss_mib")));
+            assert!(
+                (0.0..=100.0 * f(&s, "/machine/nproc")).contains(&cpu),
+                "{proc_name} {cpu} %"
+            );
+            assert!(rss > 1.0 && rss < 1024.0, "{proc_name} {rss} MiB");
+        }
+    }
+    // Offline: 60 s simulated, faster than real time by far even on a loaded machine.
+    assert!(f(&s, "/offline/navigating_imu_samples") > 200.0 * 40.0);
+    assert!(f(&s, "/offline/navigating_x_real_time") > 10.0);
+    assert_eq!(f(&s, "/offline/rejected_inputs"), 0.0);
+    // Recorder: every offered record accounted for.
+    assert!(f(&s, "/recorder/saturated_records_per_s") > 1000.0);
+    assert!(f(&s, "/recorder/saturated_mcap_mb_per_s") > 0.0);
+    assert_eq!(
+        f(&s, "/recorder/paced_10x_accepted") + f(&s, "/recorder/paced_10x_dropped"),
+        f(&s, "/recorder/paced_10x_records")
+    );
+    for t in [
+        "latency_p50_us_at_1khz",
+        "latency_p99_us_at_1khz",
+        "offline_x_real_time_all_aiding",
+        "fusion_peak_rss_mib",
+        "recorder_10x_dropped",
+    ] {
+        assert!(s["targets"][t]["measured"].is_number(), "target {t}");
+    }
+    let png = std::fs::metadata(out.join("latency_histogram.png")).expect("histogram");
+    assert!(png.len() > 1000);
+}
