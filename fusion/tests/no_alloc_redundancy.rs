@@ -1,0 +1,146 @@
+//! Proves that the redundant-channel path (paper 004) allocates nothing per IMU step: a
+//! counting global allocator wraps the system allocator; after the navigator has built its
+//! `RedundantImu` and aligned, `Navigator::push_imu` with five skewed channels — including the
+//! block in which a failed channel is detected, isolated and excluded — and
+//! `RedundantImu::step` on its own must not move the count. It also checks, end to end through
+//! the navigator, that the failed channel is the one excluded and reported.
+//! One `#[test]` only, so that no other test thread allocates concurrently.
+
+use msgs::{GnssSample, ImuSample};
+use nalgebra::{UnitQuaternion, Vector3};
+use sextant_fusion::earth::{Geodetic, GravityModel, WGS84, geodetic_to_ecef};
+use sextant_fusion::navigator::{Navigator, NavigatorConfig};
+use sextant_fusion::redundancy::{FdiConfig, RedundantImu, pyramid_axes};
+use sextant_fusion::strapdown::{q_e_n, stationary_increment};
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+struct Counting;
+
+static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
+
+// SAFETY: forwards to the system allocator unchanged; only counts calls.
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
+        // SAFETY: same contract as the caller's.
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: same contract as the caller's.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
+        // SAFETY: same contract as the caller's.
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+fn count() -> usize {
+    ALLOCATIONS.load(Ordering::SeqCst)
+}
+
+const T0: i64 = 1_400_000_000_000_000_000;
+
+#[test]
+fn redundant_channels_allocate_nothing_per_step() {
+    let probe = count();
+    let boxed = std::hint::black_box(Box::new([1.0_f64; 4]));
+    assert!(count() > probe, "the counting allocator must work");
+    drop(boxed);
+
+    let site = Geodetic {
+        lat_rad: 58.52f64.to_radians(),
+        lon_rad: 31.27f64.to_radians(),
+        height_m: 50.0,
+    };
+    let r_e = geodetic_to_ecef(&WGS84, &site);
+    let q_e_b =
+        q_e_n(site.lat_rad, site.lon_rad) * UnitQuaternion::from_euler_angles(0.0, 0.0, 0.7);
+    let cfg = NavigatorConfig {
+        alignment_s: 5.0,
+        ..NavigatorConfig::default()
+    };
+    let mut nav = Box::new(Navigator::new(cfg).unwrap());
+    let n = 5;
+    let axes = pyramid_axes(n, 35.26f64.to_radians());
+    // Noise-free channels: σ of the test from the default IMU spec is what the navigator
+    // derives; the 1e-6 rad per interval (0.0057 °/s) bias step on channel 2 is thousands of
+    // σ, so it is detected in the first full block after onset.
+    nav.set_redundancy_config(FdiConfig {
+        gyro_sigma_rad: 1e-7,
+        accel_sigma_m_s: 1e-6,
+        learn_blocks: 2,
+        ..FdiConfig::default()
+    });
+    let dt = 0.01;
+    let mut seq = 0u64;
+    let fault_from = 1500;
+    let mut step = |nav: &mut Navigator, k: i64| {
+        seq += 1;
+        let t = T0 + k * 10_000_000;
+        let inc = stationary_increment(&WGS84, GravityModel::J2, &r_e, &q_e_b, dt);
+        let mut s = ImuSample::default();
+        s.header.time_ns = t;
+        s.header.seq = seq;
+        s.dt_s = dt;
+        s.delta_angle_rad = [0.0; 3];
+        s.delta_velocity_m_s = [0.0; 3];
+        s.n_channels = n as u32;
+        for i in 0..n {
+            let e = Vector3::from(axes[i]);
+            s.channel_axis[i] = axes[i];
+            s.channel_delta_angle_rad[i] = e.dot(&inc.delta_angle_rad);
+            s.channel_delta_velocity_m_s[i] = e.dot(&inc.delta_velocity_m_s);
+        }
+        if k >= fault_from {
+            s.channel_delta_angle_rad[2] += 1e-6;
+        }
+        if k % 10 == 0 {
+            let mut g = GnssSample::default();
+            g.header.time_ns = t;
+            g.header.seq = seq;
+            g.fix_valid = 1;
+            g.pos_ecef_m = r_e.into();
+            g.pos_cov_ecef_m2 = [4.0, 0.0, 0.0, 0.0, 4.0, 0.0, 0.0, 0.0, 4.0];
+            g.vel_cov_ecef_m2_s2 = [1e-4, 0.0, 0.0, 0.0, 1e-4, 0.0, 0.0, 0.0, 1e-4];
+            nav.push_gnss(&g).unwrap();
+        }
+        nav.push_imu(&s).unwrap()
+    };
+    // Warm-up: alignment, the RedundantImu built, parity offset learnt.
+    for k in 1..=1000 {
+        step(&mut nav, k);
+    }
+    assert!(nav.is_navigating());
+    let before = nav.redundancy_status().expect("channels seen");
+    assert_eq!(before.excluded_mask, 0);
+    assert!(before.blocks_tested > 0);
+    let start = count();
+    for k in 1001..=2500 {
+        let sol = step(&mut nav, k);
+        assert!(sol.is_some());
+    }
+    let used = count() - start;
+    let st = nav.redundancy_status().expect("channels seen");
+    assert_eq!(used, 0, "push_imu with channels allocated {used} times");
+    assert_eq!(st.excluded_mask, 1 << 2, "{st:?}");
+    assert_eq!(st.faults_detected, 1);
+
+    // RedundantImu on its own.
+    let mut r = RedundantImu::new(&axes[..n], FdiConfig::default()).unwrap();
+    let g = [1e-5; 5];
+    let a = [0.1; 5];
+    for _ in 0..10 {
+        r.step(&g, &a);
+    }
+    let start = count();
+    for _ in 0..10_000 {
+        std::hint::black_box(r.step(&g, &a));
+    }
+    assert_eq!(count() - start, 0);
+}
