@@ -23,3 +23,4 @@ pub mod signals;
 pub mod stats;
 pub mod recording;
 pub mod bench;
+pub mod replay;

@@ -540,6 +540,22 @@ impl Recorder {
         }
     }
 
+    /// Queue a record, waiting while the queue is full (offline tools, where losing a record is
+    /// worse than waiting). Returns false when the recorder is not running (counted as dropped).
+    pub fn record_blocking(&self, record: Record, receive_mono_ns: u64) -> bool {
+        let sent = self.tx.as_ref().is_some_and(|tx| {
+            tx.send(Item {
+                record,
+                receive_mono_ns,
+            })
+            .is_ok()
+        });
+        if !sent {
+            self.counters.dropped.fetch_add(1, Ordering::Relaxed);
+        }
+        sent
+    }
+
     /// Messages written so far.
     pub fn written(&self) -> u64 {
         self.counters.written.load(Ordering::Relaxed)

@@ -35,6 +35,36 @@ enum Command {
     /// Measure latency through the real processes (200 Hz and 1 kHz IMU), offline fusion and
     /// recorder throughput, CPU and memory; prints a table, writes summary.json and a histogram.
     Bench(BenchArgs),
+    /// Replay a recording: offline through the fusion (bit-exact check, or other settings with
+    /// --config), or live onto the iceoryx2 services (bench).
+    Replay(ReplayArgs),
+}
+
+#[derive(Debug, clap::Args)]
+#[command(group(clap::ArgGroup::new("mode").required(true).args(["offline", "live"])))]
+struct ReplayArgs {
+    /// Re-run the fusion over this recording's inputs at full speed.
+    #[arg(long, value_name = "REC.mcap")]
+    offline: Option<PathBuf>,
+    /// Republish this recording's sensor channels with the recorded timing.
+    #[arg(long, value_name = "REC.mcap")]
+    live: Option<PathBuf>,
+    /// Output directory of an offline replay (default out/replay).
+    #[arg(long, default_value = "out/replay")]
+    out: PathBuf,
+    /// Filter tuning (filter.toml) or system configuration to replay with instead of the
+    /// configuration embedded in the recording (offline).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Speed-up of simulated over wall time (live).
+    #[arg(long, default_value_t = 1.0)]
+    speed: f64,
+    /// Service-name prefix (live).
+    #[arg(long, default_value = "sextant")]
+    prefix: String,
+    /// Do not republish the truth (live).
+    #[arg(long)]
+    no_truth: bool,
 }
 
 #[derive(Debug, clap::Args)]
@@ -111,6 +141,7 @@ fn main() -> anyhow::Result<()> {
         }
         Command::Experiment(args) => experiment(args),
         Command::Bench(args) => bench(args),
+        Command::Replay(args) => replay(args),
     }
 }
 
@@ -404,8 +435,7 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
     for k in 0..=64 {
         let old = recording_path(&out, k);
         if old.exists() {
-            std::fs::remove_file(&old)
-                .with_context(|| format!("remove old {}", old.display()))?;
+            std::fs::remove_file(&old).with_context(|| format!("remove old {}", old.display()))?;
         }
     }
     if !(args.restart_delay.is_finite() && (0.0..=600.0).contains(&args.restart_delay)) {
@@ -663,7 +693,10 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
                 .map(|p| serde_json::Value::from(p.display().to_string()))
                 .collect(),
         );
-        m.insert("analysed_recording".into(), recording.display().to_string().into());
+        m.insert(
+            "analysed_recording".into(),
+            recording.display().to_string().into(),
+        );
         m.insert(
             "driver_restarts".into(),
             serde_json::Value::Object(
@@ -691,4 +724,53 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
         End::Completed | End::Interrupted(_) if fusion_ok => 0,
         _ => 1,
     })
+}
+
+/// `sextant replay`: offline (table, summary.json, the replay's recording) or live.
+fn replay(args: ReplayArgs) -> anyhow::Result<()> {
+    use sextant_daemons::replay as rp;
+    if let Some(rec) = args.offline {
+        let s = rp::replay_offline(&rp::OfflineOptions {
+            recording: rec,
+            out_dir: args.out.clone(),
+            config: args.config,
+            progress: true,
+        })?;
+        println!("{}", rp::format_offline_table(&s));
+        let replayed = std::path::Path::new(&s.replayed_recording);
+        let analysis = analysis::analyze(replayed, &[]).ok();
+        if let Some(a) = &analysis {
+            println!("{}", analysis::format_table(&a.summary));
+            let _ = plots::write_plots(&args.out, &a.series);
+        }
+        let summary = serde_json::json!({
+            "replay": s,
+            "analysis": analysis.map(|a| a.summary),
+        });
+        let path = args.out.join("summary.json");
+        std::fs::write(&path, serde_json::to_string_pretty(&summary)?)
+            .with_context(|| format!("writing {}", path.display()))?;
+        println!("summary in {}", path.display());
+        if s.config_source == "embedded" && !s.bit_exact {
+            bail!("the replay did not reproduce the recorded solution bit for bit");
+        }
+        return Ok(());
+    }
+    let Some(rec) = args.live else {
+        bail!("give --offline REC.mcap or --live REC.mcap");
+    };
+    let stop = sextant_daemons::signals::install()?;
+    let s = rp::replay_live(
+        &rp::LiveOptions {
+            recording: rec,
+            prefix: args.prefix,
+            speed: args.speed,
+            start_delay_s: 1.0,
+            with_truth: !args.no_truth,
+            progress: true,
+        },
+        stop,
+    )?;
+    println!("{}", serde_json::to_string_pretty(&s)?);
+    Ok(())
 }
