@@ -10,6 +10,7 @@
 //! - [`strapdown`]: ECEF strapdown mechanization with selectable integrators (paper 002).
 //! - [`ekf`]: the error-state Kalman filter and its measurement models.
 //! - [`alignment`]: static coarse alignment (levelling and gyrocompassing, paper 003).
+//! - [`baseline_attitude`]: dual-baseline GNSS attitude from carrier phase (paper 003 eq. 14–21).
 //! - [`gnss_ls`]: receiver-style least-squares GNSS fix with DOPs (paper 003 eq. 12–13).
 //! - [`navigator`]: the fusion engine the daemons drive: alignment, mechanization, filter,
 //!   measurement buffering, modes and health.
@@ -18,6 +19,7 @@ pub mod alignment;
 pub mod atmosphere;
 pub mod astro_fix;
 pub mod attitude;
+pub mod baseline_attitude;
 pub mod boresight;
 pub mod celestial;
 pub mod earth;
