@@ -47,7 +47,7 @@ pub struct Kinematics {
     pub roll_rad: f64,
     /// Roll rate, rad/s.
     pub roll_rate_rad_s: f64,
-    /// Turntable angle (already included in the heading), rad.
+    /// Turntable angle (already included in the attitude angles), rad.
     pub turntable_rad: f64,
 }
 
@@ -286,14 +286,7 @@ impl Profile {
                         0.0
                     };
                 }
-                Kinematics {
-                    heading_rad: heading_rad + beta,
-                    heading_rate_rad_s: beta_rate,
-                    pitch_rad: *pitch_rad,
-                    roll_rad: *roll_rad,
-                    turntable_rad: beta,
-                    ..Default::default()
-                }
+                turntable_kinematics(*roll_rad, *pitch_rad, *heading_rad, beta, beta_rate)
             }
             Profile::Vehicle { pieces } => {
                 let i = pieces
@@ -671,5 +664,32 @@ mod tests {
             "{w_fd} vs {}",
             w_nb_b(&k0)
         );
+    }
+    /// A tilted turntable turns the body about its own z axis: C_n_b(β) = C_n_b0·R_z(β), the
+    /// body rate relative to NED is (0, 0, β̇), and the truth generator's inertial rate is the
+    /// Earth rate resolved in the rotated body plus that.
+    #[test]
+    fn tilted_turntable_rotates_about_body_z() {
+        let (r0, p0, h0) = (0.02, -0.015, 0.4);
+        let (beta, rate) = (1.1, 0.2);
+        let k = turntable_kinematics(r0, p0, h0, beta, rate);
+        let (sb, cb) = f64::sin_cos(beta);
+        let r_z = Matrix3::new(cb, -sb, 0.0, sb, cb, 0.0, 0.0, 0.0, 1.0);
+        let expect = c_n_b_from_rph(r0, p0, h0) * r_z;
+        let got = c_n_b_from_rph(k.roll_rad, k.pitch_rad, k.heading_rad);
+        assert!((got - expect).norm() < 1e-14, "{}", got - expect);
+        assert!((w_nb_b(&k) - Vector3::new(0.0, 0.0, rate)).norm() < 1e-15);
+        // At 180° the horizontal body axes are reversed in NED, the z axis is unchanged.
+        let k = turntable_kinematics(r0, p0, h0, std::f64::consts::PI, 0.0);
+        let c180 = c_n_b_from_rph(k.roll_rad, k.pitch_rad, k.heading_rad);
+        let c0 = c_n_b_from_rph(r0, p0, h0);
+        assert!((c180.column(0) + c0.column(0)).norm() < 1e-14);
+        assert!((c180.column(1) + c0.column(1)).norm() < 1e-14);
+        assert!((c180.column(2) - c0.column(2)).norm() < 1e-14);
+        // Level table: a pure heading change.
+        let k = turntable_kinematics(0.0, 0.0, h0, beta, rate);
+        assert!(k.roll_rad.abs() < 1e-15 && k.pitch_rad.abs() < 1e-15);
+        assert!((k.heading_rad - (h0 + beta)).abs() < 1e-14);
+        assert!((k.heading_rate_rad_s - rate).abs() < 1e-15);
     }
 }
