@@ -165,7 +165,9 @@ pub struct StaticTrajectory {
     /// Heading of the body (turntable at zero), degrees from north, clockwise.
     #[serde(default)]
     pub heading_deg: f64,
-    /// Turntable moves about the local vertical (applied in order, must not overlap).
+    /// Turntable moves about the table axis = body z (applied in order, must not overlap). The
+    /// roll and pitch above are the tilt of the table top, so with a tilted table the axis is
+    /// tilted too and the body turns about its own z axis (`C_n_b = C_n_b0·R_z(β)`).
     #[serde(default)]
     pub turntable: Vec<TurntableMove>,
 }
