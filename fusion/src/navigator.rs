@@ -88,6 +88,11 @@ pub struct ImuSpec {
     pub gyro_scale_ppm: f64,
     /// Accelerometer scale-factor error, ppm: initial σ of the accelerometer scale states.
     pub accel_scale_ppm: f64,
+    /// Axis misalignment of the triads (each off-diagonal term), arcsec. Not a state: the
+    /// body frame is realised by the IMU axes, so a boresight estimated against them carries
+    /// this as an irreducible bias relative to the true body; it is added to the reported
+    /// boresight σ ("consider" term, see [`Navigator::boresight_rad`]).
+    pub misalignment_arcsec: f64,
     /// Largest plausible angular rate, rad/s (input validation).
     pub max_rate_rad_s: f64,
     /// Largest plausible specific force, m/s² (input validation).
@@ -105,6 +110,7 @@ impl Default for ImuSpec {
             accel_bias_rw_ug_sqrt_h: 5.0,
             gyro_scale_ppm: 50.0,
             accel_scale_ppm: 100.0,
+            misalignment_arcsec: 10.0,
             max_rate_rad_s: 10.0,
             max_specific_force_m_s2: 300.0,
         }
@@ -549,6 +555,7 @@ impl NavigatorConfig {
         for (v, k) in [
             (self.imu.gyro_scale_ppm, "imu.gyro_scale_ppm"),
             (self.imu.accel_scale_ppm, "imu.accel_scale_ppm"),
+            (self.imu.misalignment_arcsec, "imu.misalignment_arcsec"),
             (
                 self.aiding.boresight_sigma_deg,
                 "aiding.boresight_sigma_deg",
@@ -1169,12 +1176,23 @@ impl Navigator {
         self.ekf.baro_bias_m
     }
 
-    /// Estimated star-tracker boresight angles κ1..κ3 (paper 000) and their 1-σ, rad.
+    /// Estimated star-tracker boresight angles κ1..κ3 (paper 000) and their 1-σ relative to
+    /// the true body frame, rad: `σ² = P_κκ + σ_mis²`, the filter's own variance (κ relative
+    /// to the frame the IMU axes realise) plus the IMU axis misalignment
+    /// (`imu.misalignment_arcsec`), which no estimator that uses the IMU as its body
+    /// reference can remove. 0 when the boresight group is off.
     pub fn boresight_rad(&self) -> (Vector3<f64>, Vector3<f64>) {
-        (
-            self.ekf.kappa_rad,
-            Vector3::from(diag_sigma(&self.ekf.p, idx::KAPPA)),
-        )
+        (self.ekf.kappa_rad, self.boresight_sigma())
+    }
+
+    fn boresight_sigma(&self) -> Vector3<f64> {
+        if !self.ekf.is_active(idx::KAPPA) {
+            return Vector3::zeros();
+        }
+        let mis = self.config.imu.misalignment_arcsec / 3600.0 * DEG;
+        Vector3::from_fn(|i, _| {
+            (self.ekf.p[(idx::KAPPA + i, idx::KAPPA + i)].max(0.0) + mis * mis).sqrt()
+        })
     }
 
     /// Receiver clock: bias × c (m), drift × c (m/s) and their 1-σ; zeros before tight
@@ -1848,7 +1866,7 @@ impl Navigator {
             gyro_scale_ppm: (self.ekf.gyro_scale * 1e6).into(),
             accel_scale_ppm: (self.ekf.accel_scale * 1e6).into(),
             boresight_rad: self.ekf.kappa_rad.into(),
-            boresight_sigma_rad: diag_sigma(p, idx::KAPPA),
+            boresight_sigma_rad: self.boresight_sigma().into(),
             clock_bias_m: self.ekf.clock_bias_m,
             clock_drift_m_s: self.ekf.clock_drift_m_s,
             baro_bias_m: self.ekf.baro_bias_m,
