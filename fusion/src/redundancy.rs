@@ -126,6 +126,10 @@ pub struct FdiConfig {
     pub persistence_blocks: u32,
     /// Blocks averaged at the start to learn the fault-free parity offset (channel biases).
     pub learn_blocks: u32,
+    /// After learning, healthy blocks keep tracking the offset with this time constant in
+    /// blocks (follows temperature and random-walk bias drift; 0 = frozen). A drift-ramp
+    /// fault of slope `r` still shows as a lag `r · track_blocks · block length`.
+    pub track_blocks: u32,
     /// Exclude an isolated channel (false: detect and report only).
     pub exclude: bool,
 }
@@ -141,6 +145,7 @@ impl Default for FdiConfig {
             false_alarm_probability: 1e-4,
             persistence_blocks: 2,
             learn_blocks: 30,
+            track_blocks: 600,
             exclude: true,
         }
     }
@@ -219,6 +224,9 @@ struct ParityState {
     sum_x: Vector3<f64>,
     offset: ChannelVector,
     learn_sum: ChannelVector,
+    /// Mean combined block increment while learning (the scale/axis errors at that motion
+    /// are in the offset; the adaptive term uses the change from it).
+    x_learn: Vector3<f64>,
     sigma: f64,
     relative_sigma: f64,
 }
@@ -230,6 +238,7 @@ impl ParityState {
             sum_x: Vector3::zeros(),
             offset: ChannelVector::zeros(),
             learn_sum: ChannelVector::zeros(),
+            x_learn: Vector3::zeros(),
             sigma,
             relative_sigma,
         }
@@ -431,7 +440,7 @@ impl RedundantImu {
     fn test(&self, st: &ParityState) -> BlockTest {
         let m = f64::from(self.config.block_samples);
         let r = self.projector * st.sum_z - st.offset;
-        let kx = st.relative_sigma * st.sum_x.norm();
+        let kx = st.relative_sigma * (st.sum_x - st.x_learn).norm();
         let var = m * st.sigma * st.sigma + kx * kx;
         let statistic = r.norm_squared() / var;
         let dof = self.status.dof as usize;
@@ -465,6 +474,8 @@ impl RedundantImu {
             let ra = self.projector * self.accel.sum_z;
             self.gyro.learn_sum += rg;
             self.accel.learn_sum += ra;
+            self.gyro.x_learn += self.gyro.sum_x / learn as f64;
+            self.accel.x_learn += self.accel.sum_x / learn as f64;
             if self.blocks == learn {
                 self.gyro.offset = self.gyro.learn_sum / learn as f64;
                 self.accel.offset = self.accel.learn_sum / learn as f64;
@@ -474,6 +485,13 @@ impl RedundantImu {
         }
         let g = self.test(&self.gyro);
         let a = self.test(&self.accel);
+        if !(g.over || a.over) && self.config.track_blocks > 0 {
+            let w = 1.0 / f64::from(self.config.track_blocks);
+            for st in [&mut self.gyro, &mut self.accel] {
+                let r = self.projector * st.sum_z;
+                st.offset += (r - st.offset) * w;
+            }
+        }
         self.reset_sums();
         self.status.blocks_tested += 1;
         self.status.last_gyro_statistic = g.statistic;
@@ -683,6 +701,7 @@ mod tests {
             false_alarm_probability: 0.01,
             persistence_blocks: 1,
             learn_blocks: 0,
+            track_blocks: 0,
             exclude: false,
             ..Default::default()
         };

@@ -127,6 +127,7 @@ fn redundant_channels_allocate_nothing_per_step() {
     }
     let used = count() - start;
     let st = nav.redundancy_status().expect("channels seen");
+    eprintln!("{st:?}");
     assert_eq!(used, 0, "push_imu with channels allocated {used} times");
     assert_eq!(st.excluded_mask, 1 << 2, "{st:?}");
     assert_eq!(st.faults_detected, 1);
