@@ -525,7 +525,9 @@ fn tangent_basis(d: &Vector3<f64>) -> Matrix3x2<f64> {
 /// `d_model = c_s_b(κ) d_b(γ_k, θ_k)`, T a basis across `d_model`; its covariance
 /// `Tᵀ([d×] diag(σc², σc², σr²) [d×]ᵀ + σ_t² (I − d dᵀ)) T`. Normal equations with the prior:
 /// `(Σ Jᵀ R⁻¹ J + P₀⁻¹) Δκ = −Σ Jᵀ R⁻¹ r − P₀⁻¹ (κ − κ₀)`; the inverse of the left matrix is
-/// the covariance of κ̂. Stops when the step is below 1e-12 rad.
+/// the covariance of κ̂. Stops when every component of the step is below 10⁻³ of its σ
+/// (further iterations could not change the estimate measurably; an absolute bound is not
+/// usable because the unobservable direction is conditioned ≈ 10⁸ worse than the others).
 pub fn least_squares(
     samples: &[BoresightSample],
     c_e_i: &[Matrix3<f64>],
@@ -615,7 +617,10 @@ pub fn least_squares(
         };
         kappa += step;
         iterations += 1;
-        if step.norm() < 1e-12 {
+        let converged = normal
+            .try_inverse()
+            .is_some_and(|p| (0..3).all(|j| step[j].abs() < 1e-3 * p[(j, j)].max(0.0).sqrt()));
+        if converged {
             break;
         }
     }
