@@ -3,15 +3,16 @@
 //! and after GNSS outages, and IMU-to-solution latency. Used by `sextant run` and, later,
 //! `sextant report`.
 //!
-//! A recording cut short by a crash is read up to its last complete chunk
-//! (`Summary::truncated` tells).
+//! Read through [`crate::recording`]; a recording cut short by a crash is read up to its last
+//! complete chunk (`Summary::recording_truncated` tells).
 
 use crate::foxglove::{NedOrigin, ned_offset};
+use crate::recorder::Record;
+use crate::recording::{Recording, RecordingError};
 use crate::scenario::TimeWindow;
 use crate::stats::{max_abs, percentile, rms};
-use mcap::MessageStream;
-use msgs::{Channel, Header, NavMode, NavSolution, Status, TruthSample};
-use serde::{Deserialize, Serialize};
+use msgs::{NavMode, NavSolution, Status, TruthSample};
+use serde::Serialize;
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 
@@ -131,11 +132,6 @@ pub struct Analysis {
     pub series: Series,
 }
 
-#[derive(Deserialize)]
-struct HeaderOnly {
-    header: Header,
-}
-
 /// Seconds after an outage over which the recovery RMS is computed.
 pub const AFTER_OUTAGE_S: f64 = 60.0;
 
@@ -179,22 +175,13 @@ pub fn analyze_recording(path: &Path, outages: &[TimeWindow]) -> Result<Summary,
 
 /// Like [`analyze_recording`], with the time series for plots.
 pub fn analyze(path: &Path, outages: &[TimeWindow]) -> Result<Analysis, AnalysisError> {
-    let bytes = std::fs::read(path).map_err(|source| AnalysisError::Read {
-        path: path.to_path_buf(),
-        source,
-    })?;
-    if !bytes.starts_with(b"\x89MCAP0\r\n") {
-        return Err(AnalysisError::NotMcap {
+    let rec = Recording::open(path).map_err(|e| match e {
+        RecordingError::Io { path, source } => AnalysisError::Read { path, source },
+        other => AnalysisError::NotMcap {
             path: path.to_path_buf(),
-            detail: "no MCAP magic at the start".into(),
-        });
-    }
-    let stream =
-        MessageStream::new_with_options(&bytes, mcap::read::Options::IgnoreEndMagic.into())
-            .map_err(|e| AnalysisError::NotMcap {
-                path: path.to_path_buf(),
-                detail: e.to_string(),
-            })?;
+            detail: other.to_string(),
+        },
+    })?;
     let mut s = Summary {
         recording: path.display().to_string(),
         ..Default::default()
@@ -205,7 +192,7 @@ pub fn analyze(path: &Path, outages: &[TimeWindow]) -> Result<Analysis, Analysis
     let mut navs: Vec<NavSolution> = Vec::new();
     let mut last_status: Option<Status> = None;
     let (mut t_min, mut t_max) = (i64::MAX, i64::MIN);
-    for m in stream {
+    for m in rec {
         let m = match m {
             Ok(m) => m,
             Err(e) => {
@@ -214,15 +201,17 @@ pub fn analyze(path: &Path, outages: &[TimeWindow]) -> Result<Analysis, Analysis
                 break;
             }
         };
-        let topic = m.channel.topic.clone();
-        *s.messages_per_channel.entry(topic.clone()).or_insert(0) += 1;
-        let Some(ch) = Channel::from_name(&topic) else {
+        *s.messages_per_channel
+            .entry(m.topic.to_string())
+            .or_insert(0) += 1;
+        let Some(record) = m.record else {
             continue;
         };
-        let Ok(h) = serde_json::from_slice::<HeaderOnly>(&m.data) else {
+        let Some(ch) = record.channel() else {
             continue;
         };
-        let h = h.header;
+        let topic = ch.name().to_string();
+        let h = *record.header();
         if h.time_ns > 0 {
             t_min = t_min.min(h.time_ns);
             t_max = t_max.max(h.time_ns);
@@ -240,23 +229,13 @@ pub fn analyze(path: &Path, outages: &[TimeWindow]) -> Result<Analysis, Analysis
                     .or_insert(0) += 1;
             }
         }
-        match ch {
-            Channel::Truth => {
-                if let Ok(t) = serde_json::from_slice::<TruthSample>(&m.data) {
-                    first_truth.get_or_insert(t);
-                    truth.insert(t.header.time_ns, t);
-                }
+        match record {
+            Record::Truth(t) => {
+                first_truth.get_or_insert(t);
+                truth.insert(t.header.time_ns, t);
             }
-            Channel::Nav => {
-                if let Ok(n) = serde_json::from_slice::<NavSolution>(&m.data) {
-                    navs.push(n);
-                }
-            }
-            Channel::Status => {
-                if let Ok(st) = serde_json::from_slice::<Status>(&m.data) {
-                    last_status = Some(st);
-                }
-            }
+            Record::Nav(n) => navs.push(n),
+            Record::Status(st) => last_status = Some(*st),
             _ => {}
         }
     }

@@ -24,3 +24,4 @@ pub mod stats;
 pub mod recording;
 pub mod bench;
 pub mod replay;
+pub mod report;

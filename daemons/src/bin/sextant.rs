@@ -38,6 +38,18 @@ enum Command {
     /// Replay a recording: offline through the fusion (bit-exact check, or other settings with
     /// --config), or live onto the iceoryx2 services (bench).
     Replay(ReplayArgs),
+    /// Post-analysis of a recording: errors against truth, NIS per sensor, rejections, mode
+    /// changes, dropouts; REPORT.md, summary.json and PNG plots.
+    Report(ReportArgs),
+}
+
+#[derive(Debug, clap::Args)]
+struct ReportArgs {
+    /// The recording.
+    recording: PathBuf,
+    /// Output directory (default out/report).
+    #[arg(long, default_value = "out/report")]
+    out: PathBuf,
 }
 
 #[derive(Debug, clap::Args)]
@@ -142,6 +154,15 @@ fn main() -> anyhow::Result<()> {
         Command::Experiment(args) => experiment(args),
         Command::Bench(args) => bench(args),
         Command::Replay(args) => replay(args),
+        Command::Report(args) => {
+            let s = sextant_daemons::report::report(&args.recording, &args.out)?;
+            println!("{}", sextant_daemons::report::format_table(&s));
+            println!(
+                "REPORT.md, summary.json and plots in {}",
+                args.out.display()
+            );
+            Ok(())
+        }
     }
 }
 
