@@ -25,3 +25,4 @@ pub mod recording;
 pub mod bench;
 pub mod replay;
 pub mod report;
+pub mod calibrate;

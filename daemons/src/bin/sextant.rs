@@ -41,6 +41,9 @@ enum Command {
     /// Post-analysis of a recording: errors against truth, NIS per sensor, rejections, mode
     /// changes, dropouts; REPORT.md, summary.json and PNG plots.
     Report(ReportArgs),
+    /// Calibrate a sensor from a recording: `calibrate boresight REC.mcap --site LAT,LON,H`
+    /// estimates the star-tracker / IMU boresight angles κ1..κ3 (paper 000) from a static log.
+    Calibrate(CalibrateArgs),
 }
 
 #[derive(Debug, clap::Args)]
@@ -130,6 +133,31 @@ struct RunArgs {
     restart_delay: f64,
 }
 
+#[derive(Debug, clap::Args)]
+struct CalibrateArgs {
+    #[command(subcommand)]
+    what: CalibrateWhat,
+}
+
+#[derive(Debug, Subcommand)]
+enum CalibrateWhat {
+    /// Star-tracker boresight from a static recording at a known site: the paper's three
+    /// stages and least squares; prints a table, writes summary.json and a PNG plot.
+    Boresight {
+        /// The recording (MCAP) of a static run with star-tracker and IMU channels.
+        recording: PathBuf,
+        /// Known site: latitude, longitude (deg), height (m), e.g. `55.655,37.534,200`.
+        #[arg(long, allow_hyphen_values = true)]
+        site: sextant_daemons::calibrate::SiteArg,
+        /// Output directory.
+        #[arg(long, default_value = "out/calibrate")]
+        out: PathBuf,
+        /// Calibration window from the start of the record, s.
+        #[arg(long, default_value_t = 600.0)]
+        window: f64,
+    },
+}
+
 const DEFAULT_CONFIG: &str = "config/sextant.toml";
 
 fn main() -> anyhow::Result<()> {
@@ -154,6 +182,26 @@ fn main() -> anyhow::Result<()> {
         Command::Experiment(args) => experiment(args),
         Command::Bench(args) => bench(args),
         Command::Replay(args) => replay(args),
+        Command::Calibrate(CalibrateArgs {
+            what:
+                CalibrateWhat::Boresight {
+                    recording,
+                    site,
+                    out,
+                    window,
+                },
+        }) => {
+            let opts = sextant_daemons::calibrate::BoresightOptions {
+                recording,
+                site,
+                out: out.clone(),
+                window_s: window,
+            };
+            let s = sextant_daemons::calibrate::boresight(&opts)?;
+            println!("{}", sextant_daemons::calibrate::table(&s));
+            println!("summary.json and plot in {}", out.display());
+            Ok(())
+        }
         Command::Report(args) => {
             let s = sextant_daemons::report::report(&args.recording, &args.out)?;
             println!("{}", sextant_daemons::report::format_table(&s));
