@@ -13,6 +13,7 @@
 //! plots into the output directory, and returns the summary so that the caller can print it
 //! with the experiment's `table`.
 
+pub mod alignment;
 pub mod all;
 pub mod astro_calibration;
 pub mod consistency;
@@ -61,7 +62,7 @@ pub enum ExperimentError {
 
 /// Names of the experiments, in the order of the issue.
 pub fn names() -> &'static [&'static str] {
-    &["integrators", "schuler", "gravity", "consistency", "astro-calibration"]
+    &["integrators", "schuler", "gravity", "consistency", "astro-calibration", "alignment"]
 }
 
 /// Run the experiment `name` into `out_dir` (created if missing); `progress` shows progress
@@ -77,6 +78,7 @@ pub fn run_by_name(
         "gravity" => gravity::run(out_dir, progress),
         "consistency" => consistency::run(out_dir, progress),
         "astro-calibration" => astro_calibration::run(out_dir, progress),
+        "alignment" => alignment::run(out_dir, progress),
         "all" => all::run(out_dir, progress),
         _ => Err(unknown(name)),
     }
@@ -90,6 +92,7 @@ pub fn table_by_name(name: &str, summary: &serde_json::Value) -> Result<String, 
         "gravity" => Ok(gravity::table(summary)),
         "consistency" => Ok(consistency::table(summary)),
         "astro-calibration" => Ok(astro_calibration::table(summary)),
+        "alignment" => Ok(alignment::table(summary)),
         "all" => Ok(all::table(summary)),
         _ => Err(unknown(name)),
     }
