@@ -6,19 +6,32 @@
 //! `Initializing` (no IMU yet) → `Aligning`: IMU increments are averaged for
 //! [`NavigatorConfig::alignment_s`] (paper 003 static alignment, [`crate::alignment`]) while the
 //! first valid GNSS fix (or [`NavigatorConfig::initial_position`]) gives the position →
-//! navigating: strapdown ([`crate::strapdown`]) plus the 15-state error-state EKF
+//! navigating: strapdown ([`crate::strapdown`]) plus the 28-state error-state EKF
 //! ([`crate::ekf`]), mode from the aiding actually fused within its deadline.
 //!
-//! # Delayed fusion
+//! # Delayed fusion (at the time of validity, exactly)
 //! Aiding samples are queued in fixed-capacity, time-ordered ring buffers (no allocation) and
-//! fused when the IMU time reaches their time of validity. The simulator puts every sample on
-//! the IMU time grid; a sample whose time falls between two IMU epochs is fused at the first IMU
-//! epoch ≥ its time (an approximation of at most one IMU interval, ≤ 5 ms at 200 Hz). A sample
-//! that arrives after the IMU has passed its time, but within
-//! [`NavigatorConfig::buffer_window_s`], is evaluated against the inertial state stored for that
-//! epoch (a short state history that every correction also updates), and its correction is
-//! applied to the current state (the error state changes negligibly over the window).
-//! Older samples are counted in `dropped_late` and never fused.
+//! fused when the IMU time reaches their time of validity: at the first IMU epoch ≥ that time
+//! (the simulator puts every sample on the IMU grid; otherwise the approximation is at most one
+//! IMU interval, ≤ 5 ms at 200 Hz).
+//!
+//! A sample that arrives after the inertial solution has passed its time (but within
+//! [`NavigatorConfig::buffer_window_s`]) is fused by **re-propagation from buffered IMU
+//! data**: every 100 ms of IMU time the replayable filter state (inertial state, error-state
+//! filter with its covariance and pending transition, strapdown history, ZUPT/baro
+//! schedulers) is checkpointed; the validated IMU increments and every fused aiding sample
+//! are kept for the window. At the next IMU sample the navigator restores the latest
+//! checkpoint before the late sample's time, re-queues the aiding fused since then and
+//! replays the logged IMU steps, fusing everything — the late sample included — at the epoch,
+//! with the state *and covariance* that an in-time arrival would have met. The result is the
+//! in-time result up to floating-point rounding (test
+//! `late_gnss_sample_gives_the_in_time_update`), unlike the usual shortcut of applying a
+//! correction computed with the current covariance (which ignores the cross-covariance
+//! between the delayed and the current error). Cost: one replay of up to window + 100 ms of
+//! IMU steps (≈ 2 µs each) per burst of late samples. Samples older than the window are
+//! counted in `dropped_late` and never fused; right after alignment, when no checkpoint is
+//! old enough yet, a late sample is fused at the next epoch. Health counters count every
+//! sample once (re-fused samples do not count again).
 //!
 //! # Input validation
 //! Every sample is checked (NaN/inf, impossible magnitudes, time not increasing, duplicated
@@ -593,7 +606,8 @@ impl NavigatorConfig {
 /// Time-ordered ring buffer of fixed capacity (no allocation).
 #[derive(Debug, Clone)]
 struct TimeQueue<T: Copy + Default, const CAP: usize> {
-    buf: [(i64, T); CAP],
+    /// (time of validity, value, already counted in the health counters).
+    buf: [(i64, T, bool); CAP],
     head: usize,
     len: usize,
 }
@@ -601,7 +615,7 @@ struct TimeQueue<T: Copy + Default, const CAP: usize> {
 impl<T: Copy + Default, const CAP: usize> TimeQueue<T, CAP> {
     fn new() -> Self {
         Self {
-            buf: [(0, T::default()); CAP],
+            buf: [(0, T::default(), false); CAP],
             head: 0,
             len: 0,
         }
@@ -610,7 +624,11 @@ impl<T: Copy + Default, const CAP: usize> TimeQueue<T, CAP> {
         (self.head + i) % CAP
     }
     /// Insert keeping time order; when full, the oldest entry is evicted and returned.
-    fn insert(&mut self, t: i64, v: T) -> Option<(i64, T)> {
+    fn insert(&mut self, t: i64, v: T) -> Option<(i64, T, bool)> {
+        self.insert_flagged(t, v, false)
+    }
+    /// Insert with the "already counted" flag (samples re-queued for a replay).
+    fn insert_flagged(&mut self, t: i64, v: T, counted: bool) -> Option<(i64, T, bool)> {
         let evicted = if self.len == CAP {
             let e = self.buf[self.head];
             self.head = (self.head + 1) % CAP;
@@ -627,11 +645,22 @@ impl<T: Copy + Default, const CAP: usize> TimeQueue<T, CAP> {
             i -= 1;
         }
         let s = self.slot(i);
-        self.buf[s] = (t, v);
+        self.buf[s] = (t, v, counted);
         evicted
     }
+    /// Remove and return the newest entry if its time is > `t`.
+    fn pop_newer(&mut self, t: i64) -> Option<(i64, T, bool)> {
+        if self.len > 0 {
+            let s = self.slot(self.len - 1);
+            if self.buf[s].0 > t {
+                self.len -= 1;
+                return Some(self.buf[s]);
+            }
+        }
+        None
+    }
     /// Remove and return the oldest entry if its time is ≤ `t`.
-    fn pop_due(&mut self, t: i64) -> Option<(i64, T)> {
+    fn pop_due(&mut self, t: i64) -> Option<(i64, T, bool)> {
         if self.len > 0 && self.buf[self.head].0 <= t {
             let e = self.buf[self.head];
             self.head = (self.head + 1) % CAP;
@@ -736,14 +765,75 @@ struct StarObs {
     sigma_roll: f64,
 }
 
-/// State history entry for late samples.
-#[derive(Debug, Clone, Copy)]
-struct HistEntry {
+/// One navigating IMU step as logged for replay (validated, channels already combined).
+#[derive(Debug, Clone, Copy, Default)]
+struct ImuLogEntry {
     t: i64,
-    nav: NavState,
+    prev_t: Option<i64>,
+    dth: Vector3<f64>,
+    dv: Vector3<f64>,
+    dt_s: f64,
 }
 
-const HIST_CAP: usize = 512;
+/// Everything an IMU step or an update changes, at the end of one IMU epoch `t` (the
+/// replayable part of the navigator; health counters are not in it).
+#[derive(Debug, Clone)]
+struct Checkpoint {
+    t: i64,
+    nav: NavState,
+    ekf: ErrorStateEkf,
+    strapdown: Strapdown,
+    static_since: Option<i64>,
+    last_zupt: Option<i64>,
+    last_baro_fused: Option<i64>,
+    last_odo: Option<(i64, f64)>,
+    clock_initialized: bool,
+}
+
+/// Fixed-capacity ring (allocated once at construction, never again).
+#[derive(Debug, Clone)]
+struct Ring<T: Clone> {
+    buf: Vec<T>,
+    head: usize,
+    len: usize,
+}
+
+impl<T: Clone> Ring<T> {
+    fn new(cap: usize, fill: T) -> Self {
+        Self {
+            buf: vec![fill; cap],
+            head: 0,
+            len: 0,
+        }
+    }
+    fn get(&self, i: usize) -> &T {
+        &self.buf[(self.head + i) % self.buf.len()]
+    }
+    /// Append, evicting the oldest entry when full.
+    fn push(&mut self, v: T) {
+        let cap = self.buf.len();
+        let i = (self.head + self.len) % cap;
+        self.buf[i] = v;
+        if self.len == cap {
+            self.head = (self.head + 1) % cap;
+        } else {
+            self.len += 1;
+        }
+    }
+    fn truncate(&mut self, len: usize) {
+        self.len = self.len.min(len);
+    }
+    fn clear(&mut self) {
+        self.len = 0;
+    }
+}
+
+/// Checkpoints are taken at this period of IMU time, ns.
+const CHECKPOINT_PERIOD_NS: i64 = 100_000_000;
+/// Checkpoints kept: the 2 s longest buffer window plus margin, at the period above.
+const CHECKPOINT_CAP: usize = 32;
+/// IMU steps kept for replay: > 2.3 s at 400 Hz.
+const IMU_LOG_CAP: usize = 1024;
 const GNSS_CAP: usize = 32;
 const STAR_CAP: usize = 64;
 const ODO_CAP: usize = 256;
@@ -839,9 +929,18 @@ pub struct Navigator {
     star_q: TimeQueue<StarObs, STAR_CAP>,
     odo_q: TimeQueue<f64, ODO_CAP>,
     baro_q: TimeQueue<f64, BARO_CAP>,
-    hist: [HistEntry; HIST_CAP],
-    hist_head: usize,
-    hist_len: usize,
+    imu_log: Ring<ImuLogEntry>,
+    checkpoints: Ring<Checkpoint>,
+    gnss_done: TimeQueue<GnssObs, GNSS_CAP>,
+    star_done: TimeQueue<StarObs, STAR_CAP>,
+    odo_done: TimeQueue<f64, ODO_CAP>,
+    baro_done: TimeQueue<f64, BARO_CAP>,
+    /// Earliest time of validity of a sample that arrived after the IMU passed it.
+    rewind_to: Option<i64>,
+    replaying: bool,
+    /// Whether the sample being fused counts in the health counters (false when it is
+    /// re-fused during a replay).
+    count_health: bool,
     last_baro_fused: Option<i64>,
     last_odo: Option<(i64, f64)>,
     static_since: Option<i64>,
@@ -897,9 +996,32 @@ impl Navigator {
             star_q: TimeQueue::new(),
             odo_q: TimeQueue::new(),
             baro_q: TimeQueue::new(),
-            hist: [HistEntry { t: 0, nav }; HIST_CAP],
-            hist_head: 0,
-            hist_len: 0,
+            imu_log: Ring::new(IMU_LOG_CAP, ImuLogEntry::default()),
+            checkpoints: Ring::new(
+                CHECKPOINT_CAP,
+                Checkpoint {
+                    t: 0,
+                    nav,
+                    ekf: ErrorStateEkf::new(
+                        Covariance::identity(),
+                        config.imu.process_noise(),
+                        ActiveStates::ALL,
+                    ),
+                    strapdown: Strapdown::new(config.mechanization()),
+                    static_since: None,
+                    last_zupt: None,
+                    last_baro_fused: None,
+                    last_odo: None,
+                    clock_initialized: false,
+                },
+            ),
+            gnss_done: TimeQueue::new(),
+            star_done: TimeQueue::new(),
+            odo_done: TimeQueue::new(),
+            baro_done: TimeQueue::new(),
+            rewind_to: None,
+            replaying: false,
+            count_health: true,
             last_baro_fused: None,
             last_odo: None,
             static_since: None,
@@ -951,34 +1073,19 @@ impl Navigator {
                 self.try_finish_alignment(t);
             }
             Phase::Navigating => {
-                // The increment covers dt_s; after missing samples, stretch it over the gap.
-                let gap_s = prev_t.map_or(s.dt_s, |p| (t - p) as f64 * 1e-9);
-                let (scale, dt) = if gap_s > 1.5 * s.dt_s {
-                    self.strapdown.reset_history();
-                    (gap_s / s.dt_s, gap_s)
-                } else {
-                    (1.0, s.dt_s)
-                };
-                let (dth_c, dv_c) = self
-                    .ekf
-                    .correct_increment(&(dth * scale), &(dv * scale), dt);
-                let inc = ImuIncrement {
-                    dt_s: dt,
-                    delta_angle_rad: dth_c,
-                    delta_velocity_m_s: dv_c,
-                };
-                self.strapdown.step(&mut self.nav, &inc);
-                self.ekf
-                    .accumulate(&self.nav, &(dv_c / dt), &(dth_c / dt), dt);
-                if self.ekf.pending_s() >= self.config.covariance_interval_s - 1e-9 {
-                    self.ekf.propagate_covariance(&self.ell, &self.nav.r_e);
+                if let Some(ts) = self.rewind_to.take() {
+                    self.replay_from(ts);
                 }
-                self.time_ns = t;
+                let e = ImuLogEntry {
+                    t,
+                    prev_t,
+                    dth,
+                    dv,
+                    dt_s: s.dt_s,
+                };
+                self.imu_log.push(e);
+                self.imu_step(&e);
                 self.health[id].fused += 1;
-                self.push_history();
-                self.update_static_detector(t, &inc);
-                self.fuse_due(t);
-                self.maybe_zupt(t);
             }
         }
         if self.phase != Phase::Navigating {
@@ -1028,6 +1135,8 @@ impl Navigator {
                 || self.star_q.insert(s.header.time_ns, obs).is_some()
             {
                 self.health[id].dropped_late += 1;
+            } else {
+                self.note_arrival(s.header.time_ns);
             }
         }
         Ok(())
@@ -1059,6 +1168,8 @@ impl Navigator {
         let obs = GnssObs { fix, n_sats, sats };
         if self.too_late(s.header.time_ns) || self.gnss_q.insert(s.header.time_ns, obs).is_some() {
             self.health[id].dropped_late += 1;
+        } else {
+            self.note_arrival(s.header.time_ns);
         }
         Ok(())
     }
@@ -1091,6 +1202,8 @@ impl Navigator {
             || self.odo_q.insert(s.header.time_ns, s.speed_m_s).is_some()
         {
             self.health[id].dropped_late += 1;
+        } else {
+            self.note_arrival(s.header.time_ns);
         }
         Ok(())
     }
@@ -1121,6 +1234,8 @@ impl Navigator {
         }
         if self.too_late(s.header.time_ns) || self.baro_q.insert(s.header.time_ns, h).is_some() {
             self.health[id].dropped_late += 1;
+        } else {
+            self.note_arrival(s.header.time_ns);
         }
         Ok(())
     }
@@ -1294,7 +1409,7 @@ impl Navigator {
     // ---------------------------------------------------------------- alignment
 
     fn consume_during_alignment(&mut self, t: i64) {
-        while let Some((_, obs)) = self.gnss_q.pop_due(t) {
+        while let Some((_, obs, _)) = self.gnss_q.pop_due(t) {
             if self.init_fix.is_none()
                 && let Some(fix) = obs.fix
             {
@@ -1399,79 +1514,160 @@ impl Navigator {
         self.strapdown = Strapdown::new(self.config.mechanization());
         self.phase = Phase::Navigating;
         self.time_ns = t;
-        self.hist_len = 0;
-        self.push_history();
+        self.imu_log.clear();
+        self.checkpoints.clear();
+        self.rewind_to = None;
+        self.take_checkpoint(t);
         // Aiding queued up to now belongs to the alignment period.
         self.gnss_q.clear();
     }
 
-    // ---------------------------------------------------------------- history
+    // ---------------------------------------------------------------- delayed fusion
 
-    fn push_history(&mut self) {
-        let i = (self.hist_head + self.hist_len) % HIST_CAP;
-        self.hist[i] = HistEntry {
-            t: self.time_ns,
-            nav: self.nav,
-        };
-        if self.hist_len == HIST_CAP {
-            self.hist_head = (self.hist_head + 1) % HIST_CAP;
+    /// One navigating IMU step (live or replayed): mechanization, transition accumulation,
+    /// covariance propagation at its interval, fusion of the aiding due, ZUPT, checkpoint.
+    fn imu_step(&mut self, e: &ImuLogEntry) {
+        let t = e.t;
+        // The increment covers dt_s; after missing samples, stretch it over the gap.
+        let gap_s = e.prev_t.map_or(e.dt_s, |p| (t - p) as f64 * 1e-9);
+        let (scale, dt) = if gap_s > 1.5 * e.dt_s {
+            self.strapdown.reset_history();
+            (gap_s / e.dt_s, gap_s)
         } else {
-            self.hist_len += 1;
+            (1.0, e.dt_s)
+        };
+        let (dth_c, dv_c) = self
+            .ekf
+            .correct_increment(&(e.dth * scale), &(e.dv * scale), dt);
+        let inc = ImuIncrement {
+            dt_s: dt,
+            delta_angle_rad: dth_c,
+            delta_velocity_m_s: dv_c,
+        };
+        self.strapdown.step(&mut self.nav, &inc);
+        self.ekf
+            .accumulate(&self.nav, &(dv_c / dt), &(dth_c / dt), dt);
+        if self.ekf.pending_s() >= self.config.covariance_interval_s - 1e-9 {
+            self.ekf.propagate_covariance(&self.ell, &self.nav.r_e);
+        }
+        self.time_ns = t;
+        self.update_static_detector(t, &inc);
+        self.fuse_due(t);
+        self.maybe_zupt(t);
+        let last = if self.checkpoints.len > 0 {
+            self.checkpoints.get(self.checkpoints.len - 1).t
+        } else {
+            i64::MIN / 2
+        };
+        if t - last >= CHECKPOINT_PERIOD_NS {
+            self.take_checkpoint(t);
         }
     }
 
-    /// Index of the first stored epoch with time ≥ `t`, None when older than the history.
-    fn history_at(&self, t: i64) -> Option<usize> {
-        if self.hist_len == 0 {
-            return None;
+    /// A sample queued at time of validity `ts`: if the inertial solution has already passed
+    /// it, the filter must rewind (done at the next IMU sample, once for a burst).
+    fn note_arrival(&mut self, ts: i64) {
+        if self.phase == Phase::Navigating && ts <= self.time_ns {
+            self.rewind_to = Some(self.rewind_to.map_or(ts, |r| r.min(ts)));
         }
-        let mut found = None;
-        for k in (0..self.hist_len).rev() {
-            let i = (self.hist_head + k) % HIST_CAP;
-            if self.hist[i].t >= t {
-                found = Some(i);
-            } else {
-                return found;
+    }
+
+    fn take_checkpoint(&mut self, t: i64) {
+        self.checkpoints.push(Checkpoint {
+            t,
+            nav: self.nav,
+            ekf: self.ekf.clone(),
+            strapdown: self.strapdown.clone(),
+            static_since: self.static_since,
+            last_zupt: self.last_zupt,
+            last_baro_fused: self.last_baro_fused,
+            last_odo: self.last_odo,
+            clock_initialized: self.clock_initialized,
+        });
+    }
+
+    /// Fuse late samples at their time of validity exactly as if they had arrived in time
+    /// (module docs, "Delayed fusion"): restore the latest checkpoint before `ts`, put the
+    /// aiding fused since then back in the queues (flagged as already counted) and replay the
+    /// logged IMU steps, which fuse every sample — the late ones included — at the epoch and
+    /// with the state and covariance an in-time arrival would have met. When no checkpoint is
+    /// old enough (right after alignment), the samples are fused at the next epoch instead.
+    fn replay_from(&mut self, ts: i64) {
+        let mut k = self.checkpoints.len;
+        while k > 0 && self.checkpoints.get(k - 1).t >= ts {
+            k -= 1;
+        }
+        if k == 0 {
+            return;
+        }
+        let c = self.checkpoints.get(k - 1).clone();
+        // The IMU log must reach back to the checkpoint epoch.
+        if self.imu_log.len == 0 || self.imu_log.get(0).t > c.t {
+            return;
+        }
+        self.checkpoints.truncate(k);
+        self.nav = c.nav;
+        self.ekf = c.ekf;
+        self.strapdown = c.strapdown;
+        self.static_since = c.static_since;
+        self.last_zupt = c.last_zupt;
+        self.last_baro_fused = c.last_baro_fused;
+        self.last_odo = c.last_odo;
+        self.clock_initialized = c.clock_initialized;
+        self.time_ns = c.t;
+        while let Some((t, v, _)) = self.gnss_done.pop_newer(c.t) {
+            self.gnss_q.insert_flagged(t, v, true);
+        }
+        while let Some((t, v, _)) = self.star_done.pop_newer(c.t) {
+            self.star_q.insert_flagged(t, v, true);
+        }
+        while let Some((t, v, _)) = self.odo_done.pop_newer(c.t) {
+            self.odo_q.insert_flagged(t, v, true);
+        }
+        while let Some((t, v, _)) = self.baro_done.pop_newer(c.t) {
+            self.baro_q.insert_flagged(t, v, true);
+        }
+        self.replaying = true;
+        for i in 0..self.imu_log.len {
+            let e = *self.imu_log.get(i);
+            if e.t > c.t {
+                self.imu_step(&e);
             }
         }
-        // Every stored epoch is ≥ t: only acceptable when t is not before the oldest one's
-        // interval (the first epoch after navigation start).
-        if k_oldest_covers(&self.hist[self.hist_head], t) {
-            found
-        } else {
-            None
-        }
+        self.replaying = false;
     }
 
-    /// Apply an accepted correction to the current state, the biases and the history.
+    /// Apply an accepted correction to the current state and the error estimates.
     fn correct(&mut self, dx: &StateVector) {
         self.ekf.apply_correction(&mut self.nav, dx);
-        let dr: Vector3<f64> = dx.fixed_rows::<3>(idx::POS).into_owned();
-        let dv: Vector3<f64> = dx.fixed_rows::<3>(idx::VEL).into_owned();
-        let dq = UnitQuaternion::from_scaled_axis(dx.fixed_rows::<3>(idx::ATT).into_owned());
-        for k in 0..self.hist_len {
-            let e = &mut self.hist[(self.hist_head + k) % HIST_CAP].nav;
-            e.r_e += dr;
-            e.v_e += dv;
-            e.q_e_b = dq * e.q_e_b;
-        }
     }
 
     // ---------------------------------------------------------------- fusion
 
+    /// Fuse every queued sample with time of validity ≤ `t` (the current epoch) and keep it
+    /// for a possible replay.
     fn fuse_due(&mut self, t: i64) {
-        while let Some((ts, fix)) = self.gnss_q.pop_due(t) {
-            self.fuse_gnss(ts, &fix);
+        while let Some((ts, obs, counted)) = self.gnss_q.pop_due(t) {
+            self.count_health = !counted;
+            self.fuse_gnss(ts, &obs);
+            self.gnss_done.insert_flagged(ts, obs, true);
         }
-        while let Some((ts, obs)) = self.star_q.pop_due(t) {
+        while let Some((ts, obs, counted)) = self.star_q.pop_due(t) {
+            self.count_health = !counted;
             self.fuse_star(ts, &obs);
+            self.star_done.insert_flagged(ts, obs, true);
         }
-        while let Some((ts, speed)) = self.odo_q.pop_due(t) {
+        while let Some((ts, speed, counted)) = self.odo_q.pop_due(t) {
+            self.count_health = !counted;
             self.fuse_odometer(ts, speed);
+            self.odo_done.insert_flagged(ts, speed, true);
         }
-        while let Some((ts, h)) = self.baro_q.pop_due(t) {
+        while let Some((ts, h, counted)) = self.baro_q.pop_due(t) {
+            self.count_health = !counted;
             self.fuse_baro(ts, h);
+            self.baro_done.insert_flagged(ts, h, true);
         }
+        self.count_health = true;
     }
 
     /// Run one gated update (health counters of sensor `id`, or the ZUPT counters for None);
@@ -1480,7 +1676,9 @@ impl Navigator {
         // The covariance must be at the current time before any update.
         self.ekf.propagate_covariance(&self.ell, &self.nav.r_e);
         let out = ekf::update(&self.ekf.p, m, self.gates.threshold(M));
-        if let Some(id) = id {
+        if !self.count_health || (id.is_none() && self.replaying) {
+            // Re-fused during a replay: counted the first time.
+        } else if let Some(id) = id {
             self.health[id].last_nis = out.residual.nis;
             if out.residual.rejected {
                 self.health[id].rejected_gate += 1;
@@ -1508,19 +1706,17 @@ impl Navigator {
     }
 
     fn mark_fused(&mut self, id: usize, ts: i64) {
-        self.health[id].fused += 1;
+        if self.count_health {
+            self.health[id].fused += 1;
+        }
         self.last_fused_ns[id] = Some(self.last_fused_ns[id].map_or(ts, |p| p.max(ts)));
     }
 
     fn fuse_gnss(&mut self, ts: i64, obs: &GnssObs) {
         let id = sid(SensorId::Gnss);
-        let Some(hi) = self.history_at(ts) else {
-            self.health[id].dropped_late += 1;
-            return;
-        };
         if self.config.gnss_mode == GnssMode::Tight {
             if obs.n_sats > 0 {
-                self.fuse_gnss_tight(ts, hi, obs);
+                self.fuse_gnss_tight(ts, obs);
             }
             return;
         }
@@ -1531,12 +1727,12 @@ impl Navigator {
         let mut fused = false;
         let mut nis = f64::NEG_INFINITY;
         if self.config.updates.gnss_position {
-            let m = ekf::gnss_position(&self.hist[hi].nav, &fix.pos, &fix.pos_cov);
+            let m = ekf::gnss_position(&self.nav, &fix.pos, &fix.pos_cov);
             fused |= self.run_update(Some(id), &m);
             nis = nis.max(self.health[id].last_nis);
         }
         if self.config.updates.gnss_velocity && fix.vel_valid {
-            let m = ekf::gnss_velocity(&self.hist[hi].nav, &fix.vel, &fix.vel_cov);
+            let m = ekf::gnss_velocity(&self.nav, &fix.vel, &fix.vel_cov);
             fused |= self.run_update(Some(id), &m);
             nis = nis.max(self.health[id].last_nis);
         }
@@ -1551,12 +1747,12 @@ impl Navigator {
     /// Tight coupling: every satellite's pseudorange and range rate as a sequential scalar
     /// update (each gated on its own 1-dof NIS) at the inertial state of the epoch; the clock
     /// states are initialised from the first epoch. The sample's NIS is the largest one.
-    fn fuse_gnss_tight(&mut self, ts: i64, hi: usize, obs: &GnssObs) {
+    fn fuse_gnss_tight(&mut self, ts: i64, obs: &GnssObs) {
         let id = sid(SensorId::Gnss);
         // The clock estimate is kept at the filter time; move it back to the sample's time.
         let back_s = (self.time_ns - ts) as f64 * 1e-9;
         if !self.clock_initialized {
-            self.initialize_clock(hi, obs, back_s);
+            self.initialize_clock(obs, back_s);
         }
         let mut fused = false;
         let mut nis = f64::NEG_INFINITY;
@@ -1564,7 +1760,7 @@ impl Navigator {
             if sat.has_pr {
                 let b = self.ekf.clock_bias_m - self.ekf.clock_drift_m_s * back_s;
                 let m = ekf::gnss_pseudorange(
-                    &self.hist[hi].nav,
+                    &self.nav,
                     &sat.pos,
                     sat.pseudorange_m,
                     b,
@@ -1575,7 +1771,7 @@ impl Navigator {
             }
             if sat.has_rr && self.config.updates.gnss_velocity {
                 let m = ekf::gnss_range_rate(
-                    &self.hist[hi].nav,
+                    &self.nav,
                     &sat.pos,
                     &sat.vel,
                     sat.range_rate_m_s,
@@ -1599,9 +1795,9 @@ impl Navigator {
     /// σ² = mean line-of-sight position (velocity) variance + measurement variance, times 4
     /// for margin (the residuals share the inertial error, so averaging does not reduce it).
     /// Works from one satellite; no 4-satellite fix is needed.
-    fn initialize_clock(&mut self, hi: usize, obs: &GnssObs, back_s: f64) {
+    fn initialize_clock(&mut self, obs: &GnssObs, back_s: f64) {
         self.ekf.propagate_covariance(&self.ell, &self.nav.r_e);
-        let nav = self.hist[hi].nav;
+        let nav = self.nav;
         let p_r: Matrix3<f64> = self
             .ekf
             .p
@@ -1665,14 +1861,10 @@ impl Navigator {
         if !self.config.updates.star_tracker {
             return;
         }
-        let Some(hi) = self.history_at(ts) else {
-            self.health[id].dropped_late += 1;
-            return;
-        };
         let c_e_i = self.celestial.c_e_i(GpsTime { ns: ts }, &self.config.eop);
         let q = quat_from_wire(&obs.q);
         let m = ekf::star_attitude(
-            &self.hist[hi].nav,
+            &self.nav,
             &q,
             &c_e_i,
             &self.c_s_b,
@@ -1691,15 +1883,11 @@ impl Navigator {
         if !self.config.updates.odometer {
             return;
         }
-        let Some(hi) = self.history_at(ts) else {
-            self.health[id].dropped_late += 1;
-            return;
-        };
         let a = &self.config.aiding;
         // The scale factor is a filter state (initial σ `odometer_scale_sigma`), so only the
         // white part of the odometer error is measurement noise.
         let sigma = a.odometer_sigma_m_s;
-        let nav = self.hist[hi].nav;
+        let nav = self.nav;
         let k = self.ekf.odo_scale;
         let ok = if self.config.updates.nonholonomic {
             let m = ekf::odometer_nhc(&nav, k, speed, sigma, a.nhc_sigma_m_s);
@@ -1724,12 +1912,8 @@ impl Navigator {
         {
             return;
         }
-        let Some(hi) = self.history_at(ts) else {
-            self.health[id].dropped_late += 1;
-            return;
-        };
         let m = ekf::baro_height(
-            &self.hist[hi].nav,
+            &self.nav,
             &self.ell,
             height_m,
             self.ekf.baro_bias_m,
@@ -1878,12 +2062,6 @@ impl Navigator {
 /// 1-σ of three consecutive states from the covariance diagonal.
 fn diag_sigma(p: &Covariance, k: usize) -> [f64; 3] {
     [0, 1, 2].map(|i| p[(k + i, k + i)].max(0.0).sqrt())
-}
-
-/// The oldest history epoch also stands for sample times inside the IMU interval before it
-/// (≤ 1 s: the longest accepted IMU interval).
-fn k_oldest_covers(oldest: &HistEntry, t: i64) -> bool {
-    oldest.t - t <= 1_000_000_000
 }
 
 fn invalid(sensor: &'static str, h: &Header, reason: &str) -> FusionError {
@@ -2344,6 +2522,100 @@ mod tests {
         let sol = nav.push_imu(&next).unwrap().unwrap();
         assert!(sol.pos_sigma_ned_m.iter().all(|s| s.is_finite()));
         assert!((nav.nav_state().r_e - sim.r_e).norm() < 5.0);
+    }
+
+    #[test]
+    fn late_gnss_sample_gives_the_in_time_update() {
+        // Two navigators see the same static-site stream (IMU 100 Hz, baro 10 Hz, GNSS 1 Hz).
+        // A gets each GNSS fix before the IMU sample of its time (in time); B gets the fix of
+        // t = 75 s only 0.3 s later, after 30 more IMU samples and 3 baro updates. B must
+        // rewind to its checkpoint before 75 s, re-fuse the baro samples and replay the IMU:
+        // the same floating-point operations in the same order, so the results agree to
+        // rounding — asserted at 1e-9 m / 1e-12 m/s / 1e-12 rad and 1e-9 relative for the
+        // covariance (the ops are identical; the bound only allows for a different
+        // summation order should the compiler choose one).
+        let cfg = quick_config();
+        let mut a = Navigator::new(cfg.clone()).unwrap();
+        let mut b = Navigator::new(cfg).unwrap();
+        let mut sim = StaticSim::new(31, 100.0);
+        let mut held: Option<(i64, GnssSample)> = None;
+        let late_at = T0 + 75_000_000_000;
+        let mut delayed = 0;
+        for k in 1..=(80 * 100) {
+            let imu = sim.next_imu();
+            let t = imu.header.time_ns;
+            if k % 10 == 0 {
+                let mut baro = BaroSample::default();
+                baro.header.time_ns = t;
+                baro.header.seq = k as u64;
+                baro.pressure_pa = crate::atmosphere::isa_pressure_pa(181.0);
+                baro.temperature_c = 15.0;
+                a.push_baro(&baro).unwrap();
+                b.push_baro(&baro).unwrap();
+            }
+            if k % 100 == 0 {
+                let g = sim.gnss();
+                a.push_gnss(&g).unwrap();
+                if t == late_at {
+                    held = Some((t + 300_000_000, g));
+                } else {
+                    b.push_gnss(&g).unwrap();
+                }
+            }
+            if let Some((when, g)) = held
+                && t >= when
+            {
+                assert!(
+                    g.header.time_ns < b.time_ns(),
+                    "the sample must really be late"
+                );
+                b.push_gnss(&g).unwrap();
+                held = None;
+                delayed += 1;
+            }
+            a.push_imu(&imu).unwrap();
+            b.push_imu(&imu).unwrap();
+        }
+        assert_eq!(delayed, 1);
+        let (na, nb) = (a.nav_state(), b.nav_state());
+        assert!(
+            (na.r_e - nb.r_e).norm() < 1e-9,
+            "{}",
+            (na.r_e - nb.r_e).norm()
+        );
+        assert!((na.v_e - nb.v_e).norm() < 1e-12);
+        assert!(na.q_e_b.angle_to(&nb.q_e_b) < 1e-12);
+        let dp = (a.covariance() - b.covariance()).abs().max() / a.covariance().abs().max();
+        assert!(dp < 1e-9, "covariance differs by {dp}");
+        // Every sample counted once, the late one included.
+        for s in [SensorId::Gnss, SensorId::Baro] {
+            let (ha, hb) = (a.health()[s as usize], b.health()[s as usize]);
+            assert_eq!(ha.fused, hb.fused, "{s:?}");
+            assert_eq!(ha.nis_count, hb.nis_count, "{s:?}");
+            assert_eq!(hb.dropped_late, 0);
+        }
+        // And the late fix did matter: without it the state differs.
+        let mut c = Navigator::new(quick_config()).unwrap();
+        let mut sim = StaticSim::new(31, 100.0);
+        for k in 1..=(80 * 100) {
+            let imu = sim.next_imu();
+            if k % 10 == 0 {
+                let mut baro = BaroSample::default();
+                baro.header.time_ns = imu.header.time_ns;
+                baro.header.seq = k as u64;
+                baro.pressure_pa = crate::atmosphere::isa_pressure_pa(181.0);
+                baro.temperature_c = 15.0;
+                c.push_baro(&baro).unwrap();
+            }
+            if k % 100 == 0 {
+                let g = sim.gnss();
+                if imu.header.time_ns != late_at {
+                    c.push_gnss(&g).unwrap();
+                }
+            }
+            c.push_imu(&imu).unwrap();
+        }
+        assert!((c.nav_state().r_e - na.r_e).norm() > 1e-4);
     }
 
     #[test]

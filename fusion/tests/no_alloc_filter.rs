@@ -3,7 +3,7 @@
 //! GNSS, star-tracker, odometer and baro samples fused inside it, and zero-velocity updates),
 //! the `push_*` queueing calls and every `ekf` measurement update must not move the count;
 //! likewise a second navigator in tight GNSS mode (per-satellite pseudorange and range-rate
-//! updates, clock states).
+//! updates, clock states), and a late sample that forces a rewind and replay.
 //! One `#[test]` only, so that no other test thread allocates concurrently.
 
 use msgs::{
@@ -165,6 +165,24 @@ fn filter_allocates_nothing_in_steady_state() {
         let sol = step(&mut nav_tight, k).expect("navigating");
         assert!(sol.clock_bias_m.is_finite());
     }
+    // A late sample: a GNSS fix of 25 ms ago arrives after the IMU has passed it, so the next
+    // IMU sample makes the navigator rewind to a checkpoint and replay (delayed fusion) —
+    // still no allocation.
+    for _ in 0..4 {
+        k += 1;
+        step(&mut nav, k).expect("navigating");
+    }
+    let gnss_fused = nav.health()[SensorId::Gnss as usize].fused;
+    let mut late = GnssSample::default();
+    late.header.time_ns = T0 + k * 10_000_000 - 25_000_000;
+    late.header.seq = 9_999_999;
+    late.fix_valid = 1;
+    late.pos_ecef_m = r_e.into();
+    late.pos_cov_ecef_m2 = [4.0, 0.0, 0.0, 0.0, 4.0, 0.0, 0.0, 0.0, 4.0];
+    nav.push_gnss(&late).unwrap();
+    k += 1;
+    step(&mut nav, k).expect("navigating");
+    assert_eq!(nav.health()[SensorId::Gnss as usize].fused, gnss_fused + 1);
     let used = count() - before;
     assert_eq!(
         used, 0,
