@@ -876,3 +876,125 @@ pub fn dropouts_per_channel(s: &ReportSummary) -> BTreeMap<String, u64> {
         .map(|r| (r.sensor.clone(), r.dropouts))
         .collect()
 }
+
+#[cfg(test)]
+#[allow(clippy::field_reassign_with_default)]
+mod tests {
+    use super::*;
+    use crate::recorder::{Recorder, RecorderOptions, SensorAliveEvent};
+    use msgs::ImuSample;
+
+    /// WGS-84 ECEF of geodetic (lat, lon, h) — independent of the code under test.
+    fn ecef(lat: f64, lon: f64, h: f64) -> [f64; 3] {
+        let a = 6378137.0;
+        let f = 1.0 / 298.257223563;
+        let e2 = f * (2.0 - f);
+        let n = a / (1.0 - e2 * lat.sin().powi(2)).sqrt();
+        [
+            (n + h) * lat.cos() * lon.cos(),
+            (n + h) * lat.cos() * lon.sin(),
+            (n * (1.0 - e2) + h) * lat.sin(),
+        ]
+    }
+
+    /// Synthetic recording with known errors: the solution is 1 m north and 0.5 m up of the
+    /// truth with σ = 0.4 m, and 0.01 rad off in heading; the IMU has a 1 s gap.
+    #[test]
+    fn known_errors_nis_and_dropouts_are_reported_exactly() {
+        let dir = std::env::temp_dir().join(format!("sextant-report-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("recording.mcap");
+        let rec = Recorder::start(&path, &RecorderOptions::default()).unwrap();
+        let (lat, lon) = (0.8f64, 0.3f64);
+        // Meridian radius of curvature: 1 m north = 1/(M+h) rad of latitude.
+        let a = 6378137.0;
+        let e2 = (1.0 / 298.257223563) * (2.0 - 1.0 / 298.257223563);
+        let m = a * (1.0 - e2) / (1.0 - e2 * lat.sin().powi(2)).powf(1.5);
+        let t0 = 1_400_000_000_000_000_000i64;
+        let mut ev = SensorAliveEvent::default();
+        ev.sensor = 2;
+        ev.alive = true;
+        rec.record(Record::SensorAlive(ev), 0);
+        let yaw = 0.01f64;
+        for k in 0..1000i64 {
+            let t = t0 + k * 5_000_000;
+            // IMU gap: samples 400..=599 missing (1 s at 200 Hz → one gap of 1.005 s).
+            if !(400..600).contains(&k) {
+                let mut imu = ImuSample::default();
+                imu.header.time_ns = t;
+                rec.record(Record::Imu(imu), 0);
+            }
+            let mut tr = TruthSample::default();
+            tr.header.time_ns = t;
+            tr.lat_rad = lat;
+            tr.lon_rad = lon;
+            tr.pos_ecef_m = ecef(lat, lon, 100.0);
+            tr.q_ned_body = [1.0, 0.0, 0.0, 0.0];
+            rec.record(Record::Truth(tr), 0);
+            let mut n = NavSolution::default();
+            n.header.time_ns = t;
+            n.mode = NavMode::GnssInertial as u32;
+            n.pos_ecef_m = ecef(lat + 1.0 / (m + 100.0), lon, 100.5);
+            n.pos_sigma_ned_m = [0.4, 0.4, 0.4];
+            n.att_sigma_ned_rad = [0.001, 0.001, 0.001];
+            n.q_ned_body = [(yaw / 2.0).cos(), 0.0, 0.0, (yaw / 2.0).sin()];
+            rec.record(Record::Nav(n), 0);
+        }
+        let mut st = Status::default();
+        st.header.time_ns = t0 + 5_000_000_000;
+        st.sensors[2].nis_sum = 30.0;
+        st.sensors[2].nis_count = 10;
+        st.sensors[2].nis_dof_sum = 60;
+        st.sensors[2].fused = 10;
+        rec.record(Record::Status(Box::new(st)), 0);
+        rec.finish().unwrap();
+
+        let out = dir.join("report");
+        let s = report(&path, &out).unwrap();
+        assert!(s.recording_complete && s.recording_error.is_none());
+        let e = s.truth_errors.as_ref().unwrap();
+        assert_eq!(e.solutions_matched, 1000);
+        // North 1 m (the curvature of 1 m is below 1e-7 m), down −0.5 m.
+        let close = |x: Option<f64>, v: f64, tol: f64| (x.unwrap() - v).abs() < tol;
+        assert!(close(e.position_north_m.rms, 1.0, 1e-6), "{e:?}");
+        assert!(close(e.position_north_m.max, 1.0, 1e-6));
+        assert!(close(e.position_north_m.p95, 1.0, 1e-6));
+        assert!(close(e.position_east_m.max, 0.0, 1e-6));
+        assert!(close(e.position_down_m.rms, 0.5, 1e-6));
+        assert!(close(e.position_3d_m.rms, 1.25f64.sqrt(), 1e-6));
+        // |1 m| ≤ 3·0.4 m always; heading 0.01 rad = 0.573° > 3·0.057°: never within 3σ.
+        assert_eq!(e.position_north_m.within_3sigma_fraction, Some(1.0));
+        assert!(close(e.attitude_down_deg.rms, yaw.to_degrees(), 1e-9));
+        assert_eq!(e.attitude_down_deg.within_3sigma_fraction, Some(0.0));
+        assert!(close(e.attitude_angle_deg.max, yaw.to_degrees(), 1e-9));
+        // NIS: 30 over 60 dof = 0.5, 95 % interval 1 ± 1.96·√(2/60).
+        let g = &s.sensors[SensorId::Gnss as usize];
+        assert_eq!(g.nis_over_dof, Some(0.5));
+        assert_eq!(g.nis_dof_mean, Some(6.0));
+        let half = 1.96 * (2.0f64 / 60.0).sqrt();
+        let iv = g.nis_over_dof_95_interval.unwrap();
+        assert!((iv[0] - (1.0 - half)).abs() < 1e-12 && (iv[1] - (1.0 + half)).abs() < 1e-12);
+        // Dropouts: exactly one IMU gap of 201 periods.
+        let imu = &s.sensors[SensorId::Imu as usize];
+        assert_eq!(imu.period_s, Some(0.005));
+        assert_eq!(imu.dropouts, 1);
+        assert!(close(imu.longest_gap_s, 1.005, 1e-9));
+        assert_eq!(s.dropouts.len(), 1);
+        assert_eq!(s.mode_changes.len(), 1);
+        assert_eq!(s.alive_events.len(), 1);
+        for f in [
+            "summary.json",
+            "REPORT.md",
+            "error_north_3sigma.png",
+            "nis.png",
+            "trajectory.png",
+        ] {
+            assert!(out.join(f).exists(), "{f} missing (plots: {:?})", s.plots);
+        }
+        let md = std::fs::read_to_string(out.join("REPORT.md")).unwrap();
+        assert!(
+            md.contains("| position north [m] | 1.000 | 1.000 | 1.000 | 100.0 % |"),
+            "{md}"
+        );
+    }
+}

@@ -47,7 +47,11 @@ fn main() -> anyhow::Result<()> {
     if let Some(dir) = args.out.parent()
         && !dir.as_os_str().is_empty()
     {
-        std::fs::create_dir_all(dir).with_context(|| format!("create {}", dir.display()))?;
+        // Not fatal: without a recording the fusion still navigates and publishes; the recorder
+        // reports the error (naming the file) and counts every record as dropped.
+        if let Err(e) = std::fs::create_dir_all(dir) {
+            tracing::error!("cannot create the recording directory {}: {e}", dir.display());
+        }
     }
     let navigator = fusion::navigator::Navigator::new(cfg.navigator.clone())
         .with_context(|| format!("filter configuration {}", cfg.filter_path.display()))?;
