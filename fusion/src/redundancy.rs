@@ -98,7 +98,7 @@ pub fn ls_covariance_per_unit_variance(h: &HMatrix) -> Option<Matrix3<f64>> {
     // Reject near-coplanar layouts: condition through the determinant of the normal matrix
     // relative to its scale (trace³/27 for an isotropic one).
     let tr = hth.trace();
-    if !(tr > 0.0) || hth.determinant() < 1e-9 * tr * tr * tr {
+    if tr.is_nan() || tr <= 0.0 || hth.determinant() < 1e-9 * tr * tr * tr {
         return None;
     }
     hth.try_inverse()

@@ -20,6 +20,7 @@ pub mod consistency;
 pub mod gravity;
 pub mod integrators;
 pub mod plot;
+pub mod redundancy;
 pub mod schuler;
 
 use std::path::{Path, PathBuf};
@@ -62,7 +63,7 @@ pub enum ExperimentError {
 
 /// Names of the experiments, in the order of the issue.
 pub fn names() -> &'static [&'static str] {
-    &["integrators", "schuler", "gravity", "consistency", "astro-calibration", "alignment"]
+    &["integrators", "schuler", "gravity", "consistency", "astro-calibration", "alignment", "redundancy"]
 }
 
 /// Run the experiment `name` into `out_dir` (created if missing); `progress` shows progress
@@ -79,6 +80,7 @@ pub fn run_by_name(
         "consistency" => consistency::run(out_dir, progress),
         "astro-calibration" => astro_calibration::run(out_dir, progress),
         "alignment" => alignment::run(out_dir, progress),
+        "redundancy" => redundancy::run(out_dir, progress),
         "all" => all::run(out_dir, progress),
         _ => Err(unknown(name)),
     }
@@ -93,6 +95,7 @@ pub fn table_by_name(name: &str, summary: &serde_json::Value) -> Result<String, 
         "consistency" => Ok(consistency::table(summary)),
         "astro-calibration" => Ok(astro_calibration::table(summary)),
         "alignment" => Ok(alignment::table(summary)),
+        "redundancy" => Ok(redundancy::table(summary)),
         "all" => Ok(all::table(summary)),
         _ => Err(unknown(name)),
     }
