@@ -62,7 +62,8 @@ pub struct Settings {
     pub times_s: Vec<f64>,
     /// IMU grades.
     pub grades: Vec<GradeSpec>,
-    /// Seeds 1..=seeds per cell.
+    /// Seeds per cell: cell c (latitude, time) uses `1000·c + 1 ..= 1000·c + seeds`, so cells
+    /// are independent while the indexed and unindexed runs of one seed share every draw.
     pub seeds: u64,
     /// Duration of the 0° → 180° move, s.
     pub move_s: f64,
@@ -70,7 +71,7 @@ pub struct Settings {
 
 impl Default for Settings {
     /// Latitudes 0, 30, 55.655, 70°; T = 120, 300, 600 s; navigation and tactical grades;
-    /// 6 seeds.
+    /// 30 seeds per cell.
     fn default() -> Self {
         Self {
             latitudes_deg: vec![0.0, 30.0, 55.655, 70.0],
@@ -83,7 +84,7 @@ impl Default for Settings {
                     overrides: None,
                 })
                 .collect(),
-            seeds: 6,
+            seeds: 30,
             move_s: 10.0,
         }
     }
@@ -285,11 +286,13 @@ pub fn run_with(
     create_out_dir(out_dir)?;
     let mut jobs = Vec::new();
     for (gi, _) in settings.grades.iter().enumerate() {
+        let mut cell = 0u64;
         for &lat in &settings.latitudes_deg {
             for &t in &settings.times_s {
                 for seed in 1..=settings.seeds {
-                    jobs.push((gi, lat, t, seed));
+                    jobs.push((gi, lat, t, 1000 * cell + seed));
                 }
+                cell += 1;
             }
         }
     }

@@ -16,6 +16,7 @@
 pub mod alignment;
 pub mod all;
 pub mod astro_calibration;
+pub mod baseline_attitude;
 pub mod consistency;
 pub mod gravity;
 pub mod integrators;
@@ -63,7 +64,7 @@ pub enum ExperimentError {
 
 /// Names of the experiments, in the order of the issue.
 pub fn names() -> &'static [&'static str] {
-    &["integrators", "schuler", "gravity", "consistency", "astro-calibration", "alignment", "redundancy"]
+    &["integrators", "schuler", "gravity", "consistency", "astro-calibration", "alignment", "redundancy", "baseline-attitude"]
 }
 
 /// Run the experiment `name` into `out_dir` (created if missing); `progress` shows progress
@@ -80,6 +81,7 @@ pub fn run_by_name(
         "consistency" => consistency::run(out_dir, progress),
         "astro-calibration" => astro_calibration::run(out_dir, progress),
         "alignment" => alignment::run(out_dir, progress),
+        "baseline-attitude" => baseline_attitude::run(out_dir, progress),
         "redundancy" => redundancy::run(out_dir, progress),
         "all" => all::run(out_dir, progress),
         _ => Err(unknown(name)),
@@ -95,6 +97,7 @@ pub fn table_by_name(name: &str, summary: &serde_json::Value) -> Result<String, 
         "consistency" => Ok(consistency::table(summary)),
         "astro-calibration" => Ok(astro_calibration::table(summary)),
         "alignment" => Ok(alignment::table(summary)),
+        "baseline-attitude" => Ok(baseline_attitude::table(summary)),
         "redundancy" => Ok(redundancy::table(summary)),
         "all" => Ok(all::table(summary)),
         _ => Err(unknown(name)),
