@@ -356,6 +356,12 @@ pub struct RunPoint {
     pub gyro_bias_true_rad_s: Vector3<f64>,
     /// True body → NED DCM.
     pub c_n_b_true: Matrix3<f64>,
+    /// True position, ECEF, m.
+    pub pos_true_e_m: Vector3<f64>,
+    /// Estimated accelerometer bias, body, m/s².
+    pub accel_bias_est_m_s2: Vector3<f64>,
+    /// Estimated gyro bias, body, rad/s.
+    pub gyro_bias_est_rad_s: Vector3<f64>,
 }
 
 fn to_ned(c_e_n: &Matrix3<f64>, v_e: &Vector3<f64>) -> Vector3<f64> {
@@ -446,6 +452,7 @@ pub fn compare(nav: &Navigator, truth: &TruthSample, epoch_ns: i64) -> RunPoint 
     let d = nalgebra::Rotation3::from_matrix_unchecked(c_e_b_true * c_e_b_est.transpose());
     let psi = d.scaled_axis();
     let p = nav.covariance();
+    let (gyro_bias_est, accel_bias_est) = nav.biases();
     RunPoint {
         t_s: (truth.header.time_ns - epoch_ns) as f64 * 1e-9,
         mode: nav.mode(),
@@ -459,6 +466,9 @@ pub fn compare(nav: &Navigator, truth: &TruthSample, epoch_ns: i64) -> RunPoint 
         accel_bias_true_m_s2: Vector3::from(truth.accel_bias_m_s2),
         gyro_bias_true_rad_s: Vector3::from(truth.gyro_bias_rad_s),
         c_n_b_true: c_n_b,
+        pos_true_e_m: r_true,
+        accel_bias_est_m_s2: accel_bias_est,
+        gyro_bias_est_rad_s: gyro_bias_est,
     }
 }
 

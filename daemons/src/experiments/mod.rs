@@ -18,11 +18,13 @@ pub mod all;
 pub mod astro_calibration;
 pub mod baseline_attitude;
 pub mod consistency;
+pub mod gnss_denied_astro;
 pub mod gravity;
 pub mod integrators;
 pub mod plot;
 pub mod redundancy;
 pub mod schuler;
+pub mod tight_coupling;
 
 use std::path::{Path, PathBuf};
 
@@ -64,7 +66,18 @@ pub enum ExperimentError {
 
 /// Names of the experiments, in the order of the issue.
 pub fn names() -> &'static [&'static str] {
-    &["integrators", "schuler", "gravity", "consistency", "astro-calibration", "alignment", "redundancy", "baseline-attitude"]
+    &[
+        "integrators",
+        "schuler",
+        "gravity",
+        "consistency",
+        "astro-calibration",
+        "tight-coupling",
+        "gnss-denied-astro",
+        "alignment",
+        "baseline-attitude",
+        "redundancy",
+    ]
 }
 
 /// Run the experiment `name` into `out_dir` (created if missing); `progress` shows progress
@@ -79,6 +92,8 @@ pub fn run_by_name(
         "schuler" => schuler::run(out_dir, progress),
         "gravity" => gravity::run(out_dir, progress),
         "consistency" => consistency::run(out_dir, progress),
+        "tight-coupling" => tight_coupling::run(out_dir, progress),
+        "gnss-denied-astro" => gnss_denied_astro::run(out_dir, progress),
         "astro-calibration" => astro_calibration::run(out_dir, progress),
         "alignment" => alignment::run(out_dir, progress),
         "baseline-attitude" => baseline_attitude::run(out_dir, progress),
@@ -95,6 +110,8 @@ pub fn table_by_name(name: &str, summary: &serde_json::Value) -> Result<String, 
         "schuler" => Ok(schuler::table(summary)),
         "gravity" => Ok(gravity::table(summary)),
         "consistency" => Ok(consistency::table(summary)),
+        "tight-coupling" => Ok(tight_coupling::table(summary)),
+        "gnss-denied-astro" => Ok(gnss_denied_astro::table(summary)),
         "astro-calibration" => Ok(astro_calibration::table(summary)),
         "alignment" => Ok(alignment::table(summary)),
         "baseline-attitude" => Ok(baseline_attitude::table(summary)),

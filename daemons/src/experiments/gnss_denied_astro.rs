@@ -1,0 +1,514 @@
+//! Experiment `gnss-denied-astro` (paper 000: the star tracker plus the accelerometers' vertical
+//! give the position; paper 002: the error equations that say how well): 10 hours at the paper
+//! 000 site (`config/scenarios/astro_10h.toml`, static, navigation-grade IMU), no GNSS at all,
+//! the start position given (surveyed point, σ 10 m). Two runs on the same samples
+//! ([`drivers_sim::offline`]):
+//!
+//! - **astro-inertial**: star tracker (5″ cross-axis, 40″ about the boresight, 5 Hz) + baro;
+//! - **free inertial**: baro only (the vertical channel is unstable without it).
+//!
+//! Zero-velocity updates are off in both (they would use the knowledge that the vehicle is
+//! static, which a ship or a vehicle does not have); odometer and NHC likewise.
+//!
+//! # The floor, from the error model ([`fusion::ekf`], ECEF)
+//! `δv̇ = G·δr − 2[ω_ie×]·δv − [f_e×]·ψ − C_e_b·δb_a − C_e_b·n_a`, `ψ̇ = −[ω_ie×]·ψ − C_e_b·δb_g`.
+//! The stars measure ψ directly, so ψ stays at the estimation-noise level and the gyro bias
+//! becomes observable (ψ's drift). Nothing measures δr, δv or the horizontal accelerometer bias
+//! (the horizontal `δb_a` and a position offset enter `δv̇` only as their combination):
+//!
+//! 1. **Bias floor** — the equilibrium of the horizontal channel (`δv = 0`, ψ ≈ 0, vertical held
+//!    by the baro) is `G_hh·δr_h = (C_n_b·δb_a)_h`; with `G_hh ≈ −(g/R)·I` (Schuler),
+//!    `δr_h ≈ −R·(C_n_b δb_a)_h / g`: the astro fix's "1′ of vertical ≈ 1 nmi", with the
+//!    accelerometer bias tilting the sensed vertical by `δb/g`. Computed at every epoch from the
+//!    true bias minus the filter's estimate and the model's own gravity gradient
+//!    (`fusion::ekf::gravity_gradient`), so it includes the bias random walk and temperature.
+//!    For 50 µg per axis: R·δb/g ≈ 320 m per axis.
+//! 2. **Noise term** — the residual tilt noise and the accelerometer white noise drive the
+//!    (undamped) Schuler oscillator. Tilt: a random walk of density `q = ARW²` observed with
+//!    white noise `σ_st²` at rate f (continuous `R_c = σ_st²/f`) has the steady-state variance
+//!    `P_ψ = √(q R_c)` and correlation time `τ = √(R_c/q)` — that is, `σ_st/√N` with
+//!    `N = f·τ` star samples averaged — and so a low-frequency acceleration density
+//!    `g²·2P_ψτ`; the accelerometer adds `VRW²`. White acceleration of density S makes an
+//!    undamped oscillator of frequency `ω_s = √(g/R)` diffuse as `σ_r² = S·t/(2ω_s²)` per axis.
+//!    With the navigation-grade numbers this is tens of metres after 10 h: the bias term
+//!    dominates.
+//! 3. **Bound** — the run starts at equilibrium's opposite corner (position known, velocity
+//!    zero, the first star updates remove the levelling error into which alignment had folded
+//!    the bias), so the horizontal error oscillates with the Schuler period around the floor
+//!    vector with an amplitude equal to it: `|δr_h| ≤ 2·|floor| + 3σ_noise`, and its mean over
+//!    whole Schuler periods is the floor vector itself. (An astro position fix inside the
+//!    filter would damp the oscillation and leave the floor alone.)
+//!
+//! Free inertial, in contrast, integrates the gyro bias into tilt and azimuth errors: its
+//! horizontal error grows without bound (km after hours for 0.01°/h).
+
+use super::consistency::{filter_config, load_scenario};
+use super::plot::{Chart, Line, color, line_chart};
+use super::{ExperimentError, create_out_dir, fmt_num, progress_bar, write_summary};
+use drivers_sim::offline::{Channel, OfflineSim, RunPoint, run_navigator};
+use drivers_sim::scenario::Scenario;
+use drivers_sim::sources::{ImuSource, SampleSource};
+use fusion::earth::{WGS84, normal_gravity};
+use fusion::ekf::gravity_gradient;
+use fusion::navigator::Navigator;
+use nalgebra::{Matrix2, Vector2, Vector3};
+use serde_json::{Value, json};
+use std::path::Path;
+
+/// Settings of the experiment.
+#[derive(Debug, Clone)]
+pub struct Settings {
+    /// Scenario name in `config/scenarios`.
+    pub scenario: String,
+    /// Duration override, s (None: the file's 10 h).
+    pub duration_s: Option<f64>,
+    /// IMU rate override, Hz (None: the file's).
+    pub imu_rate_hz: Option<f64>,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Self {
+            scenario: "astro_10h".to_string(),
+            duration_s: None,
+            imu_rate_hz: None,
+        }
+    }
+}
+
+/// One epoch of a run.
+#[derive(Debug, Clone, Copy)]
+struct Sample {
+    t_s: f64,
+    err_h_m: f64,
+    err_ne_m: Vector2<f64>,
+    sigma_h_m: f64,
+    floor_ne_m: Vector2<f64>,
+    /// True and estimated accelerometer bias in NED, µg.
+    bias_true_ned_ug: nalgebra::Vector3<f64>,
+    bias_est_ned_ug: nalgebra::Vector3<f64>,
+    bias_truth_ned_ug: nalgebra::Vector3<f64>,
+}
+
+/// The horizontal equilibrium (bias floor) vector in NED north/east, m, at point `p`:
+/// `δr_h = G_hh⁻¹ (C_n_b δf)_h` with `δf` the accelerometer triad's effective error (body,
+/// m/s²) minus the filter's bias estimate.
+fn floor_ne(p: &RunPoint, accel_error_b: &Vector3<f64>) -> Vector2<f64> {
+    let g_n = p.c_e_n.transpose() * gravity_gradient(&WGS84, &p.pos_true_e_m) * p.c_e_n;
+    let g_hh = Matrix2::new(g_n[(0, 0)], g_n[(0, 1)], g_n[(1, 0)], g_n[(1, 1)]);
+    let db_n = p.c_n_b_true * (accel_error_b - p.accel_bias_est_m_s2);
+    g_hh.try_inverse()
+        .map(|inv| inv * Vector2::new(db_n.x, db_n.y))
+        .unwrap_or_else(|| Vector2::repeat(f64::NAN))
+}
+
+/// Effective error of the accelerometer triad, body, m/s², per whole second of the run (index
+/// k: the mean over `[k − 60, k)` s): the simulated IMU's delta-velocities minus those of the
+/// same IMU with its error model switched off. Unlike the truth's bias it includes every
+/// static error the model has (bias, its random walk and temperature term, and the axis
+/// misalignment and scale factor acting on gravity: 10″ of misalignment alone tilts the
+/// sensed vertical like a 48 µg bias).
+fn effective_accel_error(scn: &Scenario) -> Vec<Vector3<f64>> {
+    let epoch = scn.epoch_gps().ns;
+    let mut real = ImuSource::new(scn, epoch);
+    let mut ideal = ImuSource::new(scn, epoch);
+    ideal.model.enabled = false;
+    let period = real.period_ns();
+    let n_s = (scn.duration_ns() / 1_000_000_000) as usize + 1;
+    let mut per_s = vec![Vector3::zeros(); n_s];
+    let mut k = real.first_index();
+    while k * period <= scn.duration_ns() {
+        let t = k * period;
+        let (a, b) = (real.sample(t), ideal.sample(t));
+        // The interval ending at t lies in second ⌈t⌉ − 1.
+        let sec = ((t - 1) / 1_000_000_000) as usize;
+        if let Some(acc) = per_s.get_mut(sec) {
+            *acc += Vector3::from(a.delta_velocity_m_s) - Vector3::from(b.delta_velocity_m_s);
+        }
+        k += 1;
+    }
+    // Trailing 60 s mean, indexed by the second that ends it.
+    let mut out = vec![Vector3::zeros(); n_s];
+    let mut sum = Vector3::zeros();
+    for i in 0..n_s {
+        sum += per_s[i];
+        if i >= 60 {
+            sum -= per_s[i - 60];
+        }
+        if i + 1 < n_s {
+            out[i + 1] = sum / (i + 1).min(60) as f64;
+        }
+    }
+    out
+}
+
+fn one_run(
+    scn: &Scenario,
+    stars: bool,
+    accel_error: &[Vector3<f64>],
+    bar: &indicatif::ProgressBar,
+) -> Result<Vec<Sample>, ExperimentError> {
+    let site = scn.spec.site;
+    let cfg = filter_config(&[
+        ("updates.star_tracker", toml::Value::Boolean(stars)),
+        // The mounting is calibrated (paper 000's procedure, `sextant calibrate`): with the
+        // boresight as free states a static run cannot tell a tilt from a boresight angle,
+        // and the stars would no longer fix the vertical (module comment).
+        ("states.boresight", toml::Value::Boolean(false)),
+        ("updates.zupt", toml::Value::Boolean(false)),
+        ("updates.odometer", toml::Value::Boolean(false)),
+        ("updates.nonholonomic", toml::Value::Boolean(false)),
+        (
+            "initial_position",
+            toml::Value::Table(toml::Table::from_iter([
+                ("lat_deg".to_string(), toml::Value::Float(site.lat_deg)),
+                ("lon_deg".to_string(), toml::Value::Float(site.lon_deg)),
+                ("height_m".to_string(), toml::Value::Float(site.height_m)),
+            ])),
+        ),
+    ])?;
+    let channels: &[Channel] = if stars {
+        &[
+            Channel::StarTracker,
+            Channel::Baro,
+            Channel::Imu,
+            Channel::Truth,
+        ]
+    } else {
+        &[Channel::Baro, Channel::Imu, Channel::Truth]
+    };
+    let sim = OfflineSim::with_channels(scn, channels);
+    let epoch = sim.epoch_ns();
+    let mut nav =
+        Navigator::new(cfg).map_err(|e| ExperimentError::Measurement(format!("navigator: {e}")))?;
+    let mut out = Vec::new();
+    let mut last_tick = 0.0;
+    run_navigator(sim, epoch, &mut nav, |p| {
+        let e = p.pos_err_ned_m();
+        out.push(Sample {
+            t_s: p.t_s,
+            err_h_m: p.horizontal_error_m(),
+            err_ne_m: Vector2::new(e.x, e.y),
+            sigma_h_m: p.horizontal_sigma_m(),
+            floor_ne_m: floor_ne(
+                p,
+                accel_error
+                    .get(p.t_s.round() as usize)
+                    .unwrap_or(&p.accel_bias_true_m_s2),
+            ),
+            bias_true_ned_ug: p.c_n_b_true
+                * accel_error
+                    .get(p.t_s.round() as usize)
+                    .unwrap_or(&p.accel_bias_true_m_s2)
+                / 9.806_65e-6,
+            bias_est_ned_ug: p.c_n_b_true * p.accel_bias_est_m_s2 / 9.806_65e-6,
+            bias_truth_ned_ug: p.c_n_b_true * p.accel_bias_true_m_s2 / 9.806_65e-6,
+        });
+        if p.t_s - last_tick >= 60.0 {
+            bar.inc((p.t_s - last_tick) as u64);
+            last_tick = p.t_s;
+        }
+    })
+    .map_err(|e| ExperimentError::Measurement(e.to_string()))?;
+    Ok(out)
+}
+
+/// Closed-form noise term (item 2 of the module comment): per-axis σ of the horizontal
+/// position after `t_s`, m, for the scenario's IMU and star tracker.
+fn noise_sigma_per_axis_m(scn: &Scenario, t_s: f64, with_stars: bool) -> f64 {
+    let g = normal_gravity(
+        &WGS84,
+        scn.spec.site.lat_deg.to_radians(),
+        scn.spec.site.height_m,
+    );
+    let r = WGS84.a_m * (1.0 - WGS84.f / 2.0) + scn.spec.site.height_m;
+    let omega_s2 = g / r;
+    let deg = std::f64::consts::PI / 180.0;
+    let arw_rad_sqrt_s = scn.imu.gyro.arw_deg_per_rt_h * deg / 60.0;
+    let vrw_m_s2_sqrt_hz = scn.imu.accel.vrw_ug_per_rt_hz * 1e-6 * 9.806_65;
+    let mut s = vrw_m_s2_sqrt_hz.powi(2);
+    if with_stars {
+        let sigma_st = scn.star_tracker.sigma_cross_arcsec * deg / 3600.0;
+        let rc = sigma_st.powi(2) / scn.spec.star_tracker.rate_hz;
+        let q = arw_rad_sqrt_s.powi(2);
+        let p_psi = (q * rc).sqrt();
+        let tau = (rc / q).sqrt();
+        s += g * g * 2.0 * p_psi * tau;
+    }
+    (s * t_s / (2.0 * omega_s2)).sqrt()
+}
+
+/// Run with the defaults into `out_dir`.
+pub fn run(out_dir: &Path, progress: bool) -> Result<Value, ExperimentError> {
+    run_with(&Settings::default(), out_dir, progress)
+}
+
+/// Run with `settings` into `out_dir`; returns the summary (also in `summary.json`).
+pub fn run_with(
+    settings: &Settings,
+    out_dir: &Path,
+    progress: bool,
+) -> Result<Value, ExperimentError> {
+    create_out_dir(out_dir)?;
+    let mut scn = load_scenario(&settings.scenario, None)?;
+    if let Some(d) = settings.duration_s {
+        scn.spec.scenario.duration_s = d;
+    }
+    if let Some(r) = settings.imu_rate_hz {
+        scn.spec.imu.rate_hz = r;
+    }
+    let duration_s = scn.spec.scenario.duration_s;
+    let bar = progress_bar(
+        progress,
+        2 * duration_s as u64,
+        "gnss-denied-astro (2 runs, sim s)",
+    );
+    let t0 = std::time::Instant::now();
+    let accel_error = effective_accel_error(&scn);
+    let (astro, free) = rayon::join(
+        || one_run(&scn, true, &accel_error, &bar),
+        || one_run(&scn, false, &accel_error, &bar),
+    );
+    bar.finish_and_clear();
+    let (astro, free) = (astro?, free?);
+    let wall_s = t0.elapsed().as_secs_f64();
+    let last = |v: &[Sample]| {
+        v.last()
+            .copied()
+            .ok_or_else(|| ExperimentError::Measurement("no navigating epoch".into()))
+    };
+    let (a_end, f_end) = (last(&astro)?, last(&free)?);
+
+    // Floor: radial magnitude of the equilibrium vector (mean and max over the run).
+    let floor_mag: Vec<f64> = astro.iter().map(|s| s.floor_ne_m.norm()).collect();
+    let floor_mean = floor_mag.iter().sum::<f64>() / floor_mag.len() as f64;
+    let floor_max = floor_mag.iter().cloned().fold(0.0, f64::max);
+    let nav_time = a_end.t_s - astro[0].t_s;
+    let noise_astro = noise_sigma_per_axis_m(&scn, nav_time, true) * 2f64.sqrt();
+    let bound = 2.0 * floor_max + 3.0 * noise_astro;
+    let astro_max = astro.iter().map(|s| s.err_h_m).fold(0.0, f64::max);
+
+    // Mean error vector over whole Schuler periods (from the start of navigation) against the
+    // mean floor vector over the same epochs.
+    let g = normal_gravity(
+        &WGS84,
+        scn.spec.site.lat_deg.to_radians(),
+        scn.spec.site.height_m,
+    );
+    let r = WGS84.a_m * (1.0 - WGS84.f / 2.0) + scn.spec.site.height_m;
+    let schuler_s = 2.0 * std::f64::consts::PI * (r / g).sqrt();
+    let periods = (nav_time / schuler_s).floor();
+    let (mean_err, mean_floor) = if periods >= 1.0 {
+        let t_end = astro[0].t_s + periods * schuler_s;
+        let w: Vec<&Sample> = astro.iter().filter(|s| s.t_s <= t_end).collect();
+        let n = w.len() as f64;
+        (
+            w.iter().map(|s| s.err_ne_m).sum::<Vector2<f64>>() / n,
+            w.iter().map(|s| s.floor_ne_m).sum::<Vector2<f64>>() / n,
+        )
+    } else {
+        (Vector2::repeat(f64::NAN), Vector2::repeat(f64::NAN))
+    };
+
+    let summary = json!({
+        "experiment": "gnss-denied-astro",
+        "scenario": settings.scenario,
+        "duration_s": duration_s,
+        "imu_rate_hz": scn.spec.imu.rate_hz,
+        "navigation_time_s": nav_time,
+        "schuler_period_s": schuler_s,
+        "whole_schuler_periods": periods,
+        "floor": {
+            "bias_floor_mean_m": floor_mean,
+            "bias_floor_max_m": floor_max,
+            "noise_sigma_at_end_astro_m": noise_astro,
+            "noise_sigma_at_end_free_vrw_only_m":
+                noise_sigma_per_axis_m(&scn, nav_time, false) * 2f64.sqrt(),
+            "bound_2_floor_plus_3_sigma_m": bound,
+        },
+        "astro_inertial": {
+            "final_horizontal_error_m": a_end.err_h_m,
+            "max_horizontal_error_m": astro_max,
+            "final_horizontal_sigma_m": a_end.sigma_h_m,
+            "mean_error_north_over_whole_periods_m": mean_err.x,
+            "mean_error_east_over_whole_periods_m": mean_err.y,
+            "mean_floor_north_over_whole_periods_m": mean_floor.x,
+            "mean_floor_east_over_whole_periods_m": mean_floor.y,
+            "within_bound": astro_max <= bound,
+            "accel_effective_error_ned_at_end_ug": [a_end.bias_true_ned_ug.x, a_end.bias_true_ned_ug.y, a_end.bias_true_ned_ug.z],
+            "accel_bias_of_truth_ned_at_end_ug": [a_end.bias_truth_ned_ug.x, a_end.bias_truth_ned_ug.y, a_end.bias_truth_ned_ug.z],
+            "accel_bias_estimate_ned_at_end_ug": [a_end.bias_est_ned_ug.x, a_end.bias_est_ned_ug.y, a_end.bias_est_ned_ug.z],
+        },
+        "free_inertial": {
+            "final_horizontal_error_m": f_end.err_h_m,
+            "max_horizontal_error_m": free.iter().map(|s| s.err_h_m).fold(0.0, f64::max),
+            "final_horizontal_sigma_m": f_end.sigma_h_m,
+        },
+        "wall_time_s": wall_s,
+    });
+
+    // Plots (every 10th epoch: at 1 Hz truth, 3600 points per line over 10 h).
+    let hours = |v: &[Sample], f: &dyn Fn(&Sample) -> f64| -> Vec<(f64, f64)> {
+        v.iter()
+            .step_by(10)
+            .map(|s| (s.t_s / 3600.0, f(s)))
+            .collect()
+    };
+    let lines = vec![
+        Line {
+            label: "free inertial: horizontal error".into(),
+            points: hours(&free, &|s| s.err_h_m),
+            color: color(1),
+            dashed: false,
+            markers: false,
+        },
+        Line {
+            label: "astro-inertial: horizontal error".into(),
+            points: hours(&astro, &|s| s.err_h_m),
+            color: color(0),
+            dashed: false,
+            markers: false,
+        },
+        Line {
+            label: "bias floor R·|δb_h|/g (closed form)".into(),
+            points: hours(&astro, &|s| s.floor_ne_m.norm()),
+            color: color(2),
+            dashed: true,
+            markers: false,
+        },
+        Line {
+            label: "bound 2·floor + 3σ_noise".into(),
+            points: hours(&astro, &|s| {
+                2.0 * floor_max
+                    + 3.0 * noise_sigma_per_axis_m(&scn, s.t_s - astro[0].t_s, true) * 2f64.sqrt()
+            }),
+            color: color(3),
+            dashed: true,
+            markers: false,
+        },
+        Line {
+            label: "astro-inertial: filter horizontal σ".into(),
+            points: hours(&astro, &|s| s.sigma_h_m),
+            color: color(4),
+            dashed: true,
+            markers: false,
+        },
+    ];
+    line_chart(
+        &out_dir.join("horizontal_error.png"),
+        &Chart {
+            title: "GNSS denied, 10 h: astro-inertial vs free inertial",
+            x_label: "time, h",
+            y_label: "horizontal position error, m",
+            log_x: false,
+            log_y: true,
+            lines: &lines,
+        },
+    )?;
+    let comp = vec![
+        Line {
+            label: "astro north error".into(),
+            points: hours(&astro, &|s| s.err_ne_m.x),
+            color: color(0),
+            dashed: false,
+            markers: false,
+        },
+        Line {
+            label: "astro east error".into(),
+            points: hours(&astro, &|s| s.err_ne_m.y),
+            color: color(1),
+            dashed: false,
+            markers: false,
+        },
+        Line {
+            label: "floor north".into(),
+            points: hours(&astro, &|s| s.floor_ne_m.x),
+            color: color(0),
+            dashed: true,
+            markers: false,
+        },
+        Line {
+            label: "floor east".into(),
+            points: hours(&astro, &|s| s.floor_ne_m.y),
+            color: color(1),
+            dashed: true,
+            markers: false,
+        },
+    ];
+    line_chart(
+        &out_dir.join("astro_error_components.png"),
+        &Chart {
+            title: "Astro-inertial error (truth − estimate) oscillates about the bias floor",
+            x_label: "time, h",
+            y_label: "position error, m",
+            log_x: false,
+            log_y: false,
+            lines: &comp,
+        },
+    )?;
+    write_summary(out_dir, &summary)?;
+    Ok(summary)
+}
+
+/// The table printed after the run.
+pub fn table(summary: &Value) -> String {
+    let mut s = format!(
+        "gnss-denied-astro: {} h, IMU {} Hz, {} Schuler periods of {} s\n",
+        fmt_num(
+            &json!(summary["duration_s"].as_f64().map(|x| x / 3600.0)),
+            "",
+            1,
+            false
+        ),
+        fmt_num(summary, "/imu_rate_hz", 0, false),
+        fmt_num(summary, "/whole_schuler_periods", 0, false),
+        fmt_num(summary, "/schuler_period_s", 0, false),
+    );
+    s += &format!(
+        "closed form: bias floor mean {} m (max {} m), noise σ at end {} m, bound {} m\n",
+        fmt_num(summary, "/floor/bias_floor_mean_m", 1, false),
+        fmt_num(summary, "/floor/bias_floor_max_m", 1, false),
+        fmt_num(summary, "/floor/noise_sigma_at_end_astro_m", 1, false),
+        fmt_num(summary, "/floor/bound_2_floor_plus_3_sigma_m", 1, false),
+    );
+    s += "run              final error, m   max error, m   filter σ at end, m\n";
+    for (k, name) in [
+        ("astro_inertial", "astro-inertial"),
+        ("free_inertial", "free inertial"),
+    ] {
+        s += &format!(
+            "{name:16} {:>14} {:>14} {:>20}\n",
+            fmt_num(summary, &format!("/{k}/final_horizontal_error_m"), 1, false),
+            fmt_num(summary, &format!("/{k}/max_horizontal_error_m"), 1, false),
+            fmt_num(summary, &format!("/{k}/final_horizontal_sigma_m"), 1, false),
+        );
+    }
+    s += &format!(
+        "astro mean error over whole periods (N, E): ({}, {}) m; floor ({}, {}) m\n",
+        fmt_num(
+            summary,
+            "/astro_inertial/mean_error_north_over_whole_periods_m",
+            1,
+            false
+        ),
+        fmt_num(
+            summary,
+            "/astro_inertial/mean_error_east_over_whole_periods_m",
+            1,
+            false
+        ),
+        fmt_num(
+            summary,
+            "/astro_inertial/mean_floor_north_over_whole_periods_m",
+            1,
+            false
+        ),
+        fmt_num(
+            summary,
+            "/astro_inertial/mean_floor_east_over_whole_periods_m",
+            1,
+            false
+        ),
+    );
+    s
+}

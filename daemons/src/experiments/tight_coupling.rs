@@ -1,0 +1,452 @@
+//! Experiment `tight-coupling` (paper 003: GNSS correction by pseudoranges and Doppler, usable
+//! with fewer than four satellites): the same vehicle run (`config/scenarios/tight.toml`,
+//! navigation-grade IMU, 15–20 m/s with turns) with 0, 1, 2, 3 or all satellites tracked
+//! during a 10-minute window, fused three ways:
+//!
+//! - **free**: no GNSS in the window (inertial + baro);
+//! - **loose**: the receiver's position/velocity fix, which needs ≥ 4 satellites;
+//! - **tight**: each satellite's pseudorange and range rate with the receiver clock states
+//!   (`gnss_mode = "tight"` in the filter configuration).
+//!
+//! Every run uses the same simulated samples ([`drivers_sim::offline`]); the satellites kept in
+//! the window are the receiver's highest-C/N0 (highest-elevation) ones, and with fewer than four
+//! the receiver publishes no fix. Star tracker, odometer and non-holonomic constraints are off,
+//! so that the horizontal error shows what GNSS alone does; the baro holds the vertical channel.
+//!
+//! # Expected physics
+//! - loose with < 4 satellites receives nothing in the window: it *is* free inertial (the
+//!   experiment checks the two runs are identical, not just close);
+//! - tight with n = 1…3 satellites observes the position along the n lines of sight (and
+//!   the clock, whose bias and drift it must also estimate: one satellite's pseudorange is
+//!   shared between its line of sight and the clock bias, so the Doppler and the clock model
+//!   carry the information); the horizontal error stays bounded in the observed directions and
+//!   grows only in the unobserved ones, well below free inertial;
+//! - with all satellites (≥ 4) tight ≈ loose (same information; the fix is the
+//!   least-squares combination of the same pseudoranges).
+
+use super::consistency::{filter_config, load_scenario};
+use super::plot::{Chart, Line, color, line_chart};
+use super::{ExperimentError, create_out_dir, fmt_num, progress_bar, write_summary};
+use drivers_sim::offline::SimMessage;
+use drivers_sim::offline::{Channel, OfflineSim, SatelliteLimit, run_navigator};
+use fusion::navigator::{Navigator, NavigatorConfig};
+use nalgebra::{Vector2, Vector3};
+use rayon::prelude::*;
+use serde_json::{Value, json};
+use std::cell::RefCell;
+use std::path::Path;
+
+/// Settings of the experiment.
+#[derive(Debug, Clone)]
+pub struct Settings {
+    /// Scenario name in `config/scenarios`.
+    pub scenario: String,
+    /// Window start, s since the scenario epoch.
+    pub window_start_s: f64,
+    /// Window length, s.
+    pub window_s: f64,
+    /// Scenario duration override, s (None: the file's).
+    pub duration_s: Option<f64>,
+    /// Satellite counts to try (`usize::MAX` = all).
+    pub satellites: Vec<usize>,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Self {
+            scenario: "tight".to_string(),
+            window_start_s: 420.0,
+            window_s: 600.0,
+            duration_s: None,
+            satellites: vec![0, 1, 2, 3, usize::MAX],
+        }
+    }
+}
+
+/// Coupling of one run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Coupling {
+    Free,
+    Loose,
+    Tight,
+}
+
+impl Coupling {
+    fn name(self) -> &'static str {
+        match self {
+            Coupling::Free => "free",
+            Coupling::Loose => "loose",
+            Coupling::Tight => "tight",
+        }
+    }
+}
+
+/// Horizontal error (and σ) series of one run inside the window.
+#[derive(Debug, Clone, Default)]
+struct Series {
+    t_s: Vec<f64>,
+    err_m: Vec<f64>,
+    sigma_m: Vec<f64>,
+    /// Horizontal error (north, east), m.
+    err_ne_m: Vec<Vector2<f64>>,
+    /// With 1 or 2 satellites: the horizontal unit direction they observe free of the clock
+    /// (2: the horizontal projection of `u₁ − u₂`, the single difference; 1: the horizontal
+    /// line of sight, which the clock bias shares), north/east.
+    dir_ne: Vec<Option<Vector2<f64>>>,
+}
+
+fn sats_label(n: usize) -> String {
+    if n == usize::MAX {
+        "all".to_string()
+    } else {
+        n.to_string()
+    }
+}
+
+/// The base filter configuration of every run, plus `gnss_mode` for tight.
+fn config(coupling: Coupling) -> Result<NavigatorConfig, ExperimentError> {
+    let mut o: Vec<(&str, toml::Value)> = vec![
+        ("updates.star_tracker", toml::Value::Boolean(false)),
+        ("updates.odometer", toml::Value::Boolean(false)),
+        ("updates.nonholonomic", toml::Value::Boolean(false)),
+    ];
+    if coupling == Coupling::Tight {
+        o.push(("gnss_mode", toml::Value::String("tight".into())));
+    }
+    filter_config(&o)
+}
+
+fn one_run(
+    settings: &Settings,
+    cfg: &NavigatorConfig,
+    max_sats: usize,
+) -> Result<Series, ExperimentError> {
+    let mut scn = load_scenario(&settings.scenario, None)?;
+    if let Some(d) = settings.duration_s {
+        scn.spec.scenario.duration_s = d;
+    }
+    let mut sim = OfflineSim::with_channels(
+        &scn,
+        &[Channel::Gnss, Channel::Baro, Channel::Imu, Channel::Truth],
+    );
+    if max_sats != usize::MAX {
+        sim = sim.limit_satellites(SatelliteLimit {
+            start_s: settings.window_start_s,
+            duration_s: settings.window_s,
+            max_satellites: max_sats,
+        });
+    }
+    let epoch = sim.epoch_ns();
+    let mut nav = Navigator::new(cfg.clone())
+        .map_err(|e| ExperimentError::Measurement(format!("navigator: {e}")))?;
+    // Satellite positions of the last GNSS epoch (for the observed direction).
+    let sats: RefCell<Vec<Vector3<f64>>> = RefCell::new(Vec::new());
+    let sim = sim.inspect(|m| {
+        if let SimMessage::Gnss(g) = m {
+            let n = (g.n_satellites as usize).min(g.satellites.len());
+            let mut v = sats.borrow_mut();
+            v.clear();
+            v.extend(
+                g.satellites[..n]
+                    .iter()
+                    .map(|s| Vector3::from(s.sat_pos_ecef_m)),
+            );
+        }
+    });
+    let (w0, w1) = (
+        settings.window_start_s,
+        settings.window_start_s + settings.window_s,
+    );
+    let mut s = Series::default();
+    run_navigator(sim, epoch, &mut nav, |p| {
+        if p.t_s >= w0 && p.t_s <= w1 {
+            s.t_s.push(p.t_s - w0);
+            s.err_m.push(p.horizontal_error_m());
+            s.sigma_m.push(p.horizontal_sigma_m());
+            let v = sats.borrow();
+            let u = |r: &Vector3<f64>| (r - p.pos_true_e_m).normalize();
+            let d_e = match (max_sats, v.as_slice()) {
+                (1, [a, ..]) => Some(u(a)),
+                (2, [a, b, ..]) => Some(u(a) - u(b)),
+                _ => None,
+            };
+            s.dir_ne.push(d_e.map(|d_e| {
+                let d_n = p.c_e_n.transpose() * d_e;
+                Vector2::new(d_n.x, d_n.y).normalize()
+            }));
+            let e = p.pos_err_ned_m();
+            s.err_ne_m.push(Vector2::new(e.x, e.y));
+        }
+    })
+    .map_err(|e| {
+        ExperimentError::Measurement(format!("{} satellites: {e}", sats_label(max_sats)))
+    })?;
+    if s.t_s.is_empty() {
+        return Err(ExperimentError::Measurement(
+            "no navigating epoch in the window".into(),
+        ));
+    }
+    Ok(s)
+}
+
+/// Components of `e`'s horizontal errors along and across `dirs` (epochs without a direction
+/// are skipped): (|final along|, max |along|, |final across|, max |across|), m.
+fn along_across(e: &Series, dirs: &[Option<Vector2<f64>>]) -> Option<[f64; 4]> {
+    let mut out: Option<[f64; 4]> = None;
+    for (err, d) in e.err_ne_m.iter().zip(dirs) {
+        if let Some(d) = d {
+            let (a, c) = (err.dot(d).abs(), err.perp(d).abs());
+            let o = out.get_or_insert([0.0; 4]);
+            *o = [a, o[1].max(a), c, o[3].max(c)];
+        }
+    }
+    out
+}
+
+fn observed_json(v: Option<[f64; 4]>) -> Value {
+    match v {
+        Some([fa, ma, fc, mc]) => json!({
+            "final_error_along_observed_direction_m": fa,
+            "max_error_along_observed_direction_m": ma,
+            "final_error_across_observed_direction_m": fc,
+            "max_error_across_observed_direction_m": mc,
+        }),
+        None => Value::Null,
+    }
+}
+
+fn stats(s: &Series) -> Value {
+    let n = s.err_m.len() as f64;
+    json!({
+        "final_horizontal_error_m": s.err_m.last(),
+        "max_horizontal_error_m": s.err_m.iter().cloned().fold(0.0, f64::max),
+        "rms_horizontal_error_m": (s.err_m.iter().map(|e| e * e).sum::<f64>() / n).sqrt(),
+        "final_horizontal_sigma_m": s.sigma_m.last(),
+    })
+}
+
+/// Run with the defaults into `out_dir`.
+pub fn run(out_dir: &Path, progress: bool) -> Result<Value, ExperimentError> {
+    run_with(&Settings::default(), out_dir, progress)
+}
+
+/// Run with `settings` into `out_dir`; returns the summary (also in `summary.json`).
+pub fn run_with(
+    settings: &Settings,
+    out_dir: &Path,
+    progress: bool,
+) -> Result<Value, ExperimentError> {
+    create_out_dir(out_dir)?;
+    // Tight coupling is switched on by the filter configuration; a filter without it makes
+    // the tight column absent (reported), not the experiment fail.
+    let tight_cfg = config(Coupling::Tight);
+    let mut jobs: Vec<(Coupling, usize)> = vec![(Coupling::Free, 0)];
+    for &n in &settings.satellites {
+        jobs.push((Coupling::Loose, n));
+        if tight_cfg.is_ok() {
+            jobs.push((Coupling::Tight, n));
+        }
+    }
+    let loose_cfg = config(Coupling::Loose)?;
+    let bar = progress_bar(progress, jobs.len() as u64, "tight-coupling runs");
+    let t0 = std::time::Instant::now();
+    let results: Vec<Series> = jobs
+        .par_iter()
+        .map(|&(c, n)| {
+            let r = match c {
+                Coupling::Tight => match &tight_cfg {
+                    Ok(cfg) => one_run(settings, cfg, n),
+                    Err(e) => Err(ExperimentError::Measurement(e.to_string())),
+                },
+                // Free = no satellite at all in the window.
+                Coupling::Free => one_run(settings, &loose_cfg, 0),
+                Coupling::Loose => one_run(settings, &loose_cfg, n),
+            };
+            bar.inc(1);
+            r
+        })
+        .collect::<Result<_, _>>()?;
+    bar.finish_and_clear();
+    let wall_s = t0.elapsed().as_secs_f64();
+
+    let find = |c: Coupling, n: usize| jobs.iter().position(|&j| j == (c, n)).map(|i| &results[i]);
+    let free = &results[0];
+    let mut rows = Vec::new();
+    for &n in &settings.satellites {
+        let mut row = serde_json::Map::new();
+        row.insert("satellites".into(), json!(sats_label(n)));
+        row.insert("free".into(), stats(free));
+        if let Some(s) = find(Coupling::Loose, n) {
+            row.insert("loose".into(), stats(s));
+            // Loose with fewer than four satellites gets nothing: identical to free.
+            let same = s.err_m.len() == free.err_m.len()
+                && s.err_m.iter().zip(&free.err_m).all(|(a, b)| a == b);
+            row.insert("loose_identical_to_free".into(), json!(same));
+        }
+        if let Some(s) = find(Coupling::Tight, n) {
+            row.insert("tight".into(), stats(s));
+            // Along/across the clock-free observed direction (1–2 satellites), tight and free
+            // on the same directions.
+            if s.dir_ne.len() == free.err_ne_m.len() {
+                row.insert(
+                    "tight_observed_direction".into(),
+                    observed_json(along_across(s, &s.dir_ne)),
+                );
+                row.insert(
+                    "free_observed_direction".into(),
+                    observed_json(along_across(free, &s.dir_ne)),
+                );
+            }
+        }
+        rows.push(Value::Object(row));
+    }
+    let summary = json!({
+        "experiment": "tight-coupling",
+        "scenario": settings.scenario,
+        "window_start_s": settings.window_start_s,
+        "window_length_s": settings.window_s,
+        "tight_available": tight_cfg.is_ok(),
+        "tight_unavailable_reason": tight_cfg.as_ref().err().map(|e| e.to_string()),
+        "aiding": "GNSS (as listed) + baro; star tracker, odometer, NHC off",
+        "cases": rows,
+        "wall_time_s": wall_s,
+    });
+
+    // Plots: horizontal error in the window per coupling, and final error vs satellites.
+    for c in [Coupling::Loose, Coupling::Tight] {
+        let mut lines = vec![Line {
+            label: "free inertial".into(),
+            points: free
+                .t_s
+                .iter()
+                .cloned()
+                .zip(free.err_m.iter().cloned())
+                .collect(),
+            color: color(5),
+            dashed: true,
+            markers: false,
+        }];
+        for (i, &n) in settings.satellites.iter().enumerate() {
+            if let Some(s) = find(c, n) {
+                lines.push(Line {
+                    label: format!("{} with {} satellites", c.name(), sats_label(n)),
+                    points: s.t_s.iter().cloned().zip(s.err_m.iter().cloned()).collect(),
+                    color: color(i),
+                    dashed: false,
+                    markers: false,
+                });
+            }
+        }
+        if lines.len() > 1 {
+            line_chart(
+                &out_dir.join(format!("horizontal_error_{}.png", c.name())),
+                &Chart {
+                    title: &format!("{} coupling: horizontal error in the window", c.name()),
+                    x_label: "time since the window started, s",
+                    y_label: "horizontal position error, m",
+                    log_x: false,
+                    log_y: true,
+                    lines: &lines,
+                },
+            )?;
+        }
+    }
+    let x_of = |n: usize| if n == usize::MAX { 5.0 } else { n as f64 };
+    let mut lines = Vec::new();
+    for (i, c) in [Coupling::Free, Coupling::Loose, Coupling::Tight]
+        .into_iter()
+        .enumerate()
+    {
+        let pts: Vec<(f64, f64)> = settings
+            .satellites
+            .iter()
+            .filter_map(|&n| {
+                let s = if c == Coupling::Free {
+                    Some(free)
+                } else {
+                    find(c, n)
+                }?;
+                Some((x_of(n), *s.err_m.last()?))
+            })
+            .collect();
+        if !pts.is_empty() {
+            lines.push(Line {
+                label: c.name().to_string(),
+                points: pts,
+                color: color(i),
+                dashed: c == Coupling::Free,
+                markers: true,
+            });
+        }
+    }
+    line_chart(
+        &out_dir.join("final_error_vs_satellites.png"),
+        &Chart {
+            title: "Horizontal error at the end of the 10-minute window (5 = all satellites)",
+            x_label: "satellites tracked in the window",
+            y_label: "horizontal position error, m",
+            log_x: false,
+            log_y: true,
+            lines: &lines,
+        },
+    )?;
+    write_summary(out_dir, &summary)?;
+    Ok(summary)
+}
+
+/// The table printed after the run.
+pub fn table(summary: &Value) -> String {
+    let mut s = format!(
+        "tight-coupling: {} s window from {} s; final / max horizontal error, m{}\n",
+        fmt_num(summary, "/window_length_s", 0, false),
+        fmt_num(summary, "/window_start_s", 0, false),
+        if summary["tight_available"].as_bool() == Some(true) {
+            ""
+        } else {
+            " (tight coupling not available in this filter)"
+        }
+    );
+    s += "satellites   free (final/max)     loose (final/max)    tight (final/max)   loose==free\n";
+    if let Some(cases) = summary["cases"].as_array() {
+        for c in cases {
+            let cell = |k: &str| {
+                format!(
+                    "{:>8} / {:<8}",
+                    fmt_num(c, &format!("/{k}/final_horizontal_error_m"), 2, false),
+                    fmt_num(c, &format!("/{k}/max_horizontal_error_m"), 2, false)
+                )
+            };
+            s += &format!(
+                "{:>10}   {}  {}  {}  {}\n",
+                c["satellites"].as_str().unwrap_or("?"),
+                cell("free"),
+                cell("loose"),
+                cell("tight"),
+                c["loose_identical_to_free"]
+            );
+        }
+        s += "clock-free observed direction (1: line of sight, 2: u1 - u2), final |error|, m:\n";
+        s += "satellites   tight along / across   free along / across\n";
+        for c in cases {
+            if c["tight_observed_direction"].is_object() {
+                let f = |k: &str, a: &str| {
+                    fmt_num(
+                        c,
+                        &format!("/{k}/final_error_{a}_observed_direction_m"),
+                        2,
+                        false,
+                    )
+                };
+                s += &format!(
+                    "{:>10}   {:>8} / {:<8}    {:>8} / {:<8}\n",
+                    c["satellites"].as_str().unwrap_or("?"),
+                    f("tight_observed_direction", "along"),
+                    f("tight_observed_direction", "across"),
+                    f("free_observed_direction", "along"),
+                    f("free_observed_direction", "across"),
+                );
+            }
+        }
+    }
+    s
+}
