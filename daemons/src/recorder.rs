@@ -170,6 +170,22 @@ impl Record {
     }
 }
 
+/// An error with its sources (`MCAP I/O error: No space left on device (os error 28)`), so that
+/// the operator sees the operating system's reason.
+fn error_chain(e: &dyn std::error::Error) -> String {
+    let mut s = e.to_string();
+    let mut src = e.source();
+    while let Some(x) = src {
+        let t = x.to_string();
+        if !s.contains(&t) {
+            s.push_str(": ");
+            s.push_str(&t);
+        }
+        src = x.source();
+    }
+    s
+}
+
 /// Recorder settings.
 #[derive(Debug, Clone)]
 pub struct RecorderOptions {
@@ -246,7 +262,7 @@ impl Sink {
     fn create(path: &Path, opts: &RecorderOptions) -> Result<Self, RecorderError> {
         let mcap_err = |e: mcap::McapError| RecorderError::Mcap {
             path: path.to_path_buf(),
-            detail: e.to_string(),
+            detail: error_chain(&e),
         };
         let file = File::create(path).map_err(|source| RecorderError::Create {
             path: path.to_path_buf(),
@@ -333,10 +349,10 @@ impl Sink {
         })
     }
 
-    fn err(&self, e: impl std::fmt::Display) -> RecorderError {
+    fn err(&self, e: impl std::error::Error) -> RecorderError {
         RecorderError::Mcap {
             path: self.path.clone(),
-            detail: e.to_string(),
+            detail: error_chain(&e),
         }
     }
 
@@ -355,10 +371,7 @@ impl Sink {
         };
         self.writer
             .write_to_known_channel(&header, &self.buf)
-            .map_err(|e| RecorderError::Mcap {
-                path: self.path.clone(),
-                detail: e.to_string(),
-            })?;
+            .map_err(|e| self.err(e))?;
         self.dirty = true;
         self.unflushed += 1;
         Ok(())
@@ -370,7 +383,10 @@ impl Sink {
             Some(ch) => *self
                 .channels
                 .get(ch.name())
-                .ok_or_else(|| self.err(format!("no channel {}", ch.name())))?,
+                .ok_or_else(|| RecorderError::Mcap {
+                    path: self.path.clone(),
+                    detail: format!("no channel {}", ch.name()),
+                })?,
             None => self.sensor_alive,
         };
         let h = *item.record.header();
