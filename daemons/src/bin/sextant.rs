@@ -491,6 +491,9 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
         bail!("--speed must be within (0, 1000], got {speed}");
     }
     let scenario_path = args.scenario.clone().unwrap_or_else(|| cfg.scenario_path());
+    // Validate the whole scenario (every key, grade and range) before starting anything: a
+    // malformed file is one clear error naming it and the key, not drivers dying at start-up.
+    drivers_sim::scenario::Scenario::load(&scenario_path)?;
     let scen = scenario::ScenarioInfo::load(&scenario_path)?;
     let prefix = args
         .prefix
