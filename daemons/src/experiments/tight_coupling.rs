@@ -450,3 +450,60 @@ pub fn table(summary: &Value) -> String {
     }
     s
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Reduced run (≈ 5 s in release): a 300 s window (420–720 s) with 2 and 3 satellites.
+    /// Physics held: loose with < 4 satellites receives nothing, so it is bit-identical to free
+    /// inertial; tight with 3 satellites (+ baro height + the clock model: as many equations as
+    /// unknowns) stays within 3σ of its own reported horizontal uncertainty and below the free
+    /// drift; tight with 2 satellites bounds the error along the single-difference direction
+    /// `u₁ − u₂` (clock-free) below free inertial's, while across it the error grows.
+    #[test]
+    fn fewer_than_four_satellites() {
+        let dir = crate::experiments::test_dir("tight-coupling");
+        let settings = Settings {
+            window_s: 300.0,
+            duration_s: Some(720.0),
+            satellites: vec![2, 3],
+            ..Settings::default()
+        };
+        let s = run_with(&settings, &dir, false).expect("run");
+        let t = table(&s);
+        assert_eq!(s["tight_available"], true, "{t}");
+        let c = |i: usize, p: &str| {
+            s["cases"][i]
+                .pointer(p)
+                .and_then(Value::as_f64)
+                .unwrap_or_else(|| panic!("{p}\n{t}"))
+        };
+        for i in 0..2 {
+            assert_eq!(s["cases"][i]["loose_identical_to_free"], true, "{t}");
+        }
+        // 3 satellites.
+        let e3 = c(1, "/tight/final_horizontal_error_m");
+        assert!(e3 <= 3.0 * c(1, "/tight/final_horizontal_sigma_m"), "{t}");
+        assert!(
+            c(1, "/tight/max_horizontal_error_m") < c(1, "/free/max_horizontal_error_m"),
+            "{t}"
+        );
+        // 2 satellites.
+        let along = c(
+            0,
+            "/tight_observed_direction/max_error_along_observed_direction_m",
+        );
+        let across = c(
+            0,
+            "/tight_observed_direction/max_error_across_observed_direction_m",
+        );
+        let free_along = c(
+            0,
+            "/free_observed_direction/max_error_along_observed_direction_m",
+        );
+        assert!(along < free_along && along < across, "{t}");
+        assert!(dir.join("final_error_vs_satellites.png").exists());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
