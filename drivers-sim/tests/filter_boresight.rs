@@ -77,12 +77,14 @@ struct Boresight {
     truth: Vector3<f64>,
 }
 
-/// Run the scenario through the navigator with the default filter configuration.
+/// Run the scenario through the navigator: default configuration with the boresight states on.
 fn run(name: &str) -> Boresight {
     let scn = scenario_with_kappa(name);
     let sim = OfflineSim::new(&scn);
     let epoch = sim.epoch_ns();
-    let mut nav = Navigator::new(NavigatorConfig::default()).unwrap();
+    let mut cfg = NavigatorConfig::default();
+    cfg.states.boresight = true;
+    let mut nav = Navigator::new(cfg).unwrap();
     run_navigator(sim, epoch, &mut nav, |_| {}).unwrap();
     assert!(nav.is_navigating());
     let (kappa, sigma) = nav.boresight_rad();

@@ -52,8 +52,8 @@ fn vehicle_accuracy_report() {
     let base = default_config();
     let mut variants: Vec<(&str, NavigatorConfig)> = vec![("filter.toml", base.clone())];
     let mut c = base.clone();
-    c.states.boresight = false;
-    variants.push(("no boresight", c));
+    c.states.boresight = true;
+    variants.push(("boresight on", c));
     let mut c = base.clone();
     c.states.gyro_scale = false;
     c.states.accel_scale = false;

@@ -182,11 +182,12 @@ impl Step {
 }
 
 fn throughput() {
-    let cfg = NavigatorConfig {
+    let mut cfg = NavigatorConfig {
         alignment_s: 5.0,
         gnss_mode: GnssMode::Tight,
         ..NavigatorConfig::default()
     };
+    cfg.states.boresight = true;
     let mut nav = Navigator::new(cfg).unwrap();
     let mut feed = Feed::new();
     for _ in 0..(20 * 200) {
@@ -203,7 +204,7 @@ fn throughput() {
     let s = t.elapsed().as_secs_f64();
     let h = nav.health();
     println!(
-        "navigator throughput, 200 Hz IMU with all aiding (tight GNSS 8 sats 1 Hz, stars 5 Hz, \
+        "navigator throughput, 200 Hz IMU with all aiding (tight GNSS 8 sats 1 Hz, stars 5 Hz with boresight, \
          odometer 20 Hz, baro 20 Hz, ZUPT): {:.0} IMU samples/s ({:.2} µs per sample); fused: \
          gnss {}, star {}, odo {}, baro {}, zupt {}",
         n as f64 / s,
