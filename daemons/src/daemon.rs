@@ -41,6 +41,26 @@ pub trait NavEngine {
     fn health(&self) -> [SensorHealth; MAX_SENSORS];
     /// Navigation mode (`msgs::NavMode` as u32).
     fn mode(&self) -> u32;
+    /// Redundant-IMU fault detection state (paper 004), when the engine combines channels.
+    fn redundancy(&self) -> Option<fusion::redundancy::RedundancyStatus> {
+        None
+    }
+}
+
+/// Fill a status from the engine: mode, per-sensor health and the redundant-IMU counters.
+/// The daemon's own fields (alive mask, recorder counters) are the caller's.
+pub fn engine_status<E: NavEngine>(engine: &E) -> Status {
+    let mut st = Status {
+        mode: engine.mode(),
+        sensors: engine.health(),
+        ..Default::default()
+    };
+    if let Some(r) = engine.redundancy() {
+        st.imu_channels_excluded_mask = r.excluded_mask;
+        st.imu_channels_suspect_mask = r.suspect_mask;
+        st.imu_faults_detected = u64::from(r.faults_detected);
+    }
+    st
 }
 
 impl NavEngine for Navigator {
@@ -67,6 +87,9 @@ impl NavEngine for Navigator {
     }
     fn mode(&self) -> u32 {
         Navigator::mode(self)
+    }
+    fn redundancy(&self) -> Option<fusion::redundancy::RedundancyStatus> {
+        Navigator::redundancy_status(self)
     }
 }
 
@@ -293,13 +316,11 @@ impl<E: NavEngine> State<'_, E> {
 
     fn status(&self) -> Status {
         let mut st = Status {
-            mode: self.engine.mode(),
             solutions_published: self.published,
             records_written: self.recorder.written(),
             records_dropped: self.recorder.dropped(),
             recorder_errors: self.recorder.errors(),
-            sensors: self.engine.health(),
-            ..Default::default()
+            ..engine_status(&self.engine)
         };
         st.header.time_ns = self.filter_time_ns;
         for s in SensorId::ALL {
@@ -530,6 +551,53 @@ mod tests {
         fn mode(&self) -> u32 {
             msgs::NavMode::GnssInertial as u32
         }
+    }
+
+    /// The status carries the engine's redundant-IMU counters (paper 004) when it has them.
+    #[test]
+    fn status_carries_redundancy_counters() {
+        struct Red(Fake);
+        impl NavEngine for Red {
+            fn push_imu(&mut self, s: &ImuSample) -> Result<Option<NavSolution>, FusionError> {
+                self.0.push_imu(s)
+            }
+            fn push_star_tracker(&mut self, s: &StarTrackerSample) -> Result<(), FusionError> {
+                self.0.push_star_tracker(s)
+            }
+            fn push_gnss(&mut self, s: &GnssSample) -> Result<(), FusionError> {
+                self.0.push_gnss(s)
+            }
+            fn push_odometer(&mut self, s: &OdometerSample) -> Result<(), FusionError> {
+                self.0.push_odometer(s)
+            }
+            fn push_baro(&mut self, s: &BaroSample) -> Result<(), FusionError> {
+                self.0.push_baro(s)
+            }
+            fn set_sensor_alive(&mut self, sensor: usize, alive: bool) {
+                self.0.set_sensor_alive(sensor, alive)
+            }
+            fn health(&self) -> [SensorHealth; MAX_SENSORS] {
+                self.0.health()
+            }
+            fn mode(&self) -> u32 {
+                self.0.mode()
+            }
+            fn redundancy(&self) -> Option<fusion::redundancy::RedundancyStatus> {
+                Some(fusion::redundancy::RedundancyStatus {
+                    excluded_mask: 0b100,
+                    suspect_mask: 0b110,
+                    faults_detected: 2,
+                    ..Default::default()
+                })
+            }
+        }
+        let st = engine_status(&Red(Fake::default()));
+        assert_eq!(st.imu_channels_excluded_mask, 0b100);
+        assert_eq!(st.imu_channels_suspect_mask, 0b110);
+        assert_eq!(st.imu_faults_detected, 2);
+        assert_eq!(st.mode, msgs::NavMode::GnssInertial as u32);
+        let st = engine_status(&Fake::default());
+        assert_eq!(st.imu_faults_detected, 0);
     }
 
     #[test]

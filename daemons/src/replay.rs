@@ -12,7 +12,7 @@
 //!   `sextant-fusion` cannot tell it from the drivers (hardware-in-the-loop bench).
 
 use crate::config;
-use crate::daemon::{feed, stamp_solution};
+use crate::daemon::{engine_status, feed, stamp_solution};
 use crate::recorder::{
     CONFIG_KEY_FILTER_TOML, CONFIG_METADATA_NAME, Record, Recorder, RecorderOptions,
 };
@@ -287,13 +287,11 @@ pub fn replay_offline(opts: &OfflineOptions) -> Result<OfflineSummary, ReplayErr
                 s.recorded_records_dropped = s.recorded_records_dropped.max(st.records_dropped);
                 let mut mine = Status {
                     header: st.header,
-                    mode: engine.mode(),
-                    sensors: engine.health(),
                     solutions_published: s.solutions_replayed,
                     records_written: recorder.written(),
                     records_dropped: recorder.dropped(),
                     recorder_errors: recorder.errors(),
-                    ..Default::default()
+                    ..engine_status(&engine)
                 };
                 for (i, a) in alive.iter().enumerate() {
                     if *a {
