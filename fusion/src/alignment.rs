@@ -649,7 +649,7 @@ mod tests {
                 &a0,
                 &Accumulator::default(),
                 0.0,
-                3.14159,
+                std::f64::consts::PI,
                 None,
                 WGS84.omega_ie_rad_s
             )

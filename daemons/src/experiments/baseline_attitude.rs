@@ -6,7 +6,8 @@
 //! The data are the simulator's own GNSS messages (`drivers_sim::sources::GnssSource`) on the
 //! moving `config/scenarios/vehicle.toml` (turns change the heading, so the line-of-sight
 //! geometry in the body frame changes too), with the grade's baseline lengths and phase σ
-//! overridden per configuration; the receiver position for the lines of sight is the
+//! overridden per configuration and an independent noise stream (seed) for each; the receiver
+//! position for the lines of sight is the
 //! least-squares fix of the same message ([`fusion::gnss_ls`]). Every epoch draws new phase
 //! noise, so the epochs are independent samples.
 //!
@@ -82,8 +83,10 @@ fn run_config(
     length_m: f64,
     sigma_cycles: f64,
     epochs: usize,
+    seed: u64,
 ) -> Result<Config, ExperimentError> {
     let mut scn = base.clone();
+    scn.spec.scenario.seed = seed;
     scn.gnss.baseline_length_m = [length_m, length_m];
     scn.gnss.phase_sigma_cycles = sigma_cycles;
     let mut src = GnssSource::new(&scn, scn.epoch_gps().ns);
@@ -196,8 +199,11 @@ pub fn run_with(
     let bar = progress_bar(progress, jobs.len() as u64, "baseline configurations");
     let results: Vec<Result<Config, ExperimentError>> = jobs
         .par_iter()
-        .map(|&(_, d, s)| {
-            let r = run_config(&base, d, s, settings.epochs);
+        .enumerate()
+        .map(|(i, &(_, d, s))| {
+            // An independent noise stream per configuration (the scenario seed + index).
+            let seed = base.spec.scenario.seed + 1 + i as u64;
+            let r = run_config(&base, d, s, settings.epochs, seed);
             bar.inc(1);
             r
         })
