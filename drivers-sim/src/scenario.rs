@@ -1376,10 +1376,10 @@ fn validate_aircraft(f: &Path, ac: &AircraftTrajectory) -> Result<(), SimError> 
                     ));
                 }
             }
-            FlightSegment::Pitch { to_deg, .. } => {
-                if !(to_deg.is_finite() && to_deg.abs() <= 30.0) {
-                    return Err(invalid(f, format!("{k}.to_deg"), "outside ±30°"));
-                }
+            FlightSegment::Pitch { to_deg, .. }
+                if !(to_deg.is_finite() && to_deg.abs() <= 30.0) =>
+            {
+                return Err(invalid(f, format!("{k}.to_deg"), "outside ±30°"));
             }
             _ => {}
         }

@@ -91,9 +91,9 @@ fn redundant_channels_allocate_nothing_per_step() {
         s.delta_angle_rad = [0.0; 3];
         s.delta_velocity_m_s = [0.0; 3];
         s.n_channels = n as u32;
-        for i in 0..n {
-            let e = Vector3::from(axes[i]);
-            s.channel_axis[i] = axes[i];
+        for (i, ax) in axes.iter().enumerate().take(n) {
+            let e = Vector3::from(*ax);
+            s.channel_axis[i] = *ax;
             s.channel_delta_angle_rad[i] = e.dot(&inc.delta_angle_rad);
             s.channel_delta_velocity_m_s[i] = e.dot(&inc.delta_velocity_m_s);
         }
