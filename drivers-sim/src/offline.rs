@@ -63,6 +63,10 @@ pub const ALL_CHANNELS: [Channel; 6] = [
 ];
 
 /// One message of the simulated system.
+// The variants are the plain `repr(C)` messages, moved by value as the IPC moves them; the
+// GNSS one is ≈ 4 kB (32 satellites). Boxing it would allocate per GNSS epoch for no gain
+// (a stream holds one message at a time).
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum SimMessage {
     /// IMU increment sample.

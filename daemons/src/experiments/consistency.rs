@@ -523,7 +523,8 @@ mod tests {
             s.imu.gyro.temp_coeff_deg_h_per_c = 0.0;
             s.imu.accel.temp_coeff_ug_per_c = 0.0;
         }
-        let edits: [(&str, fn(&mut Scenario)); 2] = [
+        type Edit = (&'static str, fn(&mut Scenario));
+        let edits: [Edit; 2] = [
             ("sim IMU without misalignment", no_misalignment),
             (
                 "sim IMU without misalignment, scale factor, temperature",
