@@ -9,6 +9,24 @@
 //! navigating: strapdown ([`crate::strapdown`]) plus the 28-state error-state EKF
 //! ([`crate::ekf`]), mode from the aiding actually fused within its deadline.
 //!
+//! # Modes
+//! The mode reports the aiding fused within its deadline ([`Deadlines`]): GNSS and stars →
+//! GNSS-astro-inertial; GNSS lost → **astro-inertial**; stars lost → GNSS-inertial; both lost
+//! → dead reckoning (odometer/baro/ZUPT) or free inertial, with the covariance growing by the
+//! process noise only. Astro-inertial bounds the horizontal position (paper 000's astro fix,
+//! done inside the filter): the star attitude residual is taken in ECEF
+//! (`C_s_i = C_s_b·C_b_e·C_e_i(t)`, [`crate::ekf::star_attitude`]), so the stars fix ψ
+//! independently of position, while the accelerometers sense gravity along the *true*
+//! vertical. A horizontal position error δr tilts the vertical the filter assumes by δr/R;
+//! with ψ pinned by the stars that appears as a horizontal specific-force error `g·δr/R` in
+//! the velocity error equation (the `[f̂_e×]ψ` and gravity-gradient terms of
+//! [`crate::ekf`]), i.e. the Schuler loop now has a measurement closing it, and the
+//! position error settles at what the accelerometers cannot distinguish from a tilted
+//! vertical: `δr ≈ R·b_a/g` (50 µg → 320 m per axis). Free inertial has no such feedback
+//! and drifts with the gyro errors. Test: `drivers-sim/tests/filter_modes.rs` (2 h without
+//! GNSS: astro-inertial error ≤ 600 m with σ at that floor, free inertial 1.4 km and
+//! growing).
+//!
 //! # Delayed fusion (at the time of validity, exactly)
 //! Aiding samples are queued in fixed-capacity, time-ordered ring buffers (no allocation) and
 //! fused when the IMU time reaches their time of validity: at the first IMU epoch ≥ that time
@@ -1375,6 +1393,28 @@ impl Navigator {
         if self.last_seq[id] == Some(h.seq) {
             return Err(invalid(sensor, h, "duplicated sequence number"));
         }
+        // A time of validity far ahead is a corrupt timestamp, not a gap: accepted, it would
+        // make every later good sample "not increasing" (the sensor lost for good) and, for
+        // the IMU, stretch one increment over the jump (found by fuzzing: a jump of 170 years
+        // made the covariance non-finite). The IMU is compared with its own last sample, an
+        // aiding sensor with the filter time (its queue is fused when the IMU reaches it).
+        /// Largest accepted lead of a time of validity, ns (1 h: far beyond any outage that a
+        /// single stretched IMU increment can bridge; after that long a new alignment is due).
+        const MAX_TIME_AHEAD_NS: i64 = 3_600_000_000_000;
+        let reference = if id == sid(SensorId::Imu) {
+            self.last_time[id]
+        } else {
+            (self.time_ns > 0).then_some(self.time_ns)
+        };
+        if let Some(r) = reference
+            && h.time_ns.saturating_sub(r) > MAX_TIME_AHEAD_NS
+        {
+            return Err(invalid(
+                sensor,
+                h,
+                "time of validity more than an hour ahead of the last IMU sample",
+            ));
+        }
         Ok(())
     }
 
@@ -1386,8 +1426,11 @@ impl Navigator {
 
     fn validate_imu(&self, s: &ImuSample) -> Result<(), FusionError> {
         let bad = |r: &str| invalid("imu", &s.header, r);
-        if !(s.dt_s.is_finite() && s.dt_s > 0.0 && s.dt_s <= 1.0) {
-            return Err(bad("interval dt_s must be in (0, 1] s"));
+        // At least 10 µs: no IMU outputs faster than 100 kHz (DESIGN: up to 2 kHz), and a
+        // vanishing interval divides the increments into infinite rates (found by fuzzing: a
+        // subnormal dt_s made the state non-finite).
+        if !(s.dt_s.is_finite() && (1e-5..=1.0).contains(&s.dt_s)) {
+            return Err(bad("interval dt_s must be in [1e-5, 1] s"));
         }
         let dth = Vector3::from(s.delta_angle_rad);
         let dv = Vector3::from(s.delta_velocity_m_s);
