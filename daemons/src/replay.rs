@@ -172,7 +172,7 @@ fn first_difference(a: &serde_json::Value, b: &serde_json::Value, path: String) 
             .zip(y)
             .enumerate()
             .find_map(|(i, (va, vb))| first_difference(va, vb, format!("{path}/{i}"))),
-        _ if a.to_string() != b.to_string() => Some(format!("{path}: recorded {a}, replayed {b}")),
+        _ if a != b => Some(format!("{path}: recorded {a}, replayed {b}")),
         _ => None,
     }
 }

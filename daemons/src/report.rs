@@ -562,12 +562,11 @@ fn write_report_plots(dir: &Path, p: &Plots) -> Vec<PathBuf> {
             Err(e) => tracing::warn!("plot {}: {e}", path.display()),
         }
     };
-    let axes = ["north", "east", "down"];
-    for i in 0..3 {
+    for (i, axis) in ["north", "east", "down"].into_iter().enumerate() {
         let neg: Vec<f64> = p.sig[i].iter().map(|x| -x).collect();
         draw(
-            &format!("error_{}_3sigma.png", axes[i]),
-            &format!("{} position error and ±3σ of the filter", axes[i]),
+            &format!("error_{axis}_3sigma.png"),
+            &format!("{axis} position error and ±3σ of the filter"),
             "error [m]",
             vec![
                 line("error", &p.t, &p.err[i], color(0), false),
@@ -587,34 +586,33 @@ fn write_report_plots(dir: &Path, p: &Plots) -> Vec<PathBuf> {
             line("−3σ", &p.t, &neg, color(1), true),
         ],
     );
-    let xyz = ["x", "y", "z"];
     let mut gyro = Vec::new();
     let mut accel = Vec::new();
     let mut bore = Vec::new();
-    for i in 0..3 {
+    for (i, axis) in ["x", "y", "z"].into_iter().enumerate() {
         gyro.push(line(
-            &format!("estimate {}", xyz[i]),
+            &format!("estimate {axis}"),
             &p.nav_t,
             &p.gyro[i],
             color(i),
             false,
         ));
         gyro.push(line(
-            &format!("truth {}", xyz[i]),
+            &format!("truth {axis}"),
             &p.truth_t,
             &p.truth_gyro[i],
             color(i),
             true,
         ));
         accel.push(line(
-            &format!("estimate {}", xyz[i]),
+            &format!("estimate {axis}"),
             &p.nav_t,
             &p.accel[i],
             color(i),
             false,
         ));
         accel.push(line(
-            &format!("truth {}", xyz[i]),
+            &format!("truth {axis}"),
             &p.truth_t,
             &p.truth_accel[i],
             color(i),

@@ -128,7 +128,7 @@ fn run_fusion(tag: &str, out: &Path, fsize_limit: Option<u64>) -> Outcome {
         log: String::new(),
         exit_ok: false,
     };
-    let mut poll = |o: &mut Outcome| {
+    let poll = |o: &mut Outcome| {
         while let Ok(Some(n)) = nav.receive() {
             o.nav_received += 1;
             o.nav_seq_max = o.nav_seq_max.max(n.header.seq);
