@@ -50,7 +50,10 @@ fn main() -> anyhow::Result<()> {
         // Not fatal: without a recording the fusion still navigates and publishes; the recorder
         // reports the error (naming the file) and counts every record as dropped.
         if let Err(e) = std::fs::create_dir_all(dir) {
-            tracing::error!("cannot create the recording directory {}: {e}", dir.display());
+            tracing::error!(
+                "cannot create the recording directory {}: {e}",
+                dir.display()
+            );
         }
     }
     let navigator = fusion::navigator::Navigator::new(cfg.navigator.clone())
