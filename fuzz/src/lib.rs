@@ -211,6 +211,9 @@ pub fn samples(data: &[u8]) {
                     s.channel_delta_velocity_m_s[i] = b.f64();
                     s.channel_temperature_c[i] = b.f64();
                 }
+                if std::env::var_os("SEXTANT_FUZZ_VERBOSE").is_some() {
+                    eprintln!("{s:?}");
+                }
                 (0, nav.push_imu(&s).is_ok())
             }
             1 => {
@@ -263,6 +266,13 @@ pub fn samples(data: &[u8]) {
                 (4, nav.push_baro(&s).is_ok())
             }
         };
+        if std::env::var_os("SEXTANT_FUZZ_VERBOSE").is_some() {
+            eprintln!(
+                "sensor {id} accepted {ok} header {header:?} finite {} r_e {:?}",
+                finite(&nav),
+                nav.nav_state().r_e
+            );
+        }
         let h1 = nav.health();
         assert_eq!(h1[id].received, h0[id].received + 1, "received not counted");
         if !ok {

@@ -729,3 +729,36 @@ fn recording_with_a_nan_input_stays_readable() {
     assert!(out.error.is_none(), "{:?}", out.error);
     assert_eq!(out.entries.len(), 10);
 }
+
+/// Regressions found by the `samples` fuzz target: a timestamp 170 years ahead and a subnormal
+/// IMU interval were accepted and made the covariance non-finite; both are now rejected and
+/// counted, and the next good sample navigates on.
+#[test]
+fn far_future_time_and_vanishing_interval_are_rejected() {
+    let (mut nav, last) = aligned();
+    let mut s = last;
+    s.header.seq += 1;
+    s.header.time_ns = 6_768_910_239_937_855_488;
+    assert!(nav.push_imu(&s).is_err());
+    let mut s = last;
+    s.header.seq += 1;
+    s.header.time_ns += 5_000_000;
+    s.dt_s = 1.28324e-319;
+    assert!(nav.push_imu(&s).is_err());
+    let mut g = GnssSample::default();
+    g.header.seq = 99_999;
+    g.header.time_ns = last.header.time_ns + 2 * 3_600_000_000_000;
+    assert!(nav.push_gnss(&g).is_err());
+    assert_eq!(nav.health()[SensorId::Imu as usize].rejected_invalid, 2);
+    assert_eq!(nav.health()[SensorId::Gnss as usize].rejected_invalid, 1);
+    let mut s = last;
+    s.header.seq += 1;
+    s.header.time_ns += 5_000_000;
+    let sol = nav.push_imu(&s).unwrap().expect("navigating");
+    assert!(
+        sol.pos_sigma_ned_m
+            .iter()
+            .all(|x| x.is_finite() && *x < 100.0)
+    );
+    assert!(state_is_finite(&nav));
+}
