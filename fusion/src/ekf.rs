@@ -73,6 +73,7 @@
 //! # Measurement models
 //! [`gnss_position`], [`gnss_velocity`] (loose), [`gnss_pseudorange`], [`gnss_range_rate`]
 //! (tight, one satellite each, paper 003), [`star_attitude`] (with boresight κ),
+//! [`gnss_baseline_attitude`] (dual-baseline GNSS attitude, paper 003),
 //! [`baro_height`], [`odometer_nhc`] / [`odometer_speed`], [`zero_velocity`]; each returns a
 //! [`Measurement`] (innovation, `H`, `R`) evaluated at the inertial state of the sample's time
 //! of validity.
@@ -767,6 +768,29 @@ pub fn star_attitude(
         r,
     }
 }
+/// Dual-baseline GNSS attitude (paper 003 eq. 14–21, [`crate::baseline_attitude`]) as a
+/// measurement. The solver reports `C̃_e_b = (I + [ε×])·C_e_b` with covariance `cov_e` of the
+/// ECEF rotation ε; with `C_e_b = (I + [ψ×])·Ĉ_e_b`, the residual rotation vector
+/// `y = rotvec(C̃_e_b Ĉ_e_bᵀ) = ψ + ε` (ECEF, rad), so `H_ψ = I`, `R = cov_e`.
+pub fn gnss_baseline_attitude(
+    nav: &NavState,
+    c_e_b_meas: &Matrix3<f64>,
+    cov_e_rad2: &Matrix3<f64>,
+) -> Measurement<3> {
+    let c_e_b = nav.q_e_b.to_rotation_matrix().into_inner();
+    let e = c_e_b_meas * c_e_b.transpose();
+    let y =
+        UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(e)).scaled_axis();
+    let mut h = SMatrix::<f64, 3, NX>::zeros();
+    h.fixed_view_mut::<3, 3>(0, idx::ATT)
+        .copy_from(&Matrix3::identity());
+    Measurement {
+        innovation: y,
+        h,
+        r: *cov_e_rad2,
+    }
+}
+
 /// Baro altitude taken as height above the ellipsoid (HELPERS.md): `z = h_baro` (m),
 /// predicted `ĥ + b̂_h` (geodetic height of `r̂_e` plus the estimated baro bias
 /// `baro_bias_m`); `H_r = u_upᵀ` (ECEF unit up vector at the estimated latitude/longitude),
@@ -1260,6 +1284,27 @@ mod tests {
         assert!(e_rr.abs() < 1e-5, "{e_rr}");
         // The position column of the rate Jacobian is not negligible against its noise.
         assert!((d0.h.fixed_view::<1, 3>(0, idx::POS) * dx.fixed_rows::<3>(0))[0].abs() > 1e-4);
+    }
+
+    #[test]
+    fn baseline_attitude_residual_is_psi_plus_noise() {
+        // Truth = (I + [ψ×])·estimate, measurement = (I + [ε×])·truth: y = ψ + ε to second
+        // order (|ψ|·|ε| ≈ 1e-7 rad here).
+        let mut nav = nav_at_origin();
+        nav.q_e_b = UnitQuaternion::from_euler_angles(0.3, -0.4, 1.2);
+        let psi = Vector3::new(2e-4, -1e-4, 3e-4);
+        let eps = Vector3::new(-1e-4, 2e-4, 1e-4);
+        let truth = UnitQuaternion::from_scaled_axis(psi) * nav.q_e_b;
+        let meas = UnitQuaternion::from_scaled_axis(eps) * truth;
+        let m = gnss_baseline_attitude(
+            &nav,
+            &meas.to_rotation_matrix().into_inner(),
+            &(Matrix3::identity() * 1e-6),
+        );
+        let mut dx = StateVector::zeros();
+        dx.fixed_rows_mut::<3>(idx::ATT).copy_from(&psi);
+        let d = m.innovation - m.h * dx - eps;
+        assert!(d.norm() < 2e-7, "{d}");
     }
 
     #[test]

@@ -260,6 +260,8 @@ pub struct UpdateSwitches {
     pub nonholonomic: bool,
     /// Zero-velocity updates while static.
     pub zupt: bool,
+    /// Dual-baseline GNSS attitude (paper 003 eq. 14–21) from the baseline carrier phases.
+    pub baseline_attitude: bool,
 }
 
 impl Default for UpdateSwitches {
@@ -272,6 +274,7 @@ impl Default for UpdateSwitches {
             odometer: true,
             nonholonomic: true,
             zupt: true,
+            baseline_attitude: false,
         }
     }
 }
@@ -296,6 +299,8 @@ pub struct AidingNoise {
     pub nhc_sigma_m_s: f64,
     /// Zero-velocity update σ per axis, m/s.
     pub zupt_sigma_m_s: f64,
+    /// 1-σ noise of each baseline carrier-phase difference, cycles (dual-baseline attitude).
+    pub baseline_phase_sigma_cycles: f64,
     /// Initial σ of each star-tracker boresight angle κ1..κ3, deg.
     pub boresight_sigma_deg: f64,
     /// Receiver clock bias PSD (white frequency noise), m²/s (tight coupling).
@@ -326,6 +331,7 @@ impl Default for AidingNoise {
             odometer_scale_sigma: 0.003,
             nhc_sigma_m_s: 0.05,
             zupt_sigma_m_s: 0.005,
+            baseline_phase_sigma_cycles: 0.01,
             boresight_sigma_deg: 0.1,
             clock_bias_psd_m2_s: 0.1,
             clock_drift_psd_m2_s3: 0.01,
@@ -597,6 +603,10 @@ impl NavigatorConfig {
                 "aiding.boresight_sigma_deg",
             ),
             (
+                self.aiding.baseline_phase_sigma_cycles,
+                "aiding.baseline_phase_sigma_cycles",
+            ),
+            (
                 self.aiding.clock_bias_psd_m2_s,
                 "aiding.clock_bias_psd_m2_s",
             ),
@@ -725,6 +735,8 @@ struct SatObs {
 #[derive(Debug, Clone, Copy, Default)]
 struct GnssObs {
     fix: Option<GnssFix>,
+    /// Dual-baseline attitude `C̃_e_b` and the covariance of its ECEF rotation error, rad².
+    attitude: Option<(Matrix3<f64>, Matrix3<f64>)>,
     n_sats: usize,
     sats: [SatObs; MAX_SATELLITES],
 }
@@ -1185,10 +1197,16 @@ impl Navigator {
         } else {
             (0, [SatObs::default(); MAX_SATELLITES])
         };
-        if fix.is_none() && n_sats == 0 {
+        let attitude = self.baseline_attitude(s);
+        if fix.is_none() && n_sats == 0 && attitude.is_none() {
             return Ok(());
         }
-        let obs = GnssObs { fix, n_sats, sats };
+        let obs = GnssObs {
+            fix,
+            attitude,
+            n_sats,
+            sats,
+        };
         if self.too_late(s.header.time_ns) || self.gnss_q.insert(s.header.time_ns, obs).is_some() {
             self.health[id].dropped_late += 1;
         } else {
@@ -1754,14 +1772,49 @@ impl Navigator {
     }
 
     fn mark_fused(&mut self, id: usize, ts: i64) {
-        if self.count_health {
+        // A sample with several updates (baseline attitude + fix) counts once; sample times
+        // strictly increase per sensor.
+        if self.count_health && self.last_fused_ns[id] != Some(ts) {
             self.health[id].fused += 1;
         }
         self.last_fused_ns[id] = Some(self.last_fused_ns[id].map_or(ts, |p| p.max(ts)));
     }
 
+    /// Dual-baseline attitude of a sample (paper 003, [`crate::baseline_attitude`]), started
+    /// from the inertial attitude (so two satellites suffice), lines of sight from the
+    /// inertial position; None when switched off, not navigating, or not solvable.
+    fn baseline_attitude(&self, s: &GnssSample) -> Option<(Matrix3<f64>, Matrix3<f64>)> {
+        use crate::baseline_attitude as ba;
+        if !self.config.updates.baseline_attitude
+            || self.phase != Phase::Navigating
+            || !(s.baseline_length_m.iter().all(|d| pos(*d)) && pos(s.wavelength_m))
+        {
+            return None;
+        }
+        let obs = ba::PhaseObservations::from_sample(s, &self.nav.r_e).ok()?;
+        let cfg = ba::BaselineConfig {
+            baseline_length_m: s.baseline_length_m,
+            wavelength_m: s.wavelength_m,
+            sigma_phase_cycles: self.config.aiding.baseline_phase_sigma_cycles,
+        };
+        let prior = self.nav.q_e_b.to_rotation_matrix().into_inner();
+        let sol = ba::solve(&obs, &cfg, &self.nav.r_e, Some(&prior)).ok()?;
+        let finite = sol
+            .c_e_b
+            .iter()
+            .chain(sol.cov_e_rad2.iter())
+            .all(|x| x.is_finite());
+        finite.then_some((sol.c_e_b, sol.cov_e_rad2))
+    }
+
     fn fuse_gnss(&mut self, ts: i64, obs: &GnssObs) {
         let id = sid(SensorId::Gnss);
+        if let Some((c_e_b, cov)) = obs.attitude {
+            let m = ekf::gnss_baseline_attitude(&self.nav, &c_e_b, &cov);
+            if self.run_update(Some(id), &m) {
+                self.mark_fused(id, ts);
+            }
+        }
         if self.config.gnss_mode == GnssMode::Tight {
             if obs.n_sats > 0 {
                 self.fuse_gnss_tight(ts, obs);
