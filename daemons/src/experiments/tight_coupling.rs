@@ -23,6 +23,14 @@
 //!   grows only in the unobserved ones, well below free inertial;
 //! - with all satellites (≥ 4) tight ≈ loose (same information; the fix is the
 //!   least-squares combination of the same pseudoranges).
+//!
+//! # Measured (default settings, seed 3, 2026-11-23 filter)
+//! Horizontal error at the end of the 600 s window: free 52.7 m; loose = free exactly for 0–3
+//! satellites; tight 43.7 m (1 satellite), 44.9 m (2), 0.36 m (3), 0.36 m (all; loose 0.35 m).
+//! Along the clock-free direction: 1 satellite 27.9 m (free 43.6 m) — the TCXO clock (drift
+//! random walk 0.01 m²/s³) soaks up most of a lone pseudorange; 2 satellites 0.10 m along
+//! `u₁ − u₂` (free 34.9 m) while across it 44.9 m (free 39.5 m): bounded exactly where the
+//! geometry observes and free elsewhere, as the physics says.
 
 use super::consistency::{filter_config, load_scenario};
 use super::plot::{Chart, Line, color, line_chart};
