@@ -83,8 +83,11 @@ impl std::str::FromStr for SiteArg {
         let [lat, lon, h] = v[..] else {
             return Err(bad());
         };
-        if !(lat.is_finite() && lat.abs() <= 90.0 && lon.is_finite() && lon.abs() <= 360.0)
-            || !h.is_finite()
+        if !(lat.is_finite()
+            && lat.abs() <= 90.0
+            && lon.is_finite()
+            && lon.abs() <= 360.0
+            && h.is_finite())
         {
             return Err(bad());
         }

@@ -19,16 +19,17 @@ fn stand() -> Scenario {
 
 #[test]
 fn simulator_and_calibration_use_the_same_kappa_matrix() {
-    for k in [
-        [0.3f64, 0.45, -0.35],
-        [-1.0, 2.0, 0.5],
-        [10.0, -20.0, 30.0],
-    ] {
+    for k in [[0.3f64, 0.45, -0.35], [-1.0, 2.0, 0.5], [10.0, -20.0, 30.0]] {
         let rad = [k[0].to_radians(), k[1].to_radians(), k[2].to_radians()];
         let sim = kappa_matrix(&rad);
         let cal = boresight::kappa_matrix(&Vector3::from(rad));
         assert!((sim - cal).abs().max() < 1e-15, "{k:?}");
-        assert!((boresight::kappa_from_matrix(&sim) - Vector3::from(rad)).abs().max() < 1e-14);
+        assert!(
+            (boresight::kappa_from_matrix(&sim) - Vector3::from(rad))
+                .abs()
+                .max()
+                < 1e-14
+        );
     }
     assert_eq!(
         sextant_drivers_sim::sensors::c_s_b_nominal(),
@@ -72,7 +73,10 @@ fn static_shortcut_equals_the_driver_sources() {
         let a = st_src.sample(t_ns);
         let b = st.sample(k as f64, epoch + t_ns, &truth);
         for i in 0..4 {
-            assert!((a.q_sensor_icrf[i] - b.q_sensor_icrf[i]).abs() < 1e-12, "k {k}");
+            assert!(
+                (a.q_sensor_icrf[i] - b.q_sensor_icrf[i]).abs() < 1e-12,
+                "k {k}"
+            );
         }
     }
 }

@@ -601,8 +601,8 @@ pub fn least_squares(
                 continue;
             };
             let mut jac = nalgebra::Matrix2x3::zeros();
-            for j in 0..3 {
-                let dd = nom * (dm[j] * db);
+            for (j, dm_j) in dm.iter().enumerate() {
+                let dd = nom * (dm_j * db);
                 jac.set_column(j, &(t.transpose() * dd.cross(dm_k)));
             }
             normal += jac.transpose() * w * jac;

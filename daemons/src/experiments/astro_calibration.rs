@@ -306,11 +306,14 @@ fn method_json(m: &MethodResult, kappa_true: &Vector3<f64>) -> Value {
     })
 }
 
+/// One plotted series: its name and (time min, north m, east m) points.
+type Series = (String, Vec<(f64, f64, f64)>);
+
 /// Results of one record.
 struct RecordResult {
     summary: Value,
     /// (t min, north m, east m) of the 3-stage calibration per celestial model, 60 s means.
-    series: Vec<(String, Vec<(f64, f64, f64)>)>,
+    series: Vec<Series>,
 }
 
 fn evaluate(k: usize, settings: &Settings) -> Result<RecordResult, ExperimentError> {
