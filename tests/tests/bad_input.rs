@@ -422,7 +422,6 @@ fn any_msg() -> impl Strategy<Value = AnyMsg> {
                 sigma_roll_rad: sr,
                 n_stars: n,
                 valid: v % 2,
-                ..Default::default()
             })
         });
     let gnss = (
@@ -454,7 +453,6 @@ fn any_msg() -> impl Strategy<Value = AnyMsg> {
             dt_s: dt,
             distance_m: d,
             speed_m_s: v,
-            ..Default::default()
         })
     });
     let baro = (header(), bits(), bits()).prop_map(|(h, p, t)| {
@@ -462,7 +460,6 @@ fn any_msg() -> impl Strategy<Value = AnyMsg> {
             header: h,
             pressure_pa: p,
             temperature_c: t,
-            ..Default::default()
         })
     });
     prop_oneof![imu, star, gnss, odo, baro]
@@ -607,9 +604,11 @@ fn small_recording() -> &'static [u8] {
             s.dt_s = 0.005;
             rec.record(Record::Imu(s), k);
             if k % 10 == 0 {
-                let mut n = msgs::NavSolution::default();
-                n.header = s.header;
-                n.q_ned_body = [1.0, 0.0, 0.0, 0.0];
+                let n = msgs::NavSolution {
+                    header: s.header,
+                    q_ned_body: [1.0, 0.0, 0.0, 0.0],
+                    ..Default::default()
+                };
                 rec.record(Record::Nav(n), k);
             }
         }
