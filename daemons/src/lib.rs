@@ -12,17 +12,17 @@
 //! - [`signals`]: SIGINT/SIGTERM to a stop flag.
 
 pub mod analysis;
+pub mod bench;
+pub mod calibrate;
 pub mod config;
 pub mod daemon;
 pub mod experiments;
 pub mod foxglove;
 pub mod plots;
 pub mod recorder;
+pub mod recording;
+pub mod replay;
+pub mod report;
 pub mod scenario;
 pub mod signals;
 pub mod stats;
-pub mod recording;
-pub mod bench;
-pub mod replay;
-pub mod report;
-pub mod calibrate;

@@ -16,8 +16,8 @@
 //!   measurement buffering, modes and health.
 
 pub mod alignment;
-pub mod atmosphere;
 pub mod astro_fix;
+pub mod atmosphere;
 pub mod attitude;
 pub mod baseline_attitude;
 pub mod boresight;
