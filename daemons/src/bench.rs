@@ -172,22 +172,39 @@ fn stop(child: &mut Child, timeout: Duration) {
     let _ = child.wait();
 }
 
-/// Latencies (µs) of every solution in a recording.
-fn latencies_us(recording: &Path) -> anyhow::Result<Vec<f64>> {
+/// Latencies of every solution in a recording, µs: (total, transport, processing). Transport =
+/// the IMU record's MCAP publish time (CLOCK_MONOTONIC when the daemon received it) − the IMU
+/// sample's send time: iceoryx2 delivery and the daemon's wake-up. Processing = the solution's
+/// send time − that receive time: the filter step and the recorder hand-off.
+fn latencies_us(recording: &Path) -> anyhow::Result<(Vec<f64>, Vec<f64>, Vec<f64>)> {
     let bytes =
         std::fs::read(recording).with_context(|| format!("read {}", recording.display()))?;
-    let mut out = Vec::new();
+    let mut received: std::collections::HashMap<u64, u64> = std::collections::HashMap::new();
+    let (mut total, mut transport, mut processing) = (Vec::new(), Vec::new(), Vec::new());
     for m in mcap::MessageStream::new(&bytes)? {
         let m = m.with_context(|| format!("decode {}", recording.display()))?;
-        if m.channel.topic != "nav" {
-            continue;
-        }
-        let nav: NavSolution = serde_json::from_slice(&m.data)?;
-        if nav.imu_send_mono_ns > 0 && nav.header.send_mono_ns >= nav.imu_send_mono_ns {
-            out.push((nav.header.send_mono_ns - nav.imu_send_mono_ns) as f64 * 1e-3);
+        match m.channel.topic.as_str() {
+            "imu" => {
+                let imu: ImuSample = serde_json::from_slice(&m.data)?;
+                received.insert(imu.header.send_mono_ns, m.publish_time);
+            }
+            "nav" => {
+                let nav: NavSolution = serde_json::from_slice(&m.data)?;
+                if nav.imu_send_mono_ns > 0 && nav.header.send_mono_ns >= nav.imu_send_mono_ns {
+                    total.push((nav.header.send_mono_ns - nav.imu_send_mono_ns) as f64 * 1e-3);
+                    if let Some(&rx) = received.get(&nav.imu_send_mono_ns)
+                        && rx >= nav.imu_send_mono_ns
+                        && nav.header.send_mono_ns >= rx
+                    {
+                        transport.push((rx - nav.imu_send_mono_ns) as f64 * 1e-3);
+                        processing.push((nav.header.send_mono_ns - rx) as f64 * 1e-3);
+                    }
+                }
+            }
+            _ => {}
         }
     }
-    Ok(out)
+    Ok((total, transport, processing))
 }
 
 /// One live run at `imu_hz`: returns (latencies µs, per-process figures).
@@ -301,7 +318,18 @@ fn live_run(
             );
         }
     }
-    let mut lat = latencies_us(&recording)?;
+    let (mut lat, mut transport, mut processing) = latencies_us(&recording)?;
+    transport.sort_by(f64::total_cmp);
+    processing.sort_by(f64::total_cmp);
+    procs.insert(
+        "latency_split".into(),
+        json!({
+            "transport_p50_us": percentile(&transport, 50.0),
+            "transport_p99_us": percentile(&transport, 99.0),
+            "processing_p50_us": percentile(&processing, 50.0),
+            "processing_p99_us": percentile(&processing, 99.0),
+        }),
+    );
     if lat.is_empty() {
         bail!(
             "no solution in {} (see {})",
@@ -609,6 +637,12 @@ pub fn run(opts: &BenchOptions) -> anyhow::Result<Value> {
         let (lat, procs) = live_run(opts, &cfg_dir, hz, sizes.live_s)?;
         let mut fig = latency_figures(&lat, hz, sizes.live_s - BENCH_ALIGNMENT_S);
         fig["processes"] = procs;
+        if let Some(split) = fig["processes"]
+            .as_object_mut()
+            .and_then(|m| m.remove("latency_split"))
+        {
+            fig["latency_split"] = split;
+        }
         live.insert(format!("imu_{}hz", hz as u64), fig);
         runs.push((hz, lat));
     }
