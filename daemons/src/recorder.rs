@@ -63,6 +63,17 @@ pub enum RecorderError {
 /// (an input of the engine that does not come from a sensor, recorded for bit-exact replay).
 pub const SENSOR_ALIVE_TOPIC: &str = "fusion/sensor_alive";
 
+/// Topic of the records that hold a non-finite number (NaN, ±inf — bad input the filter
+/// rejected). JSON has no encoding for them (serde_json would write `null`, which the channel's
+/// schema and every reader reject), so such a record goes here instead of its own topic, as
+/// `{"topic", "time_ns", "seq", "debug"}` with the whole message in Rust's `Debug` form, which
+/// prints every float exactly (`NaN`, `inf`, shortest round-trip digits): nothing is lost and
+/// the sensor topics stay schema-valid. Replay skips it; the filter rejected it anyway.
+pub const NON_FINITE_TOPIC: &str = "fusion/non_finite_input";
+
+/// JSON Schema of [`NON_FINITE_TOPIC`].
+const NON_FINITE_SCHEMA: &str = r#"{"$schema":"https://json-schema.org/draft/2020-12/schema","title":"sextant::NonFiniteInput","type":"object","properties":{"topic":{"type":"string"},"time_ns":{"type":"integer"},"seq":{"type":"integer"},"debug":{"type":"string"}},"required":["topic","time_ns","seq","debug"]}"#;
+
 /// Name of the MCAP metadata record holding the configuration the fusion ran with.
 pub const CONFIG_METADATA_NAME: &str = "sextant/config";
 
@@ -251,6 +262,7 @@ struct Sink {
     pose: u16,
     ned_origin: Option<foxglove::NedOrigin>,
     sensor_alive: u16,
+    non_finite: u16,
     buf: Vec<u8>,
     dirty: bool,
     /// Messages handed to the writer since the last successful flush: lost if the next flush
@@ -333,6 +345,16 @@ impl Sink {
         let sensor_alive = writer
             .add_channel(sid, SENSOR_ALIVE_TOPIC, "json", &no_meta)
             .map_err(mcap_err)?;
+        let sid = writer
+            .add_schema(
+                "sextant::NonFiniteInput",
+                "jsonschema",
+                NON_FINITE_SCHEMA.as_bytes(),
+            )
+            .map_err(mcap_err)?;
+        let non_finite = writer
+            .add_channel(sid, NON_FINITE_TOPIC, "json", &no_meta)
+            .map_err(mcap_err)?;
         // Make the header, schemas and channels durable at once.
         writer.flush().map_err(mcap_err)?;
         Ok(Self {
@@ -343,6 +365,7 @@ impl Sink {
             pose,
             ned_origin: None,
             sensor_alive,
+            non_finite,
             buf: Vec::with_capacity(16 * 1024),
             dirty: false,
             unflushed: 0,
@@ -394,6 +417,26 @@ impl Sink {
         let r = item.record.to_json(&mut buf);
         self.buf = buf;
         r.map_err(|e| self.err(e))?;
+        // Our messages hold only numbers, so `null` can only be a non-finite float.
+        if self.buf.windows(4).any(|w| w == b"null") {
+            let topic = item
+                .record
+                .channel()
+                .map_or(SENSOR_ALIVE_TOPIC, |c| c.name());
+            self.buf.clear();
+            serde_json::to_writer(
+                &mut self.buf,
+                &serde_json::json!({
+                    "topic": topic,
+                    "time_ns": h.time_ns,
+                    "seq": h.seq,
+                    "debug": format!("{:?}", item.record),
+                }),
+            )
+            .map_err(|e| self.err(e))?;
+            self.write_json(self.non_finite, h.seq, h.time_ns, item.receive_mono_ns)?;
+            return Ok(1);
+        }
         self.write_json(cid, h.seq, h.time_ns, item.receive_mono_ns)?;
         let mut n = 1;
         if let Record::Nav(nav) = &item.record {
