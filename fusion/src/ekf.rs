@@ -182,7 +182,29 @@ pub struct ProcessNoise {
     pub clock_bias_psd_m2_s: f64,
     /// Receiver clock drift (random-walk frequency noise) PSD, m²/s³.
     pub clock_drift_psd_m2_s3: f64,
+    /// 1-σ non-orthogonality of the gyro triad (each off-diagonal of its symmetric part),
+    /// rad: not a state, its attitude error enters as noise per radian turned
+    /// ([`MISALIGNMENT_COHERENCE_RAD`]).
+    pub gyro_misalignment_rad: f64,
 }
+
+/// Coherence angle of the unmodelled gyro non-orthogonality, rad: the attitude noise added
+/// per covariance interval is `σ_m² · Θ_c · |Δθ|` (per axis, see below), i.e. a random walk
+/// in the angle turned.
+///
+/// Derivation. The gyro triad defines the body frame, so its misalignment is a symmetric
+/// non-orthogonality `S` (off-diagonals σ_m, zero diagonal; a rigid rotation of the triad
+/// would be the body frame itself). The measured rate is `(I + S) ω`, so the attitude error
+/// rate is `S ω`, a vector fixed in the body while the body turns. For a turn by Θ about one
+/// axis u, the error accumulated in the (non-rotating) navigation frame is the chord of the
+/// circle the error-rate vector `s = S u` sweeps: `|∫ R(θ) s dθ| = |s_⊥| · 2 sin(Θ/2)`, whose
+/// variance per perpendicular axis is `σ_m² · 4 sin²(Θ/2)`. A random walk in Θ with density
+/// `σ_m² Θ_c` bounds it for every Θ iff `Θ_c ≥ max_Θ 4 sin²(Θ/2)/Θ = max 2(1 − cos Θ)/Θ`;
+/// the maximum is at `Θ = tan(Θ/2)` (Θ* = 2.3311 rad) and equals 1.4492 (the test
+/// `misalignment_coherence_bounds_the_chord` checks it). The random walk equals the
+/// coherent error at Θ*, exceeds it for smaller turns (by Θ_c/Θ) and keeps growing after
+/// Θ* where the true error is bounded by 2|s|; the star tracker resets it in between.
+pub const MISALIGNMENT_COHERENCE_RAD: f64 = 1.4492;
 
 impl ProcessNoise {
     /// Diagonal of the continuous process-noise spectral density `Q_c` in error-state layout
@@ -232,6 +254,8 @@ pub struct TransitionAccumulator {
     sum_c_diag_f: Matrix3<f64>,
     /// `∫ Ĉ_e_b diag(ω̂) dt`, rad.
     sum_c_diag_w: Matrix3<f64>,
+    /// `∫ ω̂ dt` (body angle increment), rad.
+    sum_dtheta_b: Vector3<f64>,
 }
 
 impl TransitionAccumulator {
@@ -242,12 +266,30 @@ impl TransitionAccumulator {
         self.dt_s += dt_s;
         self.sum_c_e_b += c_dt;
         self.sum_f_e += c_dt * f_b;
+        self.sum_dtheta_b += w_b * dt_s;
         for j in 0..3 {
             for i in 0..3 {
                 self.sum_c_diag_f[(i, j)] += c_dt[(i, j)] * f_b[j];
                 self.sum_c_diag_w[(i, j)] += c_dt[(i, j)] * w_b[j];
             }
         }
+    }
+
+    /// Attitude noise (ECEF, rad²) of the unmodelled gyro non-orthogonality over the
+    /// accumulated interval, for `sigma_rad` per off-diagonal ([`MISALIGNMENT_COHERENCE_RAD`]).
+    /// Body axis i's error `Σ_{j≠i} S_ij Δθ_j` has variance `σ_m² (|Δθ|² − Δθ_i²)` over the
+    /// interval; as a random walk in the angle turned it is `σ_m² Θ_c (|Δθ|² − Δθ_i²)/|Δθ|`,
+    /// rotated to ECEF with the interval's mean attitude (the body turns by |Δθ| ≪ 1 rad).
+    pub fn misalignment_noise(&self, sigma_rad: f64) -> Matrix3<f64> {
+        let dth = self.sum_dtheta_b;
+        let angle = dth.norm();
+        if !(angle > 0.0 && sigma_rad > 0.0 && self.dt_s > 0.0) {
+            return Matrix3::zeros();
+        }
+        let k = sigma_rad * sigma_rad * MISALIGNMENT_COHERENCE_RAD / angle;
+        let d = Matrix3::from_diagonal(&dth.map(|x| k * (angle * angle - x * x)));
+        let c = self.sum_c_e_b / self.dt_s;
+        c * d * c.transpose()
     }
 
     /// The navigation rows (0..9) of `Φ = I + F̄T + ½(F̄T)²` with the gravity gradient taken
@@ -447,6 +489,9 @@ impl ErrorStateEkf {
             return;
         }
         let a = self.acc.nav_rows(ell, r_e);
+        let q_mis = self
+            .acc
+            .misalignment_noise(self.noise.gyro_misalignment_rad);
         self.acc = TransitionAccumulator::default();
         let mut p = self.p;
         for i in 0..NX {
@@ -471,6 +516,8 @@ impl ErrorStateEkf {
         for i in 0..NX {
             pn[(i, i)] += 0.5 * self.qc[i] * t;
         }
+        let mut att = pn.fixed_view_mut::<3, 3>(idx::ATT, idx::ATT);
+        att += q_mis;
         self.p = symmetrize(&pn);
         // The clock estimate moves with its drift (the error model's δḃ = δd).
         self.clock_bias_m += self.clock_drift_m_s * t;
@@ -1029,6 +1076,35 @@ mod tests {
         }
     }
 
+    /// Θ_c bounds the variance of the nav-frame error of a body-fixed error rate over any
+    /// turn, `4 sin²(Θ/2) ≤ Θ_c Θ`, and is the smallest such constant (touches at Θ* where
+    /// `Θ* = tan(Θ*/2)`); closed form of the derivation at [`MISALIGNMENT_COHERENCE_RAD`].
+    #[test]
+    fn misalignment_coherence_bounds_the_chord() {
+        let mut worst = 0.0_f64;
+        for k in 1..=20_000 {
+            let th = k as f64 * 1e-3;
+            let chord2 = 4.0 * (th / 2.0).sin().powi(2);
+            assert!(chord2 <= MISALIGNMENT_COHERENCE_RAD * th + 1e-4, "{th}");
+            worst = worst.max(chord2 / th);
+        }
+        // 4-digit constant: the grid maximum agrees to its rounding.
+        assert!((worst - MISALIGNMENT_COHERENCE_RAD).abs() < 1e-4, "{worst}");
+        // Turn about body z by 1 rad in one interval: noise only on the two tilt axes,
+        // σ_m² Θ_c |Δθ| each.
+        let mut acc = TransitionAccumulator::default();
+        let w = Vector3::new(0.0, 0.0, 0.1);
+        for _ in 0..1000 {
+            acc.add(&Matrix3::identity(), &Vector3::zeros(), &w, 0.01);
+        }
+        let sigma = 1e-4;
+        let q = acc.misalignment_noise(sigma);
+        let expect = sigma * sigma * MISALIGNMENT_COHERENCE_RAD * 1.0;
+        assert!((q[(0, 0)] - expect).abs() < 1e-9 * expect, "{q}");
+        assert!((q[(1, 1)] - expect).abs() < 1e-9 * expect, "{q}");
+        assert!(q[(2, 2)].abs() < 1e-20, "{q}");
+    }
+
     fn random_spd(rng: &mut ChaCha8Rng, scale: f64) -> Covariance {
         let a = Covariance::from_fn(|_, _| rng.random_range(-1.0..1.0));
         a * a.transpose() * scale + Covariance::identity() * 1e-6
@@ -1074,6 +1150,8 @@ mod tests {
         let mut noise = noise;
         noise.clock_bias_psd_m2_s = 0.1;
         noise.clock_drift_psd_m2_s3 = 0.01;
+        // The misalignment noise is checked on its own (misalignment_coherence_bounds_the_chord).
+        noise.gyro_misalignment_rad = 0.0;
         let mut f = ErrorStateEkf::new(p0, noise, ActiveStates::ALL);
         let nav = NavState {
             r_e: Vector3::new(4.0e6, 3.0e6, 3.5e6),
