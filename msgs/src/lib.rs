@@ -400,6 +400,10 @@ pub struct SensorHealth {
     pub nis_count: u64,
     /// Sum of the measurement dimensions of those updates (the expected NIS sum).
     pub nis_dof_sum: u64,
+    /// Samples missing by sequence number: each accepted sample whose `seq` jumps ahead of the
+    /// previous one adds the number skipped (lost in transport, e.g. a flood overrunning the
+    /// subscriber's buffer, or never sent). A restarted driver's sequence starting over adds 0.
+    pub seq_gaps: u64,
 }
 
 /// Fusion health, published at 1 Hz.

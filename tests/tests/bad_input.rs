@@ -164,10 +164,18 @@ fn bad_samples_over_iceoryx2_are_counted_never_fused_and_the_daemon_survives() {
         110 + skipped
     );
     assert!(!seqs.iter().any(|s| (110..110 + skipped).contains(s)));
+    // The status counts the missing sequence numbers between accepted samples: at least the
+    // skipped ones; at most everything that was not accepted (skipped, lost, rejected).
+    let gaps = h(SensorId::Imu, "seq_gaps");
+    let rejected = h(SensorId::Imu, "rejected_invalid");
+    assert!(
+        gaps >= skipped && gaps <= skipped + lost + rejected,
+        "seq_gaps {gaps}: skipped {skipped}, lost {lost}, rejected {rejected}"
+    );
     let recorded_dropped = int(&status, "/records_dropped").unwrap();
     eprintln!(
         "sent {} IMU samples ({flood} in a flood), received {received}, lost in transport {lost}, \
-         rejected {}, fused {fused}; records dropped by the recorder {recorded_dropped}; \
+         sequence gaps {gaps}, rejected {}, fused {fused}; records dropped by the recorder {recorded_dropped}; \
          fusion peak RSS {rss:.1} MiB",
         n("imu_sent"),
         h(SensorId::Imu, "rejected_invalid")
