@@ -25,14 +25,45 @@ fn gauss3(rng: &mut ChaCha20Rng) -> Vector3<f64> {
     Vector3::new(x, y, z)
 }
 
-/// Small-angle non-orthogonal misalignment matrix `I + δ` with 1-σ `sigma_rad` off-diagonals.
-fn misalignment(rng: &mut ChaCha20Rng, sigma_rad: f64) -> Matrix3<f64> {
+/// Small-angle misalignment matrix `I + δ` of one triad, 1-σ `sigma_rad` per off-diagonal.
+///
+/// How a calibration sheet defines it (the body frame is realised by the sensors themselves,
+/// there is no other physical reference for it):
+/// - [`MisalignmentKind::Symmetric`], the gyro triad: the body frame is the orthogonal frame
+///   closest to the gyro axes (polar decomposition `I + δ = R·(I + S)` with `R = I`), so δ is
+///   a symmetric non-orthogonality `S` (three parameters). A rigid rotation of the gyro triad
+///   relative to "body" is not an error of the IMU: the navigator's body frame *is* the
+///   gyro-realised frame, and an external sensor sees that rotation as its own mounting
+///   offset (the star tracker's boresight κ, a filter state).
+/// - [`MisalignmentKind::Full`], the accelerometer triad: six independent off-diagonals,
+///   i.e. its own non-orthogonality plus its rotation relative to the gyro-defined body
+///   frame, both real navigation errors.
+///
+/// Six normal draws are made in either case (fixed draw order of the IMU stream); the
+/// symmetric term is `(n_ij + n_ji)/√2` so that every off-diagonal keeps σ `sigma_rad`.
+fn misalignment(rng: &mut ChaCha20Rng, sigma_rad: f64, kind: MisalignmentKind) -> Matrix3<f64> {
     let mut m = Matrix3::identity();
     for (i, j) in [(0, 1), (0, 2), (1, 0), (1, 2), (2, 0), (2, 1)] {
         let n: f64 = rng.sample(StandardNormal);
         m[(i, j)] = sigma_rad * n;
     }
+    if kind == MisalignmentKind::Symmetric {
+        for (i, j) in [(0, 1), (0, 2), (1, 2)] {
+            let s = (m[(i, j)] + m[(j, i)]) * std::f64::consts::FRAC_1_SQRT_2;
+            m[(i, j)] = s;
+            m[(j, i)] = s;
+        }
+    }
     m
+}
+
+/// Which parameters of a triad's misalignment are physical (see [`misalignment`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum MisalignmentKind {
+    /// Symmetric non-orthogonality only: the triad defines the body frame (gyros).
+    Symmetric,
+    /// Non-orthogonality and rotation relative to the body frame (accelerometers).
+    Full,
 }
 
 /// Errors of one triad (gyros or accelerometers), SI units.
@@ -65,13 +96,14 @@ impl TriadErrors {
         temp_coeff_sigma: f64,
         scale_sigma: f64,
         mis_sigma_rad: f64,
+        mis_kind: MisalignmentKind,
         white_per_rt_s: f64,
         lsb: f64,
     ) -> Self {
         let bias0 = bias_sigma * gauss3(rng);
         let temp_coeff = temp_coeff_sigma * gauss3(rng);
         let scale = scale_sigma * gauss3(rng);
-        let mis = misalignment(rng, mis_sigma_rad);
+        let mis = misalignment(rng, mis_sigma_rad, mis_kind);
         Self {
             bias0,
             bias_rw: Vector3::zeros(),
@@ -171,6 +203,7 @@ impl ImuErrorModel {
             g.temp_coeff_deg_h_per_c * DEG_H_TO_RAD_S,
             g.scale_factor_ppm * 1e-6,
             g.misalignment_arcsec * ARCSEC_TO_RAD,
+            MisalignmentKind::Symmetric,
             g.arw_deg_per_rt_h.to_radians() / 60.0,
             gyro_lsb,
         );
@@ -182,6 +215,7 @@ impl ImuErrorModel {
             a.temp_coeff_ug_per_c * ug,
             a.scale_factor_ppm * 1e-6,
             a.misalignment_arcsec * ARCSEC_TO_RAD,
+            MisalignmentKind::Full,
             a.vrw_ug_per_rt_hz * ug,
             accel_lsb,
         );
