@@ -87,12 +87,18 @@ fn tight_coupling_works_with_one_two_three_satellites() {
         rms[1],
         loose.0
     );
-    // Two and three satellites: the clock is common to all, their differences bound the
-    // horizontal position (measured 0.33 m and 0.22 m vs 0.93 m free-inertial/astro).
+    // Two satellites: the clock is common to both, so their single difference bounds ONE
+    // horizontal direction (u1 − u2 projected) and leaves the other as free as without GNSS.
+    // With the free error split about evenly between the two horizontal axes the RMS can only
+    // fall to ≈ √(1/2) ≈ 0.71 of the loose one (measured 0.60–0.61: the split is not even);
+    // the direction-resolved check is in `sextant experiment tight-coupling`'s test. Here: two
+    // must beat one and the loose run. Three satellites bound both horizontal directions
+    // (measured 0.20–0.22 m vs 0.93–1.2 m).
     assert!(
-        rms[2] < 0.6 * loose.0,
-        "2 sats {} vs loose {}",
+        rms[2] < rms[1] && rms[2] < 0.8 * loose.0,
+        "2 sats {} vs 1 sat {} vs loose {}",
         rms[2],
+        rms[1],
         loose.0
     );
     assert!(
