@@ -4,7 +4,7 @@
 //! block in which a failed channel is detected, isolated and excluded — and
 //! `RedundantImu::step` on its own must not move the count. It also checks, end to end through
 //! the navigator, that the failed channel is the one excluded and reported.
-//! Only allocations made on the test's own thread are counted (a thread-local flag), so that
+//! Only allocations of the test's own thread are counted (`common`), so that
 //! the test harness's main thread, which may still be setting up when a fast test starts,
 //! cannot make the count flaky.
 
@@ -14,55 +14,15 @@ use sextant_fusion::earth::{Geodetic, GravityModel, WGS84, geodetic_to_ecef};
 use sextant_fusion::navigator::{Navigator, NavigatorConfig};
 use sextant_fusion::redundancy::{FdiConfig, RedundantImu, pyramid_axes};
 use sextant_fusion::strapdown::{q_e_n, stationary_increment};
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
-use std::sync::atomic::{AtomicUsize, Ordering};
 
-struct Counting;
-
-static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
-
-thread_local! {
-    /// Set on the test thread: only its allocations are counted.
-    static TRACKED: Cell<bool> = const { Cell::new(false) };
-}
-
-fn note() {
-    if TRACKED.try_with(Cell::get).unwrap_or(false) {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
-    }
-}
-
-// SAFETY: forwards to the system allocator unchanged; only counts calls.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        note();
-        // SAFETY: same contract as the caller's.
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: same contract as the caller's.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        note();
-        // SAFETY: same contract as the caller's.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
-
-#[global_allocator]
-static GLOBAL: Counting = Counting;
-
-fn count() -> usize {
-    ALLOCATIONS.load(Ordering::SeqCst)
-}
+mod common;
+use common::{count, track_this_thread};
 
 const T0: i64 = 1_400_000_000_000_000_000;
 
 #[test]
 fn redundant_channels_allocate_nothing_per_step() {
-    TRACKED.with(|t| t.set(true));
+    track_this_thread();
     let probe = count();
     let boxed = std::hint::black_box(Box::new([1.0_f64; 4]));
     assert!(count() > probe, "the counting allocator must work");
