@@ -83,6 +83,24 @@ fn scenario_outages(path: &Path) -> Vec<Outage> {
     out
 }
 
+/// `sextant run` of the default scenario's 600 s at 20x under `prefix`, into `out`.
+fn sextant_run(root: &Path, prefix: &str, out: &Path) -> Command {
+    let mut cmd = Command::new(bin("sextant").unwrap());
+    cmd.current_dir(root)
+        .args([
+            "run",
+            "--scenario",
+            SCENARIO,
+            "--duration",
+            "600",
+            "--speed",
+            "20",
+        ])
+        .args(["--prefix", prefix, "--out"])
+        .arg(out);
+    cmd
+}
+
 #[test]
 fn run_records_every_channel_and_navigates_within_sensor_bounds() {
     let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
@@ -94,19 +112,7 @@ fn run_records_every_channel_and_navigates_within_sensor_bounds() {
     let speed = 20.0;
 
     let t0 = Instant::now();
-    let status = Command::new(bin("sextant").unwrap())
-        .current_dir(&root)
-        .args([
-            "run",
-            "--scenario",
-            SCENARIO,
-            "--duration",
-            "600",
-            "--speed",
-            "20",
-        ])
-        .args(["--prefix", &prefix, "--out"])
-        .arg(&out)
+    let status = sextant_run(&root, &prefix, &out)
         .status()
         .expect("start sextant run");
     assert!(status.success(), "sextant run failed: {status}");
@@ -321,19 +327,7 @@ fn ctrl_c_leaves_no_process_no_shared_memory_and_a_readable_recording() {
     let out = tempdir("sigint");
     let prefix = format!("sextant_sigint_{}", std::process::id());
     let shm_before = iceoryx_entries();
-    let mut child = Command::new(bin("sextant").unwrap())
-        .current_dir(&root)
-        .args([
-            "run",
-            "--scenario",
-            SCENARIO,
-            "--duration",
-            "600",
-            "--speed",
-            "20",
-        ])
-        .args(["--prefix", &prefix, "--out"])
-        .arg(&out)
+    let mut child = sextant_run(&root, &prefix, &out)
         .spawn()
         .expect("start sextant run");
     // 12 s of wall time at 20× is 240 s of scenario: past the 100 s alignment, mid-drive.
