@@ -45,6 +45,10 @@ pub trait NavEngine {
     fn redundancy(&self) -> Option<fusion::redundancy::RedundancyStatus> {
         None
     }
+    /// GNSS cross-check and re-initialisation counters.
+    fn diagnostics(&self) -> fusion::navigator::NavigatorDiagnostics {
+        fusion::navigator::NavigatorDiagnostics::default()
+    }
 }
 
 /// Fill a status from the engine: mode, per-sensor health and the redundant-IMU counters.
@@ -60,6 +64,12 @@ pub fn engine_status<E: NavEngine>(engine: &E) -> Status {
         st.imu_channels_suspect_mask = r.suspect_mask;
         st.imu_faults_detected = u64::from(r.faults_detected);
     }
+    let d = engine.diagnostics();
+    st.gnss_ls_checks = d.gnss_ls_checks;
+    st.gnss_ls_disagreements = d.gnss_ls_disagreements;
+    st.gnss_ls_last_nis = d.gnss_ls_last_nis;
+    st.gnss_ls_pdop = d.gnss_ls_pdop;
+    st.reinitializations = d.reinitializations;
     st
 }
 
@@ -90,6 +100,9 @@ impl NavEngine for Navigator {
     }
     fn redundancy(&self) -> Option<fusion::redundancy::RedundancyStatus> {
         Navigator::redundancy_status(self)
+    }
+    fn diagnostics(&self) -> fusion::navigator::NavigatorDiagnostics {
+        Navigator::diagnostics(self)
     }
 }
 

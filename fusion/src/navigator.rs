@@ -941,6 +941,21 @@ pub struct ZuptHealth {
     pub last_nis: f64,
 }
 
+/// Navigator counters that are not per-sensor (published on `msgs::Status`).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct NavigatorDiagnostics {
+    /// Least-squares GNSS fixes (paper 003 eq. 12–13) compared with the filter position.
+    pub gnss_ls_checks: u64,
+    /// Of those, the ones failing the 3-dof chi-square test.
+    pub gnss_ls_disagreements: u64,
+    /// Normalized squared position difference (3 dof) of the last cross-check.
+    pub gnss_ls_last_nis: f64,
+    /// PDOP of the last least-squares fix.
+    pub gnss_ls_pdop: f64,
+    /// Times the navigator started over (re-alignment).
+    pub reinitializations: u64,
+}
+
 /// The fusion engine.
 #[derive(Debug, Clone)]
 pub struct Navigator {
@@ -990,6 +1005,8 @@ pub struct Navigator {
     redundancy: Option<crate::redundancy::RedundantImu>,
     /// FDI settings (None: derived from `config.imu` and the sample interval).
     redundancy_config: Option<crate::redundancy::FdiConfig>,
+    /// Cross-check and re-initialisation counters.
+    diagnostics: NavigatorDiagnostics,
 }
 
 /// Slot of a sensor in the health array.
@@ -1068,6 +1085,7 @@ impl Navigator {
             aiding_mask: 0,
             redundancy: None,
             redundancy_config: None,
+            diagnostics: NavigatorDiagnostics::default(),
             ell,
             config,
         })
@@ -1301,6 +1319,11 @@ impl Navigator {
     /// Current mode (`msgs::NavMode` as u32).
     pub fn mode(&self) -> u32 {
         self.mode as u32
+    }
+
+    /// Cross-check and re-initialisation counters.
+    pub fn diagnostics(&self) -> NavigatorDiagnostics {
+        self.diagnostics
     }
 
     /// Zero-velocity update counters.

@@ -436,6 +436,18 @@ pub struct Status {
     /// Status messages or solutions the recorder could not write (disk full, unwritable), also
     /// counted in `records_dropped`; nonzero means the recording is incomplete.
     pub recorder_errors: u64,
+    /// Receiver-style least-squares fixes (paper 003 eq. 12–13) compared with the filter's
+    /// predicted position (cross-check of the GNSS aiding).
+    pub gnss_ls_checks: u64,
+    /// Of those, the ones whose position difference failed the 3-dof chi-square test against
+    /// the filter covariance plus the fix covariance.
+    pub gnss_ls_disagreements: u64,
+    /// Normalized squared position difference (3 dof) of the last cross-check.
+    pub gnss_ls_last_nis: f64,
+    /// Position dilution of precision of the last least-squares fix.
+    pub gnss_ls_pdop: f64,
+    /// Times the navigator started over (re-alignment after a gap it cannot bridge).
+    pub reinitializations: u64,
 }
 
 /// The logical channels of the system.
