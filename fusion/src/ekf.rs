@@ -740,6 +740,116 @@ pub fn gnss_range_rate(
     }
 }
 
+/// State augmentation from measurements (used to start the receiver-clock states).
+///
+/// New states `c` (indices `new`, currently without covariance: their rows and columns of `p`
+/// are zero) are set from `M` measurements `z = h(x) + c + ε`, `ε ~ N(0, r)`, as
+/// `ĉ = z − h(x̂)`. Their error is then `δc = c − ĉ = −H δx − ε`, where `H` (`h`, with zero
+/// columns at `new`) is the Jacobian of `h` with respect to the existing error states. Hence
+///
+/// `P_cc = H P Hᵀ + R`,  `P_cx = −H P`,
+///
+/// exactly (to first order in δx), so the new states carry the existing errors they were
+/// computed with — e.g. a clock bias taken from `ρ − |s − r̂|` carries `+u·δr` (`H_r = −uᵀ`).
+/// Setting `P_cx = 0` instead would let the filter later "explain" the inertial error along the
+/// line of sight by a clock it believes independent (the one-satellite defect of issue 5).
+/// The measurements used are consumed: fusing them again would count them twice. Pure; no
+/// allocation.
+pub fn augment_covariance<const M: usize>(
+    p: &mut Covariance,
+    new: [usize; M],
+    h: &SMatrix<f64, M, NX>,
+    r: &SMatrix<f64, M, M>,
+) {
+    let mut h0 = *h;
+    for &i in &new {
+        h0.column_mut(i).fill(0.0);
+        p.row_mut(i).fill(0.0);
+        p.column_mut(i).fill(0.0);
+    }
+    let hp: SMatrix<f64, M, NX> = h0 * *p;
+    let p_cc = symmetrize(&(hp * h0.transpose() + r));
+    for (a, &i) in new.iter().enumerate() {
+        for j in 0..NX {
+            p[(i, j)] = -hp[(a, j)];
+            p[(j, i)] = -hp[(a, j)];
+        }
+    }
+    for (a, &i) in new.iter().enumerate() {
+        for (b, &j) in new.iter().enumerate() {
+            p[(i, j)] = p_cc[(a, b)];
+        }
+    }
+}
+
+#[cfg(test)]
+mod augmentation_tests {
+    use super::*;
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, StandardNormal};
+
+    /// Monte Carlo: draw δx ~ N(0, P) and ε, form δc = −Hδx − ε; the sample covariance of
+    /// (δx, δc) must equal the augmented P. With N draws the sample covariance of two unit
+    /// variables has standard error ≤ √(2/N); we accept 5 standard errors on every element
+    /// of the correlation-normalised difference.
+    #[test]
+    fn augmented_covariance_is_the_covariance_of_the_construction() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+        // A random SPD prior on the 26 non-clock states, clock rows zero.
+        let mut a = SMatrix::<f64, NX, NX>::zeros();
+        for v in a.iter_mut() {
+            *v = StandardNormal.sample(&mut rng);
+        }
+        let mut p: Covariance = a * a.transpose() + Covariance::identity();
+        for i in [idx::CLK, idx::CLK_DRIFT] {
+            p.row_mut(i).fill(0.0);
+            p.column_mut(i).fill(0.0);
+        }
+        let mut h = SMatrix::<f64, 2, NX>::zeros();
+        for v in h.iter_mut() {
+            *v = StandardNormal.sample(&mut rng);
+        }
+        h[(0, idx::CLK)] = 1.0;
+        h[(1, idx::CLK_DRIFT)] = 1.0;
+        let r = SMatrix::<f64, 2, 2>::new(2.0, 0.5, 0.5, 1.0);
+        let mut pa = p;
+        augment_covariance(&mut pa, [idx::CLK, idx::CLK_DRIFT], &h, &r);
+        let mut h0 = h;
+        h0.column_mut(idx::CLK).fill(0.0);
+        h0.column_mut(idx::CLK_DRIFT).fill(0.0);
+        let lp = {
+            // P has zero rows at the clock: factor the 26×26 part through eigenvectors.
+            let e = p.symmetric_eigen();
+            e.eigenvectors * Covariance::from_diagonal(&e.eigenvalues.map(|l| l.max(0.0).sqrt()))
+        };
+        let lr = r.cholesky().unwrap().l();
+        let n = 20_000;
+        let mut s = Covariance::zeros();
+        for _ in 0..n {
+            let z = SVector::<f64, NX>::from_fn(|_, _| StandardNormal.sample(&mut rng));
+            let w = SVector::<f64, 2>::from_fn(|_, _| StandardNormal.sample(&mut rng));
+            let mut dx = lp * z;
+            let dc = -(h0 * dx) - lr * w;
+            dx[idx::CLK] = dc[0];
+            dx[idx::CLK_DRIFT] = dc[1];
+            s += dx * dx.transpose();
+        }
+        s /= n as f64;
+        for i in 0..NX {
+            for j in 0..NX {
+                let scale = (pa[(i, i)] * pa[(j, j)]).sqrt().max(1e-12);
+                let d = (s[(i, j)] - pa[(i, j)]) / scale;
+                assert!(
+                    d.abs() < 5.0 * (2.0 / n as f64).sqrt(),
+                    "({i},{j}): sample {} vs augmented {}",
+                    s[(i, j)],
+                    pa[(i, j)]
+                );
+            }
+        }
+    }
+}
+
 /// Zero-velocity update: `z = 0` for the ECEF velocity, isotropic noise `sigma_m_s`.
 pub fn zero_velocity(nav: &NavState, sigma_m_s: f64) -> Measurement<3> {
     let mut m = gnss_velocity(

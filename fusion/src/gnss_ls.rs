@@ -258,6 +258,10 @@ pub struct PositionFix {
     pub cov_r_e_m2: Matrix3<f64>,
     /// Variance of the clock bias, m².
     pub var_clock_bias_m2: f64,
+    /// Covariance of `r_e_m` with the clock bias, m² (the off-diagonal column of the weighted
+    /// `(HᵀWH)⁻¹`: position and clock errors are correlated through the common `1` column of
+    /// `H`, strongly along the vertical for a sky-only geometry).
+    pub cov_r_clock_m2: Vector3<f64>,
     /// Dilutions of precision.
     pub dop: Dop,
     /// Post-fit residuals `ρ_i − |s_i − r̂| − b̂` in observation order, m (first `n_used`).
@@ -281,6 +285,8 @@ pub struct VelocityFix {
     pub cov_v_e_m2_s2: Matrix3<f64>,
     /// Variance of the clock drift, (m/s)².
     pub var_clock_drift_m2_s2: f64,
+    /// Covariance of `v_e_m_s` with the clock drift, m²/s².
+    pub cov_v_drift_m2_s2: Vector3<f64>,
     /// Post-fit range-rate residuals of the satellites with Doppler, in observation order
     /// (entries of satellites without Doppler are 0), m/s.
     pub residuals_m_s: [f64; MAX_SATELLITES],
@@ -423,6 +429,7 @@ pub fn solve_position(
         clock_bias_m: b,
         cov_r_e_m2: p.fixed_view::<3, 3>(0, 0).into_owned(),
         var_clock_bias_m2: p[(3, 3)],
+        cov_r_clock_m2: p.fixed_view::<3, 1>(0, 3).into_owned(),
         dop,
         residuals_m: residuals,
         n_used: sats.len(),
@@ -487,6 +494,7 @@ pub fn solve_velocity(obs: &Observations, pos: &PositionFix) -> Result<VelocityF
         clock_drift_m_s: d,
         cov_v_e_m2_s2: p.fixed_view::<3, 3>(0, 0).into_owned(),
         var_clock_drift_m2_s2: p[(3, 3)],
+        cov_v_drift_m2_s2: p.fixed_view::<3, 1>(0, 3).into_owned(),
         residuals_m_s: residuals,
         n_used: used,
         chi2,
@@ -641,7 +649,9 @@ mod tests {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
         let base = synth(&r, &c, &sky(), &Vector3::zeros(), 50.0, 0.0);
         let n_trials = 2000;
-        let (mut nees_sum, mut e2_sum) = (0.0, 0.0);
+        let (mut nees_sum, mut e2_sum, mut nees4_sum) = (0.0, 0.0, 0.0);
+        let mut cross_sum = Vector3::zeros();
+        let mut p4_last = Matrix4::zeros();
         let mut pdop = 0.0;
         let mut sigma2 = 0.0;
         for _ in 0..n_trials {
@@ -653,6 +663,19 @@ mod tests {
             let fix = solve_position(&obs, &LsSettings::default()).unwrap();
             let e = fix.r_e_m - r;
             nees_sum += e.dot(&(fix.cov_r_e_m2.try_inverse().unwrap() * e));
+            // Joint position + clock NEES: χ²(4) only if the position↔clock covariance is
+            // right (the clock error is strongly correlated with the vertical one).
+            let mut p4 = Matrix4::zeros();
+            p4.fixed_view_mut::<3, 3>(0, 0).copy_from(&fix.cov_r_e_m2);
+            p4.fixed_view_mut::<3, 1>(0, 3)
+                .copy_from(&fix.cov_r_clock_m2);
+            p4.fixed_view_mut::<1, 3>(3, 0)
+                .copy_from(&fix.cov_r_clock_m2.transpose());
+            p4[(3, 3)] = fix.var_clock_bias_m2;
+            let e4 = Vector4::new(e.x, e.y, e.z, fix.clock_bias_m - 50.0);
+            nees4_sum += e4.dot(&(p4.try_inverse().unwrap() * e4));
+            cross_sum += e * e4.w;
+            p4_last = p4;
             e2_sum += e.norm_squared();
             pdop = fix.dop.pdop;
             sigma2 = 1.5f64 * 1.5;
@@ -663,6 +686,24 @@ mod tests {
             "NEES sum {nees_sum} vs {}",
             3.0 * nf
         );
+        // Same argument with 4 dof: mean 4N, σ √(8N).
+        assert!(
+            (nees4_sum - 4.0 * nf).abs() < 4.0 * (8.0 * nf).sqrt(),
+            "position+clock NEES sum {nees4_sum} vs {}",
+            4.0 * nf
+        );
+        // The NEES mean cannot see a missing correlation (tr(D⁻¹P) = 4 for D = diag P), so the
+        // cross-covariance is checked directly: the sample mean of e_k·e_b estimates P_kb with
+        // standard error √((P_kk P_bb + P_kb²)/N); accept 4 of them.
+        for k in 0..3 {
+            let p_kb = p4_last[(k, 3)];
+            let se = ((p4_last[(k, k)] * p4_last[(3, 3)] + p_kb * p_kb) / nf).sqrt();
+            assert!(
+                (cross_sum[k] / nf - p_kb).abs() < 4.0 * se,
+                "axis {k}: sample cov {} vs P_kb {p_kb} (se {se})",
+                cross_sum[k] / nf
+            );
+        }
         let expect = sigma2 * pdop * pdop;
         let mean_e2 = e2_sum / nf;
         assert!(
