@@ -38,7 +38,7 @@ use super::{ExperimentError, create_out_dir, fmt_num, progress_bar, write_summar
 use drivers_sim::offline::SimMessage;
 use drivers_sim::offline::{Channel, OfflineSim, SatelliteLimit, run_navigator};
 use fusion::navigator::{Navigator, NavigatorConfig};
-use nalgebra::{Vector2, Vector3};
+use nalgebra::{Matrix2, Vector2, Vector3};
 use rayon::prelude::*;
 use serde_json::{Value, json};
 use std::cell::RefCell;
@@ -97,6 +97,8 @@ struct Series {
     sigma_m: Vec<f64>,
     /// Horizontal error (north, east), m.
     err_ne_m: Vec<Vector2<f64>>,
+    /// Horizontal position covariance (north, east), m².
+    cov_ne_m2: Vec<Matrix2<f64>>,
     /// With 1 or 2 satellites: the horizontal unit direction they observe free of the clock
     /// (2: the horizontal projection of `u₁ − u₂`, the single difference; 1: the horizontal
     /// line of sight, which the clock bias shares), north/east.
@@ -184,6 +186,8 @@ fn one_run(
             }));
             let e = p.pos_err_ned_m();
             s.err_ne_m.push(Vector2::new(e.x, e.y));
+            let c = p.c_e_n.transpose() * p.pos_cov_e_m2 * p.c_e_n;
+            s.cov_ne_m2.push(c.fixed_view::<2, 2>(0, 0).into_owned());
         }
     })
     .map_err(|e| {
@@ -197,30 +201,146 @@ fn one_run(
     Ok(s)
 }
 
+/// A run's horizontal error resolved along and across the observed directions.
+#[derive(Debug, Clone, Copy, Default)]
+struct AlongAcross {
+    /// |along| and |across| at the last epoch with a direction, m.
+    final_along_m: f64,
+    final_across_m: f64,
+    /// Their maxima over the window, m.
+    max_along_m: f64,
+    max_across_m: f64,
+    /// Signed error along the direction at the last epoch, m.
+    final_along_signed_m: f64,
+    /// The run's own 1-σ along the direction at the last epoch, `√(aᵀ P_NE a)`, m.
+    final_sigma_along_m: f64,
+}
+
 /// Components of `e`'s horizontal errors along and across `dirs` (epochs without a direction
-/// are skipped): (|final along|, max |along|, |final across|, max |across|), m.
-fn along_across(e: &Series, dirs: &[Option<Vector2<f64>>]) -> Option<[f64; 4]> {
-    let mut out: Option<[f64; 4]> = None;
-    for (err, d) in e.err_ne_m.iter().zip(dirs) {
+/// are skipped), with the run's own σ along them.
+fn along_across(e: &Series, dirs: &[Option<Vector2<f64>>]) -> Option<AlongAcross> {
+    let mut out: Option<AlongAcross> = None;
+    for ((err, cov), d) in e.err_ne_m.iter().zip(&e.cov_ne_m2).zip(dirs) {
         if let Some(d) = d {
-            let (a, c) = (err.dot(d).abs(), err.perp(d).abs());
-            let o = out.get_or_insert([0.0; 4]);
-            *o = [a, o[1].max(a), c, o[3].max(c)];
+            let (a, c) = (err.dot(d), err.perp(d).abs());
+            let o = out.get_or_insert_with(AlongAcross::default);
+            o.final_along_m = a.abs();
+            o.final_across_m = c;
+            o.max_along_m = o.max_along_m.max(a.abs());
+            o.max_across_m = o.max_across_m.max(c);
+            o.final_along_signed_m = a;
+            o.final_sigma_along_m = d.dot(&(cov * d)).max(0.0).sqrt();
         }
     }
     out
 }
 
-fn observed_json(v: Option<[f64; 4]>) -> Value {
+fn observed_json(v: Option<AlongAcross>) -> Value {
     match v {
-        Some([fa, ma, fc, mc]) => json!({
-            "final_error_along_observed_direction_m": fa,
-            "max_error_along_observed_direction_m": ma,
-            "final_error_across_observed_direction_m": fc,
-            "max_error_across_observed_direction_m": mc,
+        Some(o) => json!({
+            "final_error_along_observed_direction_m": o.final_along_m,
+            "max_error_along_observed_direction_m": o.max_along_m,
+            "final_error_across_observed_direction_m": o.final_across_m,
+            "max_error_across_observed_direction_m": o.max_across_m,
+            "final_signed_error_along_observed_direction_m": o.final_along_signed_m,
+            "final_sigma_along_observed_direction_m": o.final_sigma_along_m,
         }),
         None => Value::Null,
     }
+}
+
+/// How much worse than free inertial a consistent tight filter may end up along the
+/// observed direction `a` in ONE run.
+///
+/// Both runs see the same truth and IMU samples; the tight estimate is the free one plus the
+/// correction `c` that the satellite's innovations carry, so `e_free = e_tight + c` along `a`.
+/// For a consistent (optimal, linear-Gaussian) filter the error `e_tight` is orthogonal to
+/// everything computed from the innovations, `c` included, hence
+/// `σ_free² = σ_tight² + Var(c)`: the correction's spread is the information gained,
+/// `Var(c) = σ_free² − σ_tight²` (both σ from the runs' own covariances). So
+/// `|e_tight| ≤ |e_free| + |c|`, and `|c| ≤ 3·√(σ_free² − σ_tight²)` at 99.7 %: tight is "not
+/// worse than free within the noise of one run" when
+/// `|e_tight,a| ≤ |e_free,a| + 3·√(σ_free,a² − σ_tight,a²)`. (A filter that learns nothing
+/// has `σ_tight = σ_free`, zero tolerance, and must then equal free.)
+fn not_worse_tolerance_m(tight: &AlongAcross, free: &AlongAcross) -> f64 {
+    let var_c = free.final_sigma_along_m.powi(2) - tight.final_sigma_along_m.powi(2);
+    3.0 * var_c.max(0.0).sqrt()
+}
+
+/// Signed error along the observed direction, tight and free, with the ±1σ the tight filter
+/// reports, for `n` = 1 or 2 satellites.
+fn along_plot(
+    out_dir: &Path,
+    n: usize,
+    tight: &Series,
+    free: &Series,
+) -> Result<(), ExperimentError> {
+    let signed = |e: &Series, sigma: Option<f64>| -> Vec<(f64, f64)> {
+        e.t_s
+            .iter()
+            .zip(e.err_ne_m.iter().zip(&e.cov_ne_m2))
+            .zip(&tight.dir_ne)
+            .filter_map(|((t, (err, cov)), d)| {
+                let d = d.as_ref()?;
+                Some((
+                    *t,
+                    match sigma {
+                        None => err.dot(d),
+                        Some(k) => k * d.dot(&(cov * d)).max(0.0).sqrt(),
+                    },
+                ))
+            })
+            .collect()
+    };
+    let lines = vec![
+        Line {
+            label: "free inertial".into(),
+            points: signed(free, None),
+            color: color(5),
+            dashed: true,
+            markers: false,
+        },
+        Line {
+            label: format!("tight, {n} satellite(s)"),
+            points: signed(tight, None),
+            color: color(0),
+            dashed: false,
+            markers: false,
+        },
+        Line {
+            label: "tight +1σ (own covariance)".into(),
+            points: signed(tight, Some(1.0)),
+            color: color(1),
+            dashed: true,
+            markers: false,
+        },
+        Line {
+            label: "tight −1σ".into(),
+            points: signed(tight, Some(-1.0)),
+            color: color(1),
+            dashed: true,
+            markers: false,
+        },
+    ];
+    line_chart(
+        &out_dir.join(format!("along_observed_direction_{n}_satellites.png")),
+        &Chart {
+            title: &format!(
+                "{n} satellite(s): error along {}",
+                if n == 1 {
+                    "the horizontal line of sight"
+                } else {
+                    "u1 − u2"
+                }
+            ),
+            x_label: "time since the window started, s",
+            y_label: "signed horizontal error along the direction, m",
+            log_x: false,
+            log_y: false,
+            lines: &lines,
+        },
+    )?;
+    Ok(())
 }
 
 fn stats(s: &Series) -> Value {
@@ -304,6 +424,19 @@ pub fn run_with(
                     "free_observed_direction".into(),
                     observed_json(along_across(free, &s.dir_ne)),
                 );
+                if let (Some(t), Some(f)) =
+                    (along_across(s, &s.dir_ne), along_across(free, &s.dir_ne))
+                {
+                    let tol = not_worse_tolerance_m(&t, &f);
+                    row.insert(
+                        "tight_vs_free_along_observed_direction".into(),
+                        json!({
+                            "tolerance_m": tol,
+                            "tight_not_worse_than_free": t.final_along_m <= f.final_along_m + tol,
+                        }),
+                    );
+                    along_plot(out_dir, n, s, free)?;
+                }
             }
         }
         rows.push(Value::Object(row));
@@ -434,7 +567,7 @@ pub fn table(summary: &Value) -> String {
             );
         }
         s += "clock-free observed direction (1: line of sight, 2: u1 - u2), final |error|, m:\n";
-        s += "satellites   tight along / across   free along / across\n";
+        s += "satellites   tight along / across   free along / across   σ along tight / free   tolerance  tight<=free+tol\n";
         for c in cases {
             if c["tight_observed_direction"].is_object() {
                 let f = |k: &str, a: &str| {
@@ -445,13 +578,30 @@ pub fn table(summary: &Value) -> String {
                         false,
                     )
                 };
+                let sig = |k: &str| {
+                    fmt_num(
+                        c,
+                        &format!("/{k}/final_sigma_along_observed_direction_m"),
+                        2,
+                        false,
+                    )
+                };
                 s += &format!(
-                    "{:>10}   {:>8} / {:<8}    {:>8} / {:<8}\n",
+                    "{:>10}   {:>8} / {:<8}    {:>8} / {:<8}   {:>8} / {:<8}   {:>8}   {}\n",
                     c["satellites"].as_str().unwrap_or("?"),
                     f("tight_observed_direction", "along"),
                     f("tight_observed_direction", "across"),
                     f("free_observed_direction", "along"),
                     f("free_observed_direction", "across"),
+                    sig("tight_observed_direction"),
+                    sig("free_observed_direction"),
+                    fmt_num(
+                        c,
+                        "/tight_vs_free_along_observed_direction/tolerance_m",
+                        2,
+                        false
+                    ),
+                    c["tight_vs_free_along_observed_direction"]["tight_not_worse_than_free"],
                 );
             }
         }
