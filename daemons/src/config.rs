@@ -324,10 +324,23 @@ pub fn parse_navigator_config(text: &str, file: &Path) -> Result<NavigatorConfig
         file: file.to_path_buf(),
         message: e.to_string(),
     })?;
-    cfg.validate().map_err(|e| ConfigError::Invalid {
-        file: file.to_path_buf(),
-        key: "filter".into(),
-        message: e.to_string(),
+    cfg.validate().map_err(|e| {
+        // fusion names the key as `filter.<dotted key> <what>`: report the key itself.
+        let (key, message) = match &e {
+            fusion::FusionError::Config(m) => match m.strip_prefix("filter.") {
+                Some(rest) => match rest.split_once(' ') {
+                    Some((k, what)) => (k.to_string(), what.to_string()),
+                    None => ("filter".to_string(), m.clone()),
+                },
+                None => ("filter".to_string(), m.clone()),
+            },
+            other => ("filter".to_string(), other.to_string()),
+        };
+        ConfigError::Invalid {
+            file: file.to_path_buf(),
+            key,
+            message,
+        }
     })?;
     Ok(cfg)
 }
@@ -443,6 +456,94 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("/nonexistent/sextant.toml"), "{e}");
+    }
+
+    /// `[redundancy]` of the filter tuning: the shipped values parse into the defaults, a bad
+    /// value or an unknown key is an error naming the file and the key, and the quantisation
+    /// steps reach the derived FDI noise.
+    #[test]
+    fn redundancy_section_parses_validates_and_names_keys() {
+        const FILTER: &str = include_str!("../../config/filter.toml");
+        let file = Path::new("cfg/filter.toml");
+        let c = parse_navigator_config(FILTER, file).unwrap();
+        assert_eq!(
+            c.redundancy,
+            fusion::redundancy::RedundancyConfig::default()
+        );
+        for (from, to, key) in [
+            (
+                "gyro_quantum_deg_s = 0.0",
+                "gyro_quantum_deg_s = -0.1",
+                "redundancy.gyro_quantum_deg_s",
+            ),
+            (
+                "accel_quantum_mg = 0.0",
+                "accel_quantum_mg = nan",
+                "redundancy.accel_quantum_mg",
+            ),
+            (
+                "false_alarm_probability = 1e-4",
+                "false_alarm_probability = 0.7",
+                "redundancy.false_alarm_probability",
+            ),
+            (
+                "block_samples = 100",
+                "block_samples = 0",
+                "redundancy.block_samples",
+            ),
+        ] {
+            assert!(FILTER.contains(from), "{from}");
+            let e = parse_navigator_config(&FILTER.replace(from, to), file).unwrap_err();
+            assert!(
+                matches!(&e, ConfigError::Invalid { key: k, .. } if k == key),
+                "{e}"
+            );
+            let msg = e.to_string();
+            assert!(
+                msg.contains("cfg/filter.toml") && msg.contains(key),
+                "{msg}"
+            );
+        }
+        let e = parse_navigator_config(
+            &FILTER.replace("exclude = true", "exclude = true\nisolate = 1"),
+            file,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("isolate") && e.contains("cfg/filter.toml"),
+            "{e}"
+        );
+        let e = parse_navigator_config(&FILTER.replace("exclude = true", "exclude = 3"), file)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("exclude"), "{e}");
+
+        // 12 bits over ±150 °/s and ±4 g at 100 Hz with the MEMS white noise (0.3 °/√h,
+        // 150 µg/√Hz): σ² = N² dt + (q dt)²/12.
+        let text = FILTER
+            .replace(
+                "gyro_quantum_deg_s = 0.0",
+                "gyro_quantum_deg_s = 0.0732421875",
+            )
+            .replace("accel_quantum_mg = 0.0", "accel_quantum_mg = 1.953125");
+        let c = parse_navigator_config(&text, file).unwrap();
+        let arw = 0.3_f64.to_radians() / 60.0;
+        let vrw = 150e-6 * 9.806_65;
+        let f = c.redundancy.fdi_config(arw, vrw, 0.01);
+        let qg = 0.0732421875_f64.to_radians() * 0.01;
+        let qa = 1.953125e-3 * 9.806_65 * 0.01;
+        let want_g = (arw * arw * 0.01 + qg * qg / 12.0).sqrt();
+        let want_a = (vrw * vrw * 0.01 + qa * qa / 12.0).sqrt();
+        assert!((f.gyro_sigma_rad / want_g - 1.0).abs() < 1e-12);
+        assert!((f.accel_sigma_m_s / want_a - 1.0).abs() < 1e-12);
+        // Quantisation adds 18 % (gyro) and 14 % (accelerometer) of variance here.
+        let rg = (f.gyro_sigma_rad / (arw * 0.1)).powi(2);
+        let ra = (f.accel_sigma_m_s / (vrw * 0.1)).powi(2);
+        assert!(
+            (rg - 1.18).abs() < 0.005 && (ra - 1.14).abs() < 0.005,
+            "{rg} {ra}"
+        );
     }
 
     #[test]

@@ -428,6 +428,8 @@ pub struct NavigatorConfig {
     pub aiding: AidingNoise,
     /// Aiding deadlines for the navigation mode.
     pub deadlines: Deadlines,
+    /// Redundant-channel fault detection (paper 004; used when the IMU has channels).
+    pub redundancy: crate::redundancy::RedundancyConfig,
 }
 
 impl Default for NavigatorConfig {
@@ -450,6 +452,7 @@ impl Default for NavigatorConfig {
             updates: UpdateSwitches::default(),
             aiding: AidingNoise::default(),
             deadlines: Deadlines::default(),
+            redundancy: crate::redundancy::RedundancyConfig::default(),
         }
     }
 }
@@ -589,6 +592,7 @@ impl NavigatorConfig {
             "imu.max_specific_force_m_s2",
             "must exceed 2 g",
         )?;
+        self.redundancy.validate()?;
         self.validate_filter_keys()
     }
 
@@ -1782,6 +1786,25 @@ impl Navigator {
             p0[(idx::BA + k, idx::BA + k)] =
                 sba + s_mis * s_mis * (f_b.norm_squared() - f_b[k] * f_b[k]);
         }
+        // The alignment's tilt and heading errors are the accelerometer and gyro biases seen
+        // through levelling and gyrocompassing, not independent of them (counting both would
+        // make e.g. a star tracker's boresight tilt look √2 better known than it is):
+        // the joint (ψ, b_g, b_a) block of alignment::alignment_error_covariance.
+        let joint = alignment::alignment_error_covariance(
+            &c_e_n,
+            &a.q_n_b.to_rotation_matrix().into_inner(),
+            geo.lat_rad,
+            self.ell.omega_ie_rad_s,
+            f_b.norm(),
+            &p0.fixed_view::<3, 3>(idx::BG, idx::BG).into_owned(),
+            &p0.fixed_view::<3, 3>(idx::BA, idx::BA).into_owned(),
+            &spec,
+            self.align.duration_s(),
+            self.config.initial.level_sigma_min_deg * DEG,
+            self.config.initial.heading_sigma_min_deg * DEG,
+        );
+        p0.fixed_view_mut::<9, 9>(idx::ATT, idx::ATT)
+            .copy_from(&joint);
         p0[(idx::BARO, idx::BARO)] = self.config.aiding.baro_bias_sigma_m.powi(2);
         p0[(idx::ODO, idx::ODO)] = self.config.aiding.odometer_scale_sigma.powi(2);
         let sg = imu.gyro_scale_ppm * 1e-6;
@@ -2186,7 +2209,11 @@ impl Navigator {
                 );
                 (m_d.innovation[0], m_d.h, sj.sigma_rr_m_s.powi(2))
             }
-            None => (0.0, nalgebra::SMatrix::<f64, 1, { ekf::NX }>::zeros(), 300.0f64.powi(2)),
+            None => (
+                0.0,
+                nalgebra::SMatrix::<f64, 1, { ekf::NX }>::zeros(),
+                300.0f64.powi(2),
+            ),
         };
         let mut h = nalgebra::SMatrix::<f64, 2, { ekf::NX }>::zeros();
         h.row_mut(0).copy_from(&(m_b.h + h_d * back_s));
@@ -2302,10 +2329,8 @@ impl Navigator {
             p.row_mut(i).fill(0.0);
             p.column_mut(i).fill(0.0);
         }
-        p[(idx::CLK, idx::CLK)] = fix.position.var_clock_bias_m2
-            + dt * dt * var_d
-            + qb * dt
-            + qd * dt * dt * dt / 3.0;
+        p[(idx::CLK, idx::CLK)] =
+            fix.position.var_clock_bias_m2 + dt * dt * var_d + qb * dt + qd * dt * dt * dt / 3.0;
         let p_bd = dt * var_d + qd * dt * dt / 2.0;
         p[(idx::CLK, idx::CLK_DRIFT)] = p_bd;
         p[(idx::CLK_DRIFT, idx::CLK)] = p_bd;
@@ -2685,13 +2710,15 @@ impl Navigator {
             .as_ref()
             .is_some_and(|r| r.same_layout(axes))
         {
+            // From `[redundancy]` with the white noise of `[imu]` and the quantisation of
+            // the channels over this sample interval, unless set_redundancy_config was called.
             let cfg = self.redundancy_config.unwrap_or_else(|| {
                 let noise = self.config.imu.process_noise();
-                crate::redundancy::FdiConfig {
-                    gyro_sigma_rad: noise.arw_rad_sqrt_s * s.dt_s.sqrt(),
-                    accel_sigma_m_s: noise.vrw_m_s_sqrt_s * s.dt_s.sqrt(),
-                    ..Default::default()
-                }
+                self.config.redundancy.fdi_config(
+                    noise.arw_rad_sqrt_s,
+                    noise.vrw_m_s_sqrt_s,
+                    s.dt_s,
+                )
             });
             self.redundancy = crate::redundancy::RedundantImu::new(axes, cfg).ok();
         }
