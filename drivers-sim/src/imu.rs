@@ -66,6 +66,71 @@ enum MisalignmentKind {
     Full,
 }
 
+/// Per-axis 1-σ errors of one sensor type (gyro or accelerometer) of a grade, SI units:
+/// rad/s or m/s² for biases, per √s for random walks and white noise, rad for misalignment.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct SensorSigmas {
+    bias: f64,
+    bias_rw_per_rt_s: f64,
+    temp_coeff: f64,
+    scale: f64,
+    misalignment_rad: f64,
+    white_per_rt_s: f64,
+    /// ADC least significant bit of the rate output (0 = none).
+    lsb: f64,
+}
+
+/// The grade's gyro and accelerometer 1-σ values in SI units (one conversion for the triad
+/// and the redundant channels). The LSB spans `2·full_scale / 2^bits`.
+fn grade_sigmas(grade: &ImuGrade) -> (SensorSigmas, SensorSigmas) {
+    let g = &grade.gyro;
+    let a = &grade.accel;
+    let lsb = |bits: u32, full_scale: f64| {
+        if bits > 0 {
+            2.0 * full_scale / 2f64.powi(bits as i32)
+        } else {
+            0.0
+        }
+    };
+    let ug = 1e-6 * G0_M_S2;
+    (
+        SensorSigmas {
+            bias: g.bias_deg_h * DEG_H_TO_RAD_S,
+            bias_rw_per_rt_s: g.bias_rw_deg_h_per_rt_h * DEG_H_TO_RAD_S / 60.0,
+            temp_coeff: g.temp_coeff_deg_h_per_c * DEG_H_TO_RAD_S,
+            scale: g.scale_factor_ppm * 1e-6,
+            misalignment_rad: g.misalignment_arcsec * ARCSEC_TO_RAD,
+            white_per_rt_s: g.arw_deg_per_rt_h.to_radians() / 60.0,
+            lsb: lsb(g.adc_bits, g.full_scale_deg_s.to_radians()),
+        },
+        SensorSigmas {
+            bias: a.bias_ug * ug,
+            bias_rw_per_rt_s: a.bias_rw_ug_per_rt_h * ug / 60.0,
+            temp_coeff: a.temp_coeff_ug_per_c * ug,
+            scale: a.scale_factor_ppm * 1e-6,
+            misalignment_rad: a.misalignment_arcsec * ARCSEC_TO_RAD,
+            white_per_rt_s: a.vrw_ug_per_rt_hz * ug,
+            lsb: lsb(a.adc_bits, a.full_scale_g * G0_M_S2),
+        },
+    )
+}
+
+/// The constant errors drawn for one triad of the orthogonal IMU, SI units (what its
+/// calibration sheet would list). The output is `(I + diag(scale))·(I + misalignment)·x +
+/// bias(t)·dt + noise`, with `bias(t) = bias + random walk + temp_coeff_per_c·(T − T_ref)`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TriadConstants {
+    /// Turn-on bias, body, rad/s (gyros) or m/s² (accelerometers).
+    pub bias: Vector3<f64>,
+    /// Temperature coefficient of the bias per axis, (rad/s)/°C or (m/s²)/°C.
+    pub temp_coeff_per_c: Vector3<f64>,
+    /// Scale-factor error per axis (dimensionless).
+    pub scale: Vector3<f64>,
+    /// Misalignment δ (zero diagonal, rad): symmetric for the gyros (they define the body
+    /// frame), six independent terms for the accelerometers.
+    pub misalignment: Matrix3<f64>,
+}
+
 /// Errors of one triad (gyros or accelerometers), SI units.
 #[derive(Debug, Clone)]
 struct TriadErrors {
@@ -88,31 +153,31 @@ struct TriadErrors {
 }
 
 impl TriadErrors {
-    #[allow(clippy::too_many_arguments)]
-    fn draw(
-        rng: &mut ChaCha20Rng,
-        bias_sigma: f64,
-        bias_rw_per_rt_s: f64,
-        temp_coeff_sigma: f64,
-        scale_sigma: f64,
-        mis_sigma_rad: f64,
-        mis_kind: MisalignmentKind,
-        white_per_rt_s: f64,
-        lsb: f64,
-    ) -> Self {
-        let bias0 = bias_sigma * gauss3(rng);
-        let temp_coeff = temp_coeff_sigma * gauss3(rng);
-        let scale = scale_sigma * gauss3(rng);
-        let mis = misalignment(rng, mis_sigma_rad, mis_kind);
+    /// Draw the constants of a triad with the per-axis 1-σ values `s` (draw order: bias,
+    /// temperature coefficient, scale factor, misalignment).
+    fn draw(rng: &mut ChaCha20Rng, s: &SensorSigmas, mis_kind: MisalignmentKind) -> Self {
+        let bias0 = s.bias * gauss3(rng);
+        let temp_coeff = s.temp_coeff * gauss3(rng);
+        let scale = s.scale * gauss3(rng);
+        let mis = misalignment(rng, s.misalignment_rad, mis_kind);
         Self {
             bias0,
             bias_rw: Vector3::zeros(),
-            bias_rw_per_rt_s,
+            bias_rw_per_rt_s: s.bias_rw_per_rt_s,
             temp_coeff,
             scale,
             mis,
-            white_per_rt_s,
-            lsb,
+            white_per_rt_s: s.white_per_rt_s,
+            lsb: s.lsb,
+        }
+    }
+
+    fn constants(&self) -> TriadConstants {
+        TriadConstants {
+            bias: self.bias0,
+            temp_coeff_per_c: self.temp_coeff,
+            scale: self.scale,
+            misalignment: self.mis - Matrix3::identity(),
         }
     }
 
@@ -184,41 +249,9 @@ impl ImuErrorModel {
         temperature: TemperatureProfile,
         mut rng: ChaCha20Rng,
     ) -> Self {
-        let g = &grade.gyro;
-        let a = &grade.accel;
-        let gyro_lsb = if g.adc_bits > 0 {
-            2.0 * g.full_scale_deg_s.to_radians() / 2f64.powi(g.adc_bits as i32)
-        } else {
-            0.0
-        };
-        let accel_lsb = if a.adc_bits > 0 {
-            2.0 * a.full_scale_g * G0_M_S2 / 2f64.powi(a.adc_bits as i32)
-        } else {
-            0.0
-        };
-        let gyro = TriadErrors::draw(
-            &mut rng,
-            g.bias_deg_h * DEG_H_TO_RAD_S,
-            g.bias_rw_deg_h_per_rt_h * DEG_H_TO_RAD_S / 60.0,
-            g.temp_coeff_deg_h_per_c * DEG_H_TO_RAD_S,
-            g.scale_factor_ppm * 1e-6,
-            g.misalignment_arcsec * ARCSEC_TO_RAD,
-            MisalignmentKind::Symmetric,
-            g.arw_deg_per_rt_h.to_radians() / 60.0,
-            gyro_lsb,
-        );
-        let ug = 1e-6 * G0_M_S2;
-        let accel = TriadErrors::draw(
-            &mut rng,
-            a.bias_ug * ug,
-            a.bias_rw_ug_per_rt_h * ug / 60.0,
-            a.temp_coeff_ug_per_c * ug,
-            a.scale_factor_ppm * 1e-6,
-            a.misalignment_arcsec * ARCSEC_TO_RAD,
-            MisalignmentKind::Full,
-            a.vrw_ug_per_rt_hz * ug,
-            accel_lsb,
-        );
+        let (g, a) = grade_sigmas(grade);
+        let gyro = TriadErrors::draw(&mut rng, &g, MisalignmentKind::Symmetric);
+        let accel = TriadErrors::draw(&mut rng, &a, MisalignmentKind::Full);
         Self {
             rng,
             gyro,
@@ -227,6 +260,16 @@ impl ImuErrorModel {
             reference_temperature_c: grade.reference_temperature_c,
             enabled: true,
         }
+    }
+
+    /// The constant errors drawn for the gyro triad.
+    pub fn gyro_constants(&self) -> TriadConstants {
+        self.gyro.constants()
+    }
+
+    /// The constant errors drawn for the accelerometer triad.
+    pub fn accel_constants(&self) -> TriadConstants {
+        self.accel.constants()
     }
 
     /// Make the draws of the interval `(t_end_s − dt_s, t_end_s]` and advance the bias random
@@ -285,32 +328,23 @@ struct AxisErrors {
 }
 
 impl AxisErrors {
-    #[allow(clippy::too_many_arguments)]
-    fn draw(
-        rng: &mut ChaCha20Rng,
-        axis: &Vector3<f64>,
-        bias_sigma: f64,
-        bias_rw_per_rt_s: f64,
-        temp_coeff_sigma: f64,
-        scale_sigma: f64,
-        mis_sigma_rad: f64,
-        white_per_rt_s: f64,
-        lsb: f64,
-    ) -> Self {
+    /// Draw one single-axis sensor on nominal unit `axis` with the per-axis 1-σ values `s`
+    /// (draw order: bias, temperature coefficient, scale factor, then the tilt).
+    fn draw(rng: &mut ChaCha20Rng, axis: &Vector3<f64>, s: &SensorSigmas) -> Self {
         let g = gauss3(rng);
-        let tilt = gauss3(rng) * mis_sigma_rad;
+        let tilt = gauss3(rng) * s.misalignment_rad;
         // Two misalignment angles about axes perpendicular to the sensitive axis.
         let tilt_perp = tilt - axis * axis.dot(&tilt);
         let true_axis = (axis + tilt_perp.cross(axis)).normalize();
         Self {
-            bias0: bias_sigma * g.x,
+            bias0: s.bias * g.x,
             bias_rw: 0.0,
-            bias_rw_per_rt_s,
-            temp_coeff: temp_coeff_sigma * g.y,
-            scale: scale_sigma * g.z,
+            bias_rw_per_rt_s: s.bias_rw_per_rt_s,
+            temp_coeff: s.temp_coeff * g.y,
+            scale: s.scale * g.z,
             true_axis,
-            white_per_rt_s,
-            lsb,
+            white_per_rt_s: s.white_per_rt_s,
+            lsb: s.lsb,
         }
     }
 }
@@ -383,45 +417,13 @@ impl ChannelErrorModel {
         failures: &[crate::scenario::ChannelFailure],
         mut rng: ChaCha20Rng,
     ) -> Self {
-        let g = &grade.gyro;
-        let a = &grade.accel;
-        let gyro_lsb = if g.adc_bits > 0 {
-            2.0 * g.full_scale_deg_s.to_radians() / 2f64.powi(g.adc_bits as i32)
-        } else {
-            0.0
-        };
-        let accel_lsb = if a.adc_bits > 0 {
-            2.0 * a.full_scale_g * G0_M_S2 / 2f64.powi(a.adc_bits as i32)
-        } else {
-            0.0
-        };
-        let ug = 1e-6 * G0_M_S2;
+        let (g, a) = grade_sigmas(grade);
         let mut gyro = Vec::with_capacity(axes.len());
         let mut accel = Vec::with_capacity(axes.len());
         for ax in axes {
             let e = Vector3::from(*ax);
-            gyro.push(AxisErrors::draw(
-                &mut rng,
-                &e,
-                g.bias_deg_h * DEG_H_TO_RAD_S,
-                g.bias_rw_deg_h_per_rt_h * DEG_H_TO_RAD_S / 60.0,
-                g.temp_coeff_deg_h_per_c * DEG_H_TO_RAD_S,
-                g.scale_factor_ppm * 1e-6,
-                g.misalignment_arcsec * ARCSEC_TO_RAD,
-                g.arw_deg_per_rt_h.to_radians() / 60.0,
-                gyro_lsb,
-            ));
-            accel.push(AxisErrors::draw(
-                &mut rng,
-                &e,
-                a.bias_ug * ug,
-                a.bias_rw_ug_per_rt_h * ug / 60.0,
-                a.temp_coeff_ug_per_c * ug,
-                a.scale_factor_ppm * 1e-6,
-                a.misalignment_arcsec * ARCSEC_TO_RAD,
-                a.vrw_ug_per_rt_hz * ug,
-                accel_lsb,
-            ));
+            gyro.push(AxisErrors::draw(&mut rng, &e, &g));
+            accel.push(AxisErrors::draw(&mut rng, &e, &a));
         }
         Self {
             rng,

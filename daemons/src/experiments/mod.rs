@@ -20,6 +20,7 @@ pub mod baseline_attitude;
 pub mod consistency;
 pub mod gnss_denied_astro;
 pub mod gravity;
+pub mod inertial_budget;
 pub mod integrators;
 pub mod plot;
 pub mod redundancy;
@@ -77,6 +78,7 @@ pub fn names() -> &'static [&'static str] {
         "alignment",
         "baseline-attitude",
         "redundancy",
+        "inertial-budget",
     ]
 }
 
@@ -98,6 +100,7 @@ pub fn run_by_name(
         "alignment" => alignment::run(out_dir, progress),
         "baseline-attitude" => baseline_attitude::run(out_dir, progress),
         "redundancy" => redundancy::run(out_dir, progress),
+        "inertial-budget" => inertial_budget::run(out_dir, progress),
         "all" => all::run(out_dir, progress),
         _ => Err(unknown(name)),
     }
@@ -116,6 +119,7 @@ pub fn table_by_name(name: &str, summary: &serde_json::Value) -> Result<String, 
         "alignment" => Ok(alignment::table(summary)),
         "baseline-attitude" => Ok(baseline_attitude::table(summary)),
         "redundancy" => Ok(redundancy::table(summary)),
+        "inertial-budget" => Ok(inertial_budget::table(summary)),
         "all" => Ok(all::table(summary)),
         _ => Err(unknown(name)),
     }
