@@ -107,6 +107,8 @@ struct CrossCheckRun {
     /// time with the LS drift, m (tight only).
     start_offset_m: f64,
     start_clock_offset_m: Option<f64>,
+    /// Mean NIS per dof of the accepted GNSS updates of the run.
+    update_nis_per_dof: f64,
 }
 
 fn cross_check_run(mode: fusion::navigator::GnssMode, spoof: bool) -> CrossCheckRun {
@@ -127,6 +129,7 @@ fn cross_check_run(mode: fusion::navigator::GnssMode, spoof: bool) -> CrossCheck
         pdop: 0.0,
         start_offset_m: f64::NAN,
         start_clock_offset_m: None,
+        update_nis_per_dof: f64::NAN,
     };
     let mut was_navigating = false;
     let epoch = sim.epoch_ns();
@@ -168,6 +171,8 @@ fn cross_check_run(mode: fusion::navigator::GnssMode, spoof: bool) -> CrossCheck
             }
         }
     }
+    let g = nav.health()[msgs::SensorId::Gnss as usize];
+    out.update_nis_per_dof = g.nis_sum / g.nis_dof_sum.max(1) as f64;
     out
 }
 
@@ -244,8 +249,14 @@ fn navigator_initialises_from_and_cross_checks_with_the_ls_fix() {
         let mean_per_dof = r.nis.iter().sum::<f64>() / (3.0 * n);
         eprintln!(
             "{mode:?}: {} checks, {} disagreements, mean NIS/dof {mean_per_dof:.3}, \
-             last PDOP {:.2}, start offset {:.2e} m, clock offset {:?} m",
-            r.checks, r.disagreements, r.pdop, r.start_offset_m, r.start_clock_offset_m
+             last PDOP {:.2}, start offset {:.2e} m, clock offset {:?} m, \
+             GNSS update NIS/dof {:.3}",
+            r.checks,
+            r.disagreements,
+            r.pdop,
+            r.start_offset_m,
+            r.start_clock_offset_m,
+            r.update_nis_per_dof
         );
         assert!(r.checks >= 400, "{mode:?}: {} checks", r.checks);
         let tol = 4.0 * (2.0 / (3.0 * n)).sqrt() + 0.05;
