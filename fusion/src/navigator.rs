@@ -4,10 +4,20 @@
 //!
 //! # Life cycle
 //! `Initializing` (no IMU yet) → `Aligning`: IMU increments are averaged for
-//! [`NavigatorConfig::alignment_s`] (paper 003 static alignment, [`crate::alignment`]) while the
-//! first valid GNSS fix (or [`NavigatorConfig::initial_position`]) gives the position →
-//! navigating: strapdown ([`crate::strapdown`]) plus the 28-state error-state EKF
-//! ([`crate::ekf`]), mode from the aiding actually fused within its deadline.
+//! [`NavigatorConfig::alignment_s`] (paper 003 static alignment, [`crate::alignment`]) while
+//! GNSS gives the position (or [`NavigatorConfig::initial_position`]) → navigating: strapdown
+//! ([`crate::strapdown`]) plus the 28-state error-state EKF ([`crate::ekf`]), mode from the
+//! aiding actually fused within its deadline.
+//!
+//! # GNSS least squares (paper 003 eq. 12–13, [`crate::gnss_ls`])
+//! With ≥ 4 pseudoranges (loose or tight mode) the receiver-style fix is computed from the raw
+//! observations: during alignment the latest one is the initial position with its covariance,
+//! and in tight mode also the initial clock bias/drift with the fix's position↔clock
+//! covariance (`initialize_from_ls`); without raw observations the receiver's fix is used.
+//! While navigating, every such epoch is cross-checked against the filter's prediction before
+//! its updates (`gnss_ls_cross_check`: 3-dof NIS, counted in [`NavigatorDiagnostics`]). With
+//! fewer satellites the tight clock states start by state augmentation from one satellite
+//! (`initialize_clock`).
 //!
 //! # Modes
 //! The mode reports the aiding fused within its deadline ([`Deadlines`]): GNSS and stars →
@@ -123,10 +133,11 @@ pub struct ImuSpec {
     pub gyro_scale_ppm: f64,
     /// Accelerometer scale-factor error, ppm: initial σ of the accelerometer scale states.
     pub accel_scale_ppm: f64,
-    /// Axis misalignment of the triads (each off-diagonal term), arcsec. Not a state: the
-    /// body frame is realised by the IMU axes, so a boresight estimated against them carries
-    /// this as an irreducible bias relative to the true body; it is added to the reported
-    /// boresight σ ("consider" term, see [`Navigator::boresight_rad`]).
+    /// Axis misalignment of the triads (each off-diagonal term), arcsec: the prior σ of the
+    /// gyro non-orthogonality states (`[states] gyro_misalignment`), the widening of the
+    /// accelerometer-bias prior (its gravity part) and, since the body frame is realised by
+    /// the IMU axes, an irreducible bias of a boresight estimated against them (added to the
+    /// reported boresight σ as a "consider" term, see [`Navigator::boresight_rad`]).
     pub misalignment_arcsec: f64,
     /// Largest plausible angular rate, rad/s (input validation).
     pub max_rate_rad_s: f64,
@@ -196,6 +207,13 @@ pub struct StateSwitches {
     /// Receiver clock bias and drift (2 states; only with `gnss_mode = "tight"`, which
     /// requires them).
     pub clock: bool,
+    /// Gyro non-orthogonality (3 states, prior σ `imu.misalignment_arcsec`). A turn about
+    /// body z through it tilts the solution by a body-fixed plus a navigation-fixed angle
+    /// (the chord of [`crate::ekf::MISALIGNMENT_COHERENCE_RAD`]): as states, GNSS and the
+    /// star tracker calibrate it. Off, it is bounded as attitude noise per radian turned,
+    /// which over-states the tilt uncertainty after every turn and, in the tight-coupling
+    /// window, let baro updates spoil the tilt (the `inertial-budget` experiment).
+    pub gyro_misalignment: bool,
 }
 
 impl Default for StateSwitches {
@@ -205,6 +223,7 @@ impl Default for StateSwitches {
             accel_scale: true,
             boresight: false,
             clock: true,
+            gyro_misalignment: true,
         }
     }
 }
@@ -296,7 +315,8 @@ pub struct AidingNoise {
     pub baro_bias_rw_m_sqrt_s: f64,
     /// Minimum time between two fused baro samples, s (the samples in between are not fused).
     pub baro_min_interval_s: f64,
-    /// Odometer speed white-noise σ, m/s.
+    /// Odometer speed white-noise σ, m/s (the mean speed over the odometer interval is
+    /// converted to the end-point speed before the update, `fuse_odometer`).
     pub odometer_sigma_m_s: f64,
     /// Odometer scale-factor σ (not a state yet; added as `σ·|speed|`), dimensionless.
     pub odometer_scale_sigma: f64,
@@ -332,9 +352,9 @@ impl Default for AidingNoise {
             baro_bias_sigma_m: 10.0,
             baro_bias_rw_m_sqrt_s: 0.005,
             baro_min_interval_s: 0.2,
-            odometer_sigma_m_s: 0.05,
+            odometer_sigma_m_s: 0.02,
             odometer_scale_sigma: 0.003,
-            nhc_sigma_m_s: 0.05,
+            nhc_sigma_m_s: 0.001,
             zupt_sigma_m_s: 0.005,
             baseline_phase_sigma_cycles: 0.01,
             boresight_sigma_deg: 0.1,
@@ -1020,9 +1040,38 @@ pub struct Navigator {
     diagnostics: NavigatorDiagnostics,
     /// An IMU time discontinuity waiting for confirmation (see [`Navigator::check_imu_time`]).
     imu_time_jump: Option<ImuTimeJump>,
+    /// The last odometer epoch (interval-mean to end-point speed, `fuse_odometer`).
+    odo_epoch: Option<OdometerEpoch>,
+    /// Non-holonomic constraint counters.
+    nhc: NhcHealth,
     /// The latest least-squares GNSS fix of the alignment period and its time of validity
     /// (initial position and tight-mode clock, `initialize_from_ls`).
     init_ls: Option<(i64, crate::gnss_ls::GnssFix)>,
+}
+
+/// Odometer epoch kept for the next sample's interval-mean correction (`fuse_odometer`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct OdometerEpoch {
+    /// Time of validity, GPS ns.
+    t: i64,
+    /// Spacing from the epoch before, ns.
+    spacing_ns: Option<i64>,
+    /// Body-x speed of the solution after the update, m/s.
+    v_x_m_s: f64,
+}
+
+/// Counters of the non-holonomic constraint updates (zero lateral and vertical body
+/// velocity, 2 dof; not a sensor slot of `msgs::Status`).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct NhcHealth {
+    /// Updates fused.
+    pub fused: u64,
+    /// Updates rejected by the gate.
+    pub rejected_gate: u64,
+    /// NIS of the last one.
+    pub last_nis: f64,
+    /// Sum of the NIS of the fused ones (mean NIS = nis_sum / fused, ≈ 2 if consistent).
+    pub nis_sum: f64,
 }
 
 /// IMU samples that continued consistently from a time discontinuity (a jump of the time of
@@ -1143,6 +1192,8 @@ impl Navigator {
             redundancy_config: None,
             diagnostics: NavigatorDiagnostics::default(),
             imu_time_jump: None,
+            odo_epoch: None,
+            nhc: NhcHealth::default(),
             init_ls: None,
             ell,
             config,
@@ -1393,6 +1444,11 @@ impl Navigator {
         self.zupt
     }
 
+    /// Counters of the non-holonomic constraint updates.
+    pub fn nhc_health(&self) -> NhcHealth {
+        self.nhc
+    }
+
     /// The configuration in use.
     pub fn config(&self) -> &NavigatorConfig {
         &self.config
@@ -1628,6 +1684,7 @@ impl Navigator {
         fresh.diagnostics = self.diagnostics;
         fresh.diagnostics.reinitializations += 1;
         fresh.zupt = self.zupt;
+        fresh.nhc = self.nhc;
         fresh.solutions = self.solutions;
         fresh.last_seq = self.last_seq;
         // The held samples were received, not lost: no sequence gap for the IMU.
@@ -2411,6 +2468,7 @@ impl Navigator {
             accel_scale: s.accel_scale,
             boresight: s.boresight && self.config.updates.star_tracker,
             clock: clock && s.clock && self.config.gnss_mode == GnssMode::Tight,
+            gyro_misalignment: s.gyro_misalignment,
         }
     }
 
@@ -2435,28 +2493,80 @@ impl Navigator {
         }
     }
 
+    /// Odometer speed, then the non-holonomic constraints as a separate update.
+    ///
+    /// The odometer outputs the distance over its interval, i.e. the *mean* body-x speed over
+    /// `(ts − dt, ts]` (drivers-sim `OdometerSim`: `dist/dt = (1 + s)·mean v_x + σ·n`), while
+    /// the measurement model compares with the speed at `ts`. They differ by `a·dt/2` under an
+    /// acceleration `a` (2.5 cm/s at 1 m/s² and 20 Hz — more than the 2 cm/s white noise, and
+    /// systematic: a speed-up biases every sample the same way). With contiguous intervals
+    /// (same spacing as the previous sample) the mean is turned into the end-point speed by
+    /// adding half the speed change over the interval, taken from the navigation solution at
+    /// the previous odometer epoch: exact for constant acceleration, the rest is
+    /// `dt²·ȧ/12` (≈ 0.2 mm/s at 1 m/s³). So `odometer_sigma_m_s` is the odometer's white
+    /// noise alone.
+    ///
+    /// The constraints (zero lateral and vertical body velocity) are a second update with
+    /// their own counters ([`Navigator::nhc_health`]): equivalent to the joint update for
+    /// independent noises, and the odometer's NIS on `sextant/status` is then the speed's
+    /// alone — the constraint's NIS is far below its dof whatever its σ (its innovations are
+    /// below the prior's lateral-velocity spread) and would hide the speed's consistency.
     fn fuse_odometer(&mut self, ts: i64, speed: f64) {
         let id = sid(SensorId::Odometer);
         self.last_odo = Some((ts, speed));
         if !self.config.updates.odometer {
             return;
         }
-        let a = &self.config.aiding;
+        let a = self.config.aiding;
         // The scale factor is a filter state (initial σ `odometer_scale_sigma`), so only the
         // white part of the odometer error is measurement noise.
-        let sigma = a.odometer_sigma_m_s;
-        let nav = self.nav;
         let k = self.ekf.odo_scale;
-        let ok = if self.config.updates.nonholonomic {
-            let m = ekf::odometer_nhc(&nav, k, speed, sigma, a.nhc_sigma_m_s);
-            self.run_update(Some(id), &m)
-        } else {
-            let m = ekf::odometer_speed(&nav, k, speed, sigma);
-            self.run_update(Some(id), &m)
+        let body_vx = |nav: &NavState| (nav.q_e_b.inverse() * nav.v_e).x;
+        let prev = self.odo_epoch.take();
+        let spacing = prev.map(|p| ts - p.t);
+        let end_speed = match (prev, spacing) {
+            (Some(p), Some(d))
+                if d > 0
+                    && d <= 1_000_000_000
+                    && p.spacing_ns.is_some_and(|s| (s - d).abs() <= 1_000) =>
+            {
+                speed + (1.0 + k) * 0.5 * (body_vx(&self.nav) - p.v_x_m_s)
+            }
+            _ => speed,
         };
-        if ok {
+        let m = ekf::odometer_speed(&self.nav, k, end_speed, a.odometer_sigma_m_s);
+        if self.run_update(Some(id), &m) {
             self.mark_fused(id, ts);
         }
+        if self.config.updates.nonholonomic {
+            let m3 = ekf::odometer_nhc(&self.nav, k, end_speed, 1.0, a.nhc_sigma_m_s);
+            let m = Measurement::<2> {
+                innovation: m3.innovation.fixed_rows::<2>(1).into_owned(),
+                h: m3.h.fixed_rows::<2>(1).into_owned(),
+                r: m3.r.fixed_view::<2, 2>(1, 1).into_owned(),
+            };
+            self.ekf.propagate_covariance(&self.ell, &self.nav.r_e);
+            let out = ekf::update(&self.ekf.p, &m, self.gates.threshold(2));
+            if self.count_health {
+                let h = &mut self.nhc;
+                h.last_nis = out.residual.nis;
+                if out.residual.rejected {
+                    h.rejected_gate += 1;
+                } else {
+                    h.fused += 1;
+                    h.nis_sum += out.residual.nis;
+                }
+            }
+            if !out.residual.rejected {
+                self.ekf.p = out.p;
+                self.correct(&out.dx);
+            }
+        }
+        self.odo_epoch = Some(OdometerEpoch {
+            t: ts,
+            spacing_ns: spacing,
+            v_x_m_s: body_vx(&self.nav),
+        });
     }
 
     fn fuse_baro(&mut self, ts: i64, height_m: f64) {

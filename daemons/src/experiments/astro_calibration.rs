@@ -266,9 +266,16 @@ fn online_estimate(
     config.states.boresight = true;
     config.aiding.boresight_sigma_deg = 1.0;
     // The filter is told the stand's accelerometer grade (the default tuning is for the
-    // 50 µg navigation grade; this stand's accelerometers are 250 µg).
+    // 50 µg navigation grade; this stand's accelerometers are 250 µg). The simulated bias at
+    // the start is the turn-on bias plus the temperature term `c·(T₀ − T_ref)` with a
+    // per-axis coefficient c of σ `temp_coeff` (drivers-sim/src/imu.rs): 10 µg/°C · 5 °C =
+    // 50 µg here, so the filter's initial σ is the root sum of squares of the two (255 µg).
+    // The later drift of the temperature term (5 µg/h) is inside the bias random walk.
     let a = &scn.imu.accel;
-    config.imu.accel_bias_ug = a.bias_ug;
+    let dtemp_c = scn.spec.imu.temperature.initial_c - scn.imu.reference_temperature_c;
+    config.imu.accel_bias_ug = a.bias_ug.hypot(a.temp_coeff_ug_per_c * dtemp_c);
+    let gy = &scn.imu.gyro;
+    config.imu.gyro_bias_deg_h = gy.bias_deg_h.hypot(gy.temp_coeff_deg_h_per_c * dtemp_c);
     config.imu.vrw_ug_sqrt_hz = a.vrw_ug_per_rt_hz;
     config.imu.accel_bias_rw_ug_sqrt_h = a.bias_rw_ug_per_rt_h;
     let mut nav = Navigator::new(config).map_err(measurement)?;
@@ -630,6 +637,49 @@ pub fn run_with(
             );
         }
     }
+    // Consistency of the online σ over the records: for a consistent filter each κ error
+    // over its σ is N(0, 1) and independent between records (independent seeds) and
+    // between κ2, κ3 (independent north/east accelerometer biases), so
+    // n·(RMS error / RMS σ)² ≈ χ²(n) with n the number of errors; its 95 % band is
+    // [√(χ²₀.₀₂₅(n)/n), √(χ²₀.₉₇₅(n)/n)] (10 records: [0.57, 1.43] per axis, [0.69, 1.31]
+    // for κ2 and κ3 together). κ1 (about the vertical) is reported the same way.
+    let ratio = |axes: &[usize]| -> Option<Value> {
+        let (mut e2, mut s2, mut n) = (0.0, 0.0, 0u32);
+        for r in &records {
+            for &j in axes {
+                let e = r
+                    .pointer(&format!("/online_filter/kappa_error_deg/{j}"))?
+                    .as_f64()?;
+                let s = r
+                    .pointer(&format!("/online_filter/kappa_sigma_deg/{j}"))?
+                    .as_f64()?;
+                e2 += e * e;
+                s2 += s * s;
+                n += 1;
+            }
+        }
+        (n > 0).then(|| {
+            let nf = f64::from(n);
+            json!({
+                "error_rms_over_sigma_rms": (e2 / s2).sqrt(),
+                "samples": n,
+                "band95": [
+                    (fusion::ekf::chi2_quantile(n, 0.025) / nf).sqrt(),
+                    (fusion::ekf::chi2_quantile(n, 0.975) / nf).sqrt(),
+                ],
+            })
+        })
+    };
+    for (key, axes) in [
+        ("kappa1_consistency", &[0usize][..]),
+        ("kappa2_consistency", &[1][..]),
+        ("kappa3_consistency", &[2][..]),
+        ("kappa_tilt_consistency", &[1, 2][..]),
+    ] {
+        if let Some(v) = ratio(axes) {
+            online.insert(key.into(), v);
+        }
+    }
     let uncal_h = mean_of(&records, "/uncalibrated/mean_fix_error_m");
     let cal_h = mean_of(&records, "/three_stage/mean_fix_error_m");
     let summary = json!({
@@ -905,6 +955,27 @@ pub fn table(summary: &Value) -> String {
             fmt_num(&recs[0], "/kappa_true_deg/1", 4, false),
             fmt_num(&recs[0], "/kappa_true_deg/2", 4, false),
         ));
+        for (label, key) in [
+            ("κ1", "kappa1_consistency"),
+            ("κ2", "kappa2_consistency"),
+            ("κ3", "kappa3_consistency"),
+            ("κ2+κ3", "kappa_tilt_consistency"),
+        ] {
+            let base = format!("/online_filter/{key}");
+            out.push_str(&format!(
+                "  filter {:<6} RMS error / RMS σ over {:>2} errors: {} (χ² 95 % band {} – {})\n",
+                label,
+                fmt_num(summary, &format!("{base}/samples"), 0, false),
+                fmt_num(
+                    summary,
+                    &format!("{base}/error_rms_over_sigma_rms"),
+                    2,
+                    false
+                ),
+                fmt_num(summary, &format!("{base}/band95/0"), 2, false),
+                fmt_num(summary, &format!("{base}/band95/1"), 2, false),
+            ));
+        }
     }
     out.push_str(&format!(
         "  improvement uncalibrated / 3-stage: {}×\n",
