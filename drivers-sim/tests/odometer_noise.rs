@@ -1,0 +1,122 @@
+//! Odometer and non-holonomic-constraint noise of `config/filter.toml` against the simulator's
+//! odometer model (drivers_sim::sensors::OdometerSim): normalized innovations on the default
+//! vehicle run.
+
+use fusion::navigator::{Navigator, NavigatorConfig};
+use msgs::SensorId;
+use sextant_drivers_sim::offline::{OfflineSim, SimMessage, compare, feed};
+use sextant_drivers_sim::scenario::Scenario;
+use std::path::Path;
+
+fn root() -> &'static Path {
+    Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
+}
+
+fn default_config() -> NavigatorConfig {
+    let text = std::fs::read_to_string(root().join("config/filter.toml")).expect("filter.toml");
+    toml::from_str(&text).expect("filter.toml parses")
+}
+
+/// Figures of one run.
+#[derive(Debug, Default)]
+struct OdoRun {
+    /// Odometer updates accepted, and their NIS sum over the dof sum (health counters).
+    nis_per_dof: f64,
+    updates: u64,
+    rejected: u64,
+    /// Non-holonomic constraint updates: mean NIS per dof, count.
+    nhc_nis_per_dof: f64,
+    nhc_updates: u64,
+    horizontal_rms_m: f64,
+    vertical_rms_m: f64,
+    attitude_rms_deg: f64,
+}
+
+fn run(cfg: NavigatorConfig, duration_s: f64) -> OdoRun {
+    let scn = Scenario::load(&root().join("config/scenarios/vehicle.toml")).expect("vehicle");
+    let sim = OfflineSim::new(&scn).with_duration_s(duration_s);
+    let epoch = sim.epoch_ns();
+    let mut nav = Navigator::new(cfg).expect("config");
+    let mut out = OdoRun::default();
+    let (mut h2, mut v2, mut a2, mut n) = (0.0, 0.0, 0.0, 0.0);
+    for msg in sim {
+        match &msg {
+            SimMessage::Truth(t) => {
+                if nav.is_navigating() && nav.time_ns() == t.header.time_ns {
+                    let p = compare(&nav, t, epoch);
+                    if p.t_s >= 120.0 {
+                        let e = p.pos_err_ned_m();
+                        h2 += e.x * e.x + e.y * e.y;
+                        v2 += e.z * e.z;
+                        a2 += p.att_err_e_rad.norm_squared();
+                        n += 1.0;
+                    }
+                }
+                continue;
+            }
+            _ => {}
+        }
+        feed(&mut nav, &msg).unwrap_or_else(|e| panic!("{e}"));
+    }
+    let h = nav.health()[SensorId::Odometer as usize];
+    out.nis_per_dof = h.nis_sum / h.nis_dof_sum as f64;
+    out.updates = h.nis_count;
+    out.rejected = h.rejected_gate;
+    let c = nav.nhc_health();
+    out.nhc_nis_per_dof = c.nis_sum / (2 * c.fused.max(1)) as f64;
+    out.nhc_updates = c.fused;
+    out.horizontal_rms_m = (h2 / n).sqrt();
+    out.vertical_rms_m = (v2 / n).sqrt();
+    out.attitude_rms_deg = (a2 / n).sqrt().to_degrees();
+    out
+}
+
+#[test]
+#[ignore = "diagnostic: the default 600 s run with several odometer/NHC noise settings"]
+fn odometer_noise_report() {
+    let base = default_config();
+    for (so, sn) in [
+        (0.05, 0.05),
+        (0.02, 0.05),
+        (0.02, 0.01),
+        (0.02, 0.005),
+        (0.02, 0.002),
+        (0.02, 0.001),
+    ] {
+        let mut c = base.clone();
+        c.aiding.odometer_sigma_m_s = so;
+        c.aiding.nhc_sigma_m_s = sn;
+        let r = run(c, 600.0);
+        println!("odometer σ {so} m/s, NHC σ {sn} m/s: {r:?}");
+    }
+}
+
+/// The default vehicle run (600 s, 20 Hz odometer) with `config/filter.toml`:
+/// - odometer speed NIS per dof inside the χ² band: with n ≈ 10 000 one-dof updates the mean
+///   NIS of a consistent filter is 1 ± √(2/n) = 1 ± 0.014; 3σ band ±0.042. (Before this
+///   change: 0.07 for the joint speed + constraint update with σ = 0.05 m/s both.)
+/// - the constraint update runs at the odometer rate, almost never gated;
+/// - horizontal RMS no worse than before the change, when this run measured 0.201 m
+///   (vertical 0.108 m, attitude 0.00064°); now 0.139 m (the odometer noise 2.5× smaller
+///   and no longer biased by the interval mean during speed changes).
+#[test]
+fn default_run_odometer_is_consistent() {
+    let r = run(default_config(), 600.0);
+    println!("{r:?}");
+    let band = 3.0 * (2.0 / r.updates as f64).sqrt();
+    assert!(r.updates > 9000, "{} updates", r.updates);
+    assert!(
+        (r.nis_per_dof - 1.0).abs() < band,
+        "odometer NIS/dof {} outside 1 ± {band}",
+        r.nis_per_dof
+    );
+    // Gate at 0.999: 0.1 % of consistent updates rejected, ≈ 10; 3σ of a Poisson(10): 20.
+    assert!(r.rejected <= 20, "{} rejected", r.rejected);
+    assert!(r.nhc_updates + 20 >= r.updates);
+    assert!(
+        r.horizontal_rms_m < 0.201,
+        "horizontal {}",
+        r.horizontal_rms_m
+    );
+    assert!(r.vertical_rms_m < 0.108, "vertical {}", r.vertical_rms_m);
+}
