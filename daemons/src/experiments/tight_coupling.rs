@@ -126,6 +126,11 @@ struct Series {
     err_ne_m: Vec<Vector2<f64>>,
     /// Horizontal position covariance (north, east), m².
     cov_ne_m2: Vec<Matrix2<f64>>,
+    /// Mean NIS per dof of the accepted GNSS updates over the whole run (≈ 1 if consistent).
+    gnss_nis_per_dof: f64,
+    /// Least-squares cross-checks of the run and how many disagreed (3-dof χ² gate).
+    ls_checks: u64,
+    ls_disagreements: u64,
     /// With 1 or 2 satellites: the horizontal unit direction they observe free of the clock
     /// (2: the horizontal projection of `u₁ − u₂`, the single difference; 1: the horizontal
     /// line of sight, which the clock bias shares), north/east.
@@ -231,6 +236,11 @@ fn one_run(
             "no navigating epoch in the window".into(),
         ));
     }
+    let g = nav.health()[msgs::SensorId::Gnss as usize];
+    s.gnss_nis_per_dof = g.nis_sum / g.nis_dof_sum.max(1) as f64;
+    let d = nav.diagnostics();
+    s.ls_checks = d.gnss_ls_checks;
+    s.ls_disagreements = d.gnss_ls_disagreements;
     Ok(s)
 }
 
@@ -430,6 +440,9 @@ fn stats(s: &Series) -> Value {
         "max_horizontal_error_m": s.err_m.iter().cloned().fold(0.0, f64::max),
         "rms_horizontal_error_m": (s.err_m.iter().map(|e| e * e).sum::<f64>() / n).sqrt(),
         "final_horizontal_sigma_m": s.sigma_m.last(),
+        "gnss_update_nis_per_dof": s.gnss_nis_per_dof,
+        "ls_cross_checks": s.ls_checks,
+        "ls_cross_check_disagreements": s.ls_disagreements,
     })
 }
 
@@ -678,7 +691,8 @@ pub fn table(summary: &Value) -> String {
             " (tight coupling not available in this filter)"
         }
     );
-    s += "satellites   free (final/max)     loose (final/max)    tight (final/max)   loose==free\n";
+    s += "satellites   free (final/max)     loose (final/max)    tight (final/max)   loose==free  \
+          tight NIS/dof  LS disagree/checks\n";
     if let Some(cases) = summary["cases"].as_array() {
         for c in cases {
             let cell = |k: &str| {
@@ -689,12 +703,15 @@ pub fn table(summary: &Value) -> String {
                 )
             };
             s += &format!(
-                "{:>10}   {}  {}  {}  {}\n",
+                "{:>10}   {}  {}  {}  {:<11}  {:>6}   {}/{}\n",
                 c["satellites"].as_str().unwrap_or("?"),
                 cell("free"),
                 cell("loose"),
                 cell("tight"),
-                c["loose_identical_to_free"]
+                c["loose_identical_to_free"].to_string(),
+                fmt_num(c, "/tight/gnss_update_nis_per_dof", 2, false),
+                c["tight"]["ls_cross_check_disagreements"],
+                c["tight"]["ls_cross_checks"],
             );
         }
         s += "clock-free observed direction (1: line of sight, 2: u1 - u2), final |error|, m:\n";
