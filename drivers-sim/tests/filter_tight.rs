@@ -45,7 +45,7 @@ fn run(mode: GnssMode, max_sats: usize, window: (f64, f64), known_start: bool) -
         "/../config/scenarios/vehicle.toml"
     ));
     let scn = Scenario::load(path).unwrap();
-    let site = scn.spec.site.clone();
+    let site = scn.spec.site;
     let sim = OfflineSim::new(&scn)
         .with_duration_s(window.1)
         .limit_satellites(SatelliteLimit {
@@ -244,7 +244,7 @@ fn first_single_satellite_epoch_only_starts_the_clock() {
         "/../config/scenarios/vehicle.toml"
     ));
     let scn = Scenario::load(path).unwrap();
-    let site = scn.spec.site.clone();
+    let site = scn.spec.site;
     let sim = OfflineSim::new(&scn).limit_satellites(SatelliteLimit {
         start_s: 0.0,
         duration_s: 1e6,
