@@ -1,0 +1,406 @@
+//! Does the fusion daemon's loop allocate per sample? The navigator is proven allocation-free
+//! per IMU step (fusion/tests/no_alloc_filter.rs); this measures what the daemon adds around it
+//! with a counting allocator that counts per thread — the daemon's own thread, not the
+//! recorder's writer thread (which serialises records to JSON and may allocate).
+//!
+//! Finding (session 3), per mechanism, each measured on its own in
+//! `each_step_of_the_loop_costs_what_it_costs` and together in `daemon_loop_allocations`:
+//! - publishing a message (`msgs::ipc::Pub::send_raw`): 3 allocations — 2 because its two
+//!   `map_err(ice(format!(..)))` build the error-context string before the call, i.e. on every
+//!   send, and 1 inside iceoryx2 0.10 (`Publisher::loan_uninit` allocates an `Rc` of shared
+//!   state per sample). The daemon publishes one solution per IMU step (decimation 1).
+//! - each WaitSet wake-up: 2 allocations inside iceoryx2 0.10 (`WaitSet::wait_and_process_once*`
+//!   collects the triggered file descriptors into a `vec![]` and builds a second `Vec` in
+//!   `handle_all_attachments`).
+//! - `Record::Gnss(Box::new(..))` and `Record::Status(Box::new(..))`: 1 per GNSS sample / status.
+//! - receiving a sample, building the other records, the recorder hand-off (`try_send` into the
+//!   bounded channel): none.
+//!
+//! `SEXTANT_ALLOC_TRACE=1 cargo test --release -p sextant-daemons --test daemon_alloc --
+//! --nocapture` prints the allocation sites of the loop (call stacks of a random sample).
+
+use msgs::ipc::Bus;
+use msgs::{
+    BaroSample, GnssSample, ImuSample, MAX_SENSORS, NavSolution, OdometerSample, SensorHealth,
+    StarTrackerSample, TruthSample,
+};
+use sextant_daemons::config::SystemConfig;
+use sextant_daemons::daemon::{DaemonOptions, NavEngine, run};
+use sextant_daemons::recorder::{Record, Recorder, RecorderOptions};
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+struct Counting;
+
+thread_local! {
+    /// Set on the measured thread only.
+    static TRACKED: Cell<bool> = const { Cell::new(false) };
+    /// Allocations of this thread since it was tracked.
+    static ALLOCATIONS: Cell<u64> = const { Cell::new(0) };
+}
+
+/// Allocations of the calling thread so far (0 unless it is tracked).
+fn allocations() -> u64 {
+    ALLOCATIONS.try_with(Cell::get).unwrap_or(0)
+}
+
+fn track_this_thread() {
+    TRACKED.with(|t| t.set(true));
+}
+
+fn note() {
+    // The tracer's own allocations are not the daemon's.
+    let in_trace = IN_TRACE.try_with(Cell::get).unwrap_or(true);
+    if !in_trace && TRACKED.try_with(Cell::get).unwrap_or(false) {
+        let _ = ALLOCATIONS.try_with(|a| a.set(a.get() + 1));
+        if TRACE.load(Ordering::SeqCst) {
+            // One in 8 at random (a fixed stride would alias with the loop's period).
+            let mut x = RNG.load(Ordering::Relaxed);
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            RNG.store(x, Ordering::Relaxed);
+            if x % 8 == 0 {
+                trace();
+            }
+        }
+    }
+}
+
+/// `SEXTANT_ALLOC_TRACE=1`: where the daemon allocates (one allocation in 8 at random in the window,
+/// its call stack reduced to the project's and iceoryx2's frames).
+static TRACE: AtomicBool = AtomicBool::new(false);
+static RNG: AtomicU64 = AtomicU64::new(0x2545_f491_4f6c_dd1d);
+static SITES: Mutex<Vec<String>> = Mutex::new(Vec::new());
+
+thread_local! {
+    static IN_TRACE: Cell<bool> = const { Cell::new(false) };
+}
+
+fn trace() {
+    if IN_TRACE.with(|t| t.replace(true)) {
+        return;
+    }
+    let bt = std::backtrace::Backtrace::force_capture().to_string();
+    let mut frames = Vec::new();
+    let mut lines = bt.lines();
+    while let Some(l) = lines.next() {
+        let l = l.trim();
+        if let Some((_, f)) = l.split_once(": ") {
+            let at = lines.next().unwrap_or("").trim().to_string();
+            if (at.contains("/work/") || at.contains("iceoryx2")) && !at.contains("daemon_alloc") {
+                let f: String = f.chars().take(60).collect();
+                frames.push(format!("{f} {at}"));
+            }
+        }
+    }
+    if let Ok(mut s) = SITES.lock() {
+        frames.truncate(5);
+        s.push(frames.join("\n    <- "));
+    }
+    IN_TRACE.with(|t| t.set(false));
+}
+
+// SAFETY: forwards to the system allocator unchanged; only counts calls.
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        note();
+        // SAFETY: same contract as the caller's.
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: same contract as the caller's.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        note();
+        // SAFETY: same contract as the caller's.
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+/// What the engine saw inside the measured window, and the daemon thread's allocation count at
+/// its first and last engine call there.
+#[derive(Default)]
+struct Tally {
+    /// Counting on.
+    on: AtomicBool,
+    /// Engine calls per sample kind: IMU, star tracker, GNSS, odometer, baro.
+    calls: [AtomicU64; 5],
+    first: AtomicU64,
+    last: AtomicU64,
+}
+
+impl Tally {
+    fn note(&self, kind: usize) {
+        if !self.on.load(Ordering::SeqCst) {
+            return;
+        }
+        let now = allocations();
+        if self.calls.iter().all(|c| c.load(Ordering::SeqCst) == 0) {
+            self.first.store(now, Ordering::SeqCst);
+        }
+        self.last.store(now, Ordering::SeqCst);
+        self.calls[kind].fetch_add(1, Ordering::SeqCst);
+    }
+    fn calls(&self, kind: usize) -> u64 {
+        self.calls[kind].load(Ordering::SeqCst)
+    }
+}
+
+struct Probe(Arc<Tally>);
+
+impl NavEngine for Probe {
+    fn push_imu(&mut self, s: &ImuSample) -> Result<Option<NavSolution>, fusion::FusionError> {
+        self.0.note(0);
+        let mut n = NavSolution::default();
+        n.header.time_ns = s.header.time_ns;
+        n.q_ned_body = [1.0, 0.0, 0.0, 0.0];
+        Ok(Some(n))
+    }
+    fn push_star_tracker(&mut self, _: &StarTrackerSample) -> Result<(), fusion::FusionError> {
+        self.0.note(1);
+        Ok(())
+    }
+    fn push_gnss(&mut self, _: &GnssSample) -> Result<(), fusion::FusionError> {
+        self.0.note(2);
+        Ok(())
+    }
+    fn push_odometer(&mut self, _: &OdometerSample) -> Result<(), fusion::FusionError> {
+        self.0.note(3);
+        Ok(())
+    }
+    fn push_baro(&mut self, _: &BaroSample) -> Result<(), fusion::FusionError> {
+        self.0.note(4);
+        Ok(())
+    }
+    fn set_sensor_alive(&mut self, _: usize, _: bool) {}
+    fn health(&self) -> [SensorHealth; MAX_SENSORS] {
+        Default::default()
+    }
+    fn mode(&self) -> u32 {
+        msgs::NavMode::GnssInertial as u32
+    }
+}
+
+/// Allocations per published message (`Pub::send_raw`): two eager `format!`s + iceoryx2's
+/// per-loan `Rc`.
+const PER_SEND: u64 = 3;
+/// Allocations per WaitSet wake-up inside iceoryx2 0.10.
+const PER_WAKEUP: u64 = 2;
+
+/// Each step of the loop measured on its own, on this thread.
+#[test]
+fn each_step_of_the_loop_costs_what_it_costs() {
+    use iceoryx2::prelude::*;
+    let prefix = format!("sextant-test-alloc-parts-{}", std::process::id());
+    let bus = Bus::new(&prefix, "alloc-parts").expect("bus");
+    let mut nav_pub = bus.publisher::<NavSolution>().expect("pub");
+    let nav_sub = bus.subscriber::<NavSolution>().expect("sub");
+    let ws = WaitSetBuilder::new()
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<ipc::Service>()
+        .expect("waitset");
+    let _guard = ws.attach_notification(nav_sub.listener()).expect("attach");
+    let dir = std::env::temp_dir().join(&prefix);
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let rec = Recorder::start(
+        &dir.join("r.mcap"),
+        &RecorderOptions {
+            queue_capacity: 4096,
+            chunk_size_bytes: 1 << 20,
+            flush_interval: Duration::from_secs(1),
+            metadata: Vec::new(),
+        },
+    )
+    .expect("recorder");
+    track_this_thread();
+    let n = 200u64;
+    let cost = |f: &mut dyn FnMut()| {
+        f(); // warm-up (first-use allocations)
+        let a0 = allocations();
+        for _ in 0..n {
+            f();
+        }
+        allocations() - a0
+    };
+    let sol = NavSolution::default();
+    let send = cost(&mut || nav_pub.send_raw(sol).expect("send"));
+    let mut received = 0;
+    let receive = cost(&mut || {
+        while let Ok(Some(_)) = nav_sub.receive() {
+            received += 1;
+        }
+    });
+    let wake = cost(&mut || {
+        nav_pub.send_raw(sol).expect("send");
+        ws.wait_and_process_once_with_timeout(
+            |_| CallbackProgression::Continue,
+            Duration::from_secs(1),
+        )
+        .expect("wait");
+        let _ = nav_sub.listener().try_wait(|_| {});
+        while let Ok(Some(_)) = nav_sub.receive() {}
+    }) - (n * PER_SEND);
+    let record_imu = cost(&mut || {
+        rec.record(Record::Imu(ImuSample::default()), 1);
+    });
+    let record_gnss = cost(&mut || {
+        rec.record(Record::Gnss(Box::new(GnssSample::default())), 1);
+    });
+    TRACKED.with(|t| t.set(false));
+    let stats = rec.finish().expect("finish");
+    let _ = std::fs::remove_dir_all(&dir);
+    eprintln!(
+        "allocations per call: send {}, receive {}, wake-up {}, record IMU {}, record GNSS {}",
+        send as f64 / n as f64,
+        receive as f64 / n as f64,
+        wake as f64 / n as f64,
+        record_imu as f64 / n as f64,
+        record_gnss as f64 / n as f64
+    );
+    assert!(received > 0);
+    assert_eq!(stats.dropped, 0);
+    assert_eq!(send, PER_SEND * n, "Pub::send_raw");
+    assert_eq!(receive, 0, "Sub::receive");
+    assert_eq!(wake, PER_WAKEUP * n, "WaitSet wake-up");
+    assert_eq!(record_imu, 0, "Recorder::record of an unboxed record");
+    assert_eq!(record_gnss, n, "Record::Gnss boxes its sample");
+}
+
+#[test]
+fn daemon_loop_allocations() {
+    let prefix = format!("sextant-test-alloc-{}", std::process::id());
+    let dir = std::env::temp_dir().join(&prefix);
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let path = std::path::Path::new("sextant.toml");
+    let mut system = SystemConfig::parse(include_str!("../../config/sextant.toml"), path)
+        .expect("config/sextant.toml parses");
+    // Status once a second (the default); generous deadlines so that no sensor goes dead
+    // (and logs) inside the measured window.
+    system.fusion.status_period_s = 1.0;
+    system.validate(path).expect("valid");
+    let opts = DaemonOptions {
+        prefix: prefix.clone(),
+        out: dir.join("recording.mcap"),
+        speed: 1.0,
+        system,
+        node_name: "alloc-fusion".into(),
+        metadata: Vec::new(),
+    };
+    let tally = Arc::new(Tally::default());
+    let engine = Probe(tally.clone());
+    let stop = Arc::new(AtomicBool::new(false));
+    let stop2 = stop.clone();
+    let report = Arc::new(Mutex::new(None));
+    let report2 = report.clone();
+    let daemon = std::thread::spawn(move || {
+        track_this_thread();
+        let r = run(engine, &opts, &stop2);
+        *report2.lock().unwrap_or_else(|e| e.into_inner()) = Some(r.map(|r| r.recorder.dropped));
+    });
+    std::thread::sleep(Duration::from_millis(500));
+    let bus = Bus::new(&prefix, "alloc-drivers").expect("bus");
+    let mut imu = bus.publisher::<ImuSample>().expect("imu pub");
+    let mut star = bus.publisher::<StarTrackerSample>().expect("star pub");
+    let mut gnss = bus.publisher::<GnssSample>().expect("gnss pub");
+    let mut odo = bus.publisher::<OdometerSample>().expect("odo pub");
+    let mut baro = bus.publisher::<BaroSample>().expect("baro pub");
+    let mut truth = bus.publisher::<TruthSample>().expect("truth pub");
+    let t0 = 1_400_000_000_000_000_000i64;
+    // 200 Hz IMU with the default rates of the aiding (star tracker 10 Hz, GNSS 10 Hz,
+    // odometer 100 Hz, baro 50 Hz), sent at 1 kHz wall (5× real time) for 4 s: the first
+    // second warms up (every sensor alive, first chunk of the recorder), 3 s are measured.
+    let n = 4000i64;
+    for k in 0..n {
+        if k == 1000 {
+            // Let the daemon drain the warm-up, then count from its next engine call.
+            std::thread::sleep(Duration::from_millis(50));
+            tally.on.store(true, Ordering::SeqCst);
+            TRACE.store(
+                std::env::var_os("SEXTANT_ALLOC_TRACE").is_some(),
+                Ordering::SeqCst,
+            );
+        }
+        let t = t0 + k * 5_000_000;
+        let mut s = ImuSample::default();
+        s.header.time_ns = t;
+        s.dt_s = 0.005;
+        let mut tr = TruthSample::default();
+        tr.header.time_ns = t;
+        tr.q_ned_body = [1.0, 0.0, 0.0, 0.0];
+        if k % 20 == 0 {
+            let mut m = StarTrackerSample::default();
+            m.header.time_ns = t;
+            star.send(m).expect("send");
+            let mut g = GnssSample::default();
+            g.header.time_ns = t;
+            gnss.send(g).expect("send");
+        }
+        if k % 2 == 0 {
+            let mut m = OdometerSample::default();
+            m.header.time_ns = t;
+            odo.send(m).expect("send");
+        }
+        if k % 4 == 0 {
+            let mut m = BaroSample::default();
+            m.header.time_ns = t;
+            baro.send(m).expect("send");
+        }
+        imu.send(s).expect("send");
+        truth.send(tr).expect("send");
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    std::thread::sleep(Duration::from_millis(100));
+    tally.on.store(false, Ordering::SeqCst);
+    TRACE.store(false, Ordering::SeqCst);
+    stop.store(true, Ordering::SeqCst);
+    daemon.join().expect("daemon thread");
+    let dropped = report
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .take()
+        .expect("daemon ran")
+        .expect("daemon ok");
+    assert_eq!(dropped, 0, "records dropped");
+    let _ = std::fs::remove_dir_all(&dir);
+
+    if let Ok(sites) = SITES.lock() {
+        let mut counts: std::collections::BTreeMap<&str, u64> = Default::default();
+        for site in sites.iter() {
+            *counts.entry(site.as_str()).or_default() += 1;
+        }
+        let mut v: Vec<_> = counts.into_iter().collect();
+        v.sort_by_key(|(_, n)| std::cmp::Reverse(*n));
+        for (site, n) in v.iter().take(12) {
+            eprintln!("{n} × (one in 8 sampled)\n    {site}");
+        }
+    }
+    // Between the first and the last engine call of the window: every IMU step published
+    // one solution (PER_SEND each); every sample published in the window (IMU, truth and the
+    // aiding) woke the daemon at most once (PER_WAKEUP each, fewer when it found several
+    // samples at one wake-up); every GNSS sample was boxed; at most 4 statuses (1 Hz over
+    // ≈ 3 s: a box and a send each).
+    let imu_steps = tally.calls(0);
+    let samples: u64 = (0..5).map(|i| tally.calls(i)).sum::<u64>() + imu_steps; // + truth
+    let gnss_n = tally.calls(2);
+    let total = tally.last.load(Ordering::SeqCst) - tally.first.load(Ordering::SeqCst);
+    let lower = PER_SEND * (imu_steps - 1) + gnss_n - 1;
+    let upper = PER_SEND * imu_steps + PER_WAKEUP * samples + gnss_n + 4 * (1 + PER_SEND);
+    eprintln!(
+        "daemon loop: {total} allocations over {imu_steps} IMU steps = {:.2} per step \
+         (bounds from the parts: {lower} ≤ n ≤ {upper})",
+        total as f64 / imu_steps as f64
+    );
+    assert!(imu_steps >= 2900, "{imu_steps} IMU steps measured");
+    assert!(
+        (lower..=upper).contains(&total),
+        "{total} not in [{lower}, {upper}]"
+    );
+}
