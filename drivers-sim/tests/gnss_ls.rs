@@ -107,6 +107,9 @@ struct CrossCheckRun {
     /// time with the LS drift, m (tight only).
     start_offset_m: f64,
     start_clock_offset_m: Option<f64>,
+    /// Largest |P_r,b − C_ls,r,b| at navigation start relative to √(P_rr P_bb) (tight only):
+    /// the position↔clock covariance must be the fix's.
+    start_cross_cov_rel: Option<f64>,
     /// Mean NIS per dof of the accepted GNSS updates of the run.
     update_nis_per_dof: f64,
 }
@@ -129,6 +132,7 @@ fn cross_check_run(mode: fusion::navigator::GnssMode, spoof: bool) -> CrossCheck
         pdop: 0.0,
         start_offset_m: f64::NAN,
         start_clock_offset_m: None,
+        start_cross_cov_rel: None,
         update_nis_per_dof: f64::NAN,
     };
     let mut was_navigating = false;
@@ -168,6 +172,18 @@ fn cross_check_run(mode: fusion::navigator::GnssMode, spoof: bool) -> CrossCheck
                 let v = fix.velocity.expect("Doppler on every satellite");
                 let b = fix.position.clock_bias_m + v.clock_drift_m_s * dt;
                 out.start_clock_offset_m = Some(nav.clock().bias_m - b);
+                // Propagation leaves P_r,b alone while P_v,b = P_r,d = 0 (static start, drift
+                // independent of the position fix): it must still be the fix's.
+                use fusion::ekf::idx;
+                let p = nav.covariance();
+                let rel = (0..3)
+                    .map(|k| {
+                        let scale =
+                            (p[(idx::POS + k, idx::POS + k)] * p[(idx::CLK, idx::CLK)]).sqrt();
+                        (p[(idx::POS + k, idx::CLK)] - fix.position.cov_r_clock_m2[k]).abs() / scale
+                    })
+                    .fold(0.0, f64::max);
+                out.start_cross_cov_rel = Some(rel);
             }
         }
     }
@@ -270,6 +286,8 @@ fn navigator_initialises_from_and_cross_checks_with_the_ls_fix() {
         if mode == GnssMode::Tight {
             let c = r.start_clock_offset_m.expect("tight");
             assert!(c.abs() < 1e-3, "clock {c} m from the LS clock");
+            let x = r.start_cross_cov_rel.expect("tight");
+            assert!(x < 1e-6, "position-clock covariance off by {x} (relative)");
         }
     }
 }
