@@ -21,6 +21,7 @@
 
 use crate::experiments::plot::{Chart, Line, color, line_chart};
 use crate::recorder::{Record, Recorder, RecorderOptions};
+use crate::recording::Recording;
 use anyhow::{Context, bail};
 use drivers_sim::offline::{Channel as SimChannel, OfflineSim, SimMessage};
 use drivers_sim::scenario::Scenario;
@@ -177,28 +178,26 @@ fn stop(child: &mut Child, timeout: Duration) {
 /// sample's send time: iceoryx2 delivery and the daemon's wake-up. Processing = the solution's
 /// send time − that receive time: the filter step and the recorder hand-off.
 fn latencies_us(recording: &Path) -> anyhow::Result<(Vec<f64>, Vec<f64>, Vec<f64>)> {
-    let bytes =
-        std::fs::read(recording).with_context(|| format!("read {}", recording.display()))?;
+    // The project's reader: bounded on corrupt input, errors name the byte offset.
+    let rec = Recording::open(recording)?;
     let mut received: std::collections::HashMap<u64, u64> = std::collections::HashMap::new();
     let (mut total, mut transport, mut processing) = (Vec::new(), Vec::new(), Vec::new());
-    for m in mcap::MessageStream::new(&bytes)? {
-        let m = m.with_context(|| format!("decode {}", recording.display()))?;
-        match m.channel.topic.as_str() {
-            "imu" => {
-                let imu: ImuSample = serde_json::from_slice(&m.data)?;
-                received.insert(imu.header.send_mono_ns, m.publish_time);
+    for e in rec {
+        let e = e?;
+        match e.record {
+            Some(Record::Imu(imu)) => {
+                received.insert(imu.header.send_mono_ns, e.publish_time_ns);
             }
-            "nav" => {
-                let nav: NavSolution = serde_json::from_slice(&m.data)?;
-                if nav.imu_send_mono_ns > 0 && nav.header.send_mono_ns >= nav.imu_send_mono_ns {
-                    total.push((nav.header.send_mono_ns - nav.imu_send_mono_ns) as f64 * 1e-3);
-                    if let Some(&rx) = received.get(&nav.imu_send_mono_ns)
-                        && rx >= nav.imu_send_mono_ns
-                        && nav.header.send_mono_ns >= rx
-                    {
-                        transport.push((rx - nav.imu_send_mono_ns) as f64 * 1e-3);
-                        processing.push((nav.header.send_mono_ns - rx) as f64 * 1e-3);
-                    }
+            Some(Record::Nav(nav))
+                if nav.imu_send_mono_ns > 0 && nav.header.send_mono_ns >= nav.imu_send_mono_ns =>
+            {
+                total.push((nav.header.send_mono_ns - nav.imu_send_mono_ns) as f64 * 1e-3);
+                if let Some(&rx) = received.get(&nav.imu_send_mono_ns)
+                    && rx >= nav.imu_send_mono_ns
+                    && nav.header.send_mono_ns >= rx
+                {
+                    transport.push((rx - nav.imu_send_mono_ns) as f64 * 1e-3);
+                    processing.push((nav.header.send_mono_ns - rx) as f64 * 1e-3);
                 }
             }
             _ => {}
@@ -733,4 +732,54 @@ pub fn table(s: &Value) -> String {
         }
     }
     t
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Latencies come back from the recording through the project's reader: transport =
+    /// receive (MCAP publish time) − IMU send, processing = solution send − receive; a cut
+    /// recording is an error naming its byte offset, not a hang or a silent partial read.
+    #[test]
+    fn latencies_from_a_recording_and_a_cut_one() {
+        let dir = std::env::temp_dir().join(format!("sextant-bench-lat-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("temp dir");
+        let path = dir.join("r.mcap");
+        let rec = Recorder::start(
+            &path,
+            &RecorderOptions {
+                queue_capacity: 1024,
+                chunk_size_bytes: 4096,
+                flush_interval: Duration::from_secs(1),
+                metadata: Vec::new(),
+            },
+        )
+        .expect("recorder");
+        for k in 0..200u64 {
+            let send = 1_000_000 + k * 5_000_000;
+            let mut imu = ImuSample::default();
+            imu.header.time_ns = 1 + k as i64;
+            imu.header.send_mono_ns = send;
+            rec.record_blocking(Record::Imu(imu), send + 40_000);
+            let mut nav = NavSolution::default();
+            nav.header.time_ns = imu.header.time_ns;
+            nav.imu_send_mono_ns = send;
+            nav.header.send_mono_ns = send + 55_000;
+            rec.record_blocking(Record::Nav(nav), nav.header.send_mono_ns);
+        }
+        rec.finish().expect("finish");
+        let (total, transport, processing) = latencies_us(&path).expect("read");
+        assert_eq!(total.len(), 200);
+        assert!(total.iter().all(|&x| (x - 55.0).abs() < 1e-9), "{total:?}");
+        assert!(transport.iter().all(|&x| (x - 40.0).abs() < 1e-9));
+        assert!(processing.iter().all(|&x| (x - 15.0).abs() < 1e-9));
+
+        let bytes = std::fs::read(&path).expect("read back");
+        let cut = dir.join("cut.mcap");
+        std::fs::write(&cut, &bytes[..bytes.len() / 2]).expect("write");
+        let err = latencies_us(&cut).expect_err("cut recording").to_string();
+        assert!(err.contains("byte offset"), "{err}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }

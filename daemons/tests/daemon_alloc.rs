@@ -63,7 +63,7 @@ fn note() {
             x ^= x >> 7;
             x ^= x << 17;
             RNG.store(x, Ordering::Relaxed);
-            if x % 8 == 0 {
+            if x.is_multiple_of(8) {
                 trace();
             }
         }
@@ -252,7 +252,7 @@ fn each_step_of_the_loop_costs_what_it_costs() {
         rec.record(Record::Imu(ImuSample::default()), 1);
     });
     let record_gnss = cost(&mut || {
-        rec.record(Record::Gnss(Box::new(GnssSample::default())), 1);
+        rec.record(Record::Gnss(Box::default()), 1);
     });
     TRACKED.with(|t| t.set(false));
     let stats = rec.finish().expect("finish");
