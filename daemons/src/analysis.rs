@@ -135,7 +135,8 @@ pub struct Analysis {
 /// Seconds after an outage over which the recovery RMS is computed.
 pub const AFTER_OUTAGE_S: f64 = 60.0;
 
-fn q_mul(a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
+/// Hamilton product of quaternions `[w, x, y, z]`.
+pub(crate) fn q_mul(a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
     let [aw, ax, ay, az] = a;
     let [bw, bx, by, bz] = b;
     [
@@ -166,6 +167,41 @@ pub fn position_error_ned_m(nav: &NavSolution, truth: &TruthSample) -> [f64; 3] 
         truth.lon_rad,
         nav.pos_ecef_m,
     )
+}
+
+/// The origin of the plots' north/east coordinates: the first truth sample's position.
+pub(crate) fn ned_origin(t: &TruthSample) -> NedOrigin {
+    NedOrigin {
+        r_e: t.pos_ecef_m,
+        lat_rad: t.lat_rad,
+        lon_rad: t.lon_rad,
+    }
+}
+
+impl Series {
+    /// Append one solution matched with the truth sample of its time of validity: `t_s` s
+    /// since `t0_ns`, its NED position error `e_ned_m` (solution − truth, m) and attitude error
+    /// angle (deg), and both positions as north/east from `origin` (when there is one).
+    pub(crate) fn push_matched(
+        &mut self,
+        t_s: f64,
+        e_ned_m: &[f64; 3],
+        attitude_deg: f64,
+        nav: &NavSolution,
+        truth: &TruthSample,
+        origin: Option<&NedOrigin>,
+    ) {
+        self.t_s.push(t_s);
+        self.horizontal_m.push(e_ned_m[0].hypot(e_ned_m[1]));
+        self.vertical_m.push(-e_ned_m[2]);
+        self.attitude_deg.push(attitude_deg);
+        if let Some(o) = origin {
+            let tn = ned_offset(o.r_e, o.lat_rad, o.lon_rad, truth.pos_ecef_m);
+            let nn = ned_offset(o.r_e, o.lat_rad, o.lon_rad, nav.pos_ecef_m);
+            self.truth_ne_m.push((tn[0], tn[1]));
+            self.nav_ne_m.push((nn[0], nn[1]));
+        }
+    }
 }
 
 /// Analyse the recording at `path` with the GNSS outage windows of its scenario.
@@ -274,11 +310,7 @@ pub fn analyze(path: &Path, outages: &[TimeWindow]) -> Result<Analysis, Analysis
             .collect(),
         ..Default::default()
     };
-    let origin = first_truth.map(|t| NedOrigin {
-        r_e: t.pos_ecef_m,
-        lat_rad: t.lat_rad,
-        lon_rad: t.lon_rad,
-    });
+    let origin = first_truth.as_ref().map(ned_origin);
     let mut t_ns = Vec::new();
     let mut latency_us = Vec::new();
     for n in &navs {
@@ -294,16 +326,8 @@ pub fn analyze(path: &Path, outages: &[TimeWindow]) -> Result<Analysis, Analysis
             continue;
         }
         t_ns.push(n.header.time_ns);
-        series.t_s.push((n.header.time_ns - t0_ns) as f64 * 1e-9);
-        series.horizontal_m.push(e[0].hypot(e[1]));
-        series.vertical_m.push(-e[2]);
-        series.attitude_deg.push(att);
-        if let Some(o) = &origin {
-            let tn = ned_offset(o.r_e, o.lat_rad, o.lon_rad, t.pos_ecef_m);
-            let nn = ned_offset(o.r_e, o.lat_rad, o.lon_rad, n.pos_ecef_m);
-            series.truth_ne_m.push((tn[0], tn[1]));
-            series.nav_ne_m.push((nn[0], nn[1]));
-        }
+        let t_s = (n.header.time_ns - t0_ns) as f64 * 1e-9;
+        series.push_matched(t_s, &e, att, n, t, origin.as_ref());
     }
     s.solutions_matched_with_truth = t_ns.len() as u64;
     s.horizontal_error_rms_m = rms(&series.horizontal_m);

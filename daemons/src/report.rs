@@ -11,7 +11,6 @@
 
 use crate::analysis::{self, Series};
 use crate::experiments::plot::{Chart, Line, color, line_chart};
-use crate::foxglove::{NedOrigin, ned_offset};
 use crate::recorder::Record;
 use crate::recording::{Recording, RecordingError};
 use crate::stats::{max_abs, percentile, rms};
@@ -212,22 +211,11 @@ const G: f64 = 9.80665;
 const DEG_H: f64 = std::f64::consts::PI / 180.0 / 3600.0;
 const ARCSEC: f64 = std::f64::consts::PI / 180.0 / 3600.0;
 
-fn q_mul(a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
-    let [aw, ax, ay, az] = a;
-    let [bw, bx, by, bz] = b;
-    [
-        aw * bw - ax * bx - ay * by - az * bz,
-        aw * bx + ax * bw + ay * bz - az * by,
-        aw * by - ax * bz + ay * bw + az * bx,
-        aw * bz + ax * by - ay * bx + az * bw,
-    ]
-}
-
 /// Rotation vector (NED, rad) of q_est ⊗ q_true⁻¹ for attitudes `q_ned_body` = [w, x, y, z]:
 /// the small rotation that takes the true body-to-NED attitude to the estimate.
 pub fn attitude_error_ned_rad(q_true: [f64; 4], q_est: [f64; 4]) -> [f64; 3] {
     let [w, x, y, z] = q_true;
-    let mut e = q_mul(q_est, [w, -x, -y, -z]);
+    let mut e = analysis::q_mul(q_est, [w, -x, -y, -z]);
     if e[0] < 0.0 {
         e = e.map(|c| -c);
     }
@@ -354,11 +342,7 @@ pub fn report(path: &Path, out_dir: &Path) -> Result<ReportSummary, ReportError>
     // Errors against truth.
     let mut p = Plots::default();
     let stride = (navs.len() / MAX_POINTS).max(1);
-    let origin = first_truth.map(|t| NedOrigin {
-        r_e: t.pos_ecef_m,
-        lat_rad: t.lat_rad,
-        lon_rad: t.lon_rad,
-    });
+    let origin = first_truth.as_ref().map(analysis::ned_origin);
     let mut series = Series {
         t0_ns: t_start,
         ..Default::default()
@@ -405,16 +389,8 @@ pub fn report(path: &Path, out_dir: &Path) -> Result<ReportSummary, ReportError>
                 p.att[i].push(a[i].to_degrees());
                 p.att_sig[i].push(3.0 * n.att_sigma_ned_rad[i].to_degrees());
             }
-            series.t_s.push(secs(n.header.time_ns));
-            series.horizontal_m.push(e[0].hypot(e[1]));
-            series.vertical_m.push(-e[2]);
-            series.attitude_deg.push(*ang.last().unwrap_or(&0.0));
-            if let Some(o) = &origin {
-                let tn = ned_offset(o.r_e, o.lat_rad, o.lon_rad, t.pos_ecef_m);
-                let nn = ned_offset(o.r_e, o.lat_rad, o.lon_rad, n.pos_ecef_m);
-                series.truth_ne_m.push((tn[0], tn[1]));
-                series.nav_ne_m.push((nn[0], nn[1]));
-            }
+            let att_deg = *ang.last().unwrap_or(&0.0);
+            series.push_matched(secs(n.header.time_ns), &e, att_deg, n, t, origin.as_ref());
         }
     }
     if !hor.is_empty() {
