@@ -1,0 +1,124 @@
+//! The GNSS paths added for issue 5 allocate nothing on the hot path: the per-epoch
+//! least-squares cross-check (`gnss_ls::solve` inside `Navigator::push_imu`), the tight clock
+//! start by state augmentation (first tight epoch after alignment without GNSS) and the tight
+//! updates. A static navigator in tight mode gets GNSS only after alignment (position from the
+//! configuration), so its first counted GNSS epoch starts the clock from the satellites and
+//! every counted epoch is cross-checked (≥ 4 satellites). Allocations of this test's thread
+//! only are counted (`common`).
+
+mod common;
+use common::{count, track_this_thread};
+use msgs::{GnssSample, ImuSample, SensorId};
+use nalgebra::{UnitQuaternion, Vector3};
+use sextant_fusion::earth::{Geodetic, GravityModel, WGS84, geodetic_to_ecef};
+use sextant_fusion::gnss_ls;
+use sextant_fusion::navigator::{GnssMode, InitialPosition, Navigator, NavigatorConfig};
+use sextant_fusion::strapdown::{q_e_n, stationary_increment};
+
+const T0: i64 = 1_400_000_000_000_000_000;
+
+#[test]
+fn gnss_cross_check_and_clock_start_allocate_nothing() {
+    track_this_thread();
+    let probe = count();
+    let boxed = std::hint::black_box(Box::new([1.0_f64; 4]));
+    assert!(count() > probe, "the counting allocator must work");
+    drop(boxed);
+
+    let site = Geodetic {
+        lat_rad: 55.655f64.to_radians(),
+        lon_rad: 37.534f64.to_radians(),
+        height_m: 180.0,
+    };
+    let r_e = geodetic_to_ecef(&WGS84, &site);
+    let q_e_b =
+        q_e_n(site.lat_rad, site.lon_rad) * UnitQuaternion::from_euler_angles(0.0, 0.0, 0.7);
+    let c_e_n = q_e_n(site.lat_rad, site.lon_rad)
+        .to_rotation_matrix()
+        .into_inner();
+    let sats: [Vector3<f64>; 6] = std::array::from_fn(|i| {
+        let az = i as f64 * 1.1;
+        let el = (25.0 + 10.0 * i as f64).to_radians();
+        r_e + c_e_n * Vector3::new(az.cos() * el.cos(), az.sin() * el.cos(), -el.sin()) * 2.0e7
+    });
+    let mut nav = Box::new(
+        Navigator::new(NavigatorConfig {
+            alignment_s: 5.0,
+            gnss_mode: GnssMode::Tight,
+            initial_position: Some(InitialPosition {
+                lat_deg: site.lat_rad.to_degrees(),
+                lon_deg: site.lon_rad.to_degrees(),
+                height_m: site.height_m,
+            }),
+            ..NavigatorConfig::default()
+        })
+        .unwrap(),
+    );
+    let rate = 100;
+    let dt = 1.0 / rate as f64;
+    let mut seq = 0u64;
+    let mut step = |nav: &mut Navigator, k: i64, with_gnss: bool| {
+        seq += 1;
+        let t = T0 + k * 10_000_000;
+        let inc = stationary_increment(&WGS84, GravityModel::J2, &r_e, &q_e_b, dt);
+        let mut s = ImuSample::default();
+        s.header.time_ns = t;
+        s.header.seq = seq;
+        s.dt_s = dt;
+        s.delta_angle_rad = inc.delta_angle_rad.into();
+        s.delta_velocity_m_s = inc.delta_velocity_m_s.into();
+        if with_gnss && k % 10 == 0 {
+            let mut g = GnssSample::default();
+            g.header.time_ns = t;
+            g.header.seq = seq;
+            g.n_satellites = sats.len() as u32;
+            for (i, r_s) in sats.iter().enumerate() {
+                let sat = &mut g.satellites[i];
+                sat.prn = i as u32 + 1;
+                sat.flags = 3;
+                sat.pseudorange_m = (r_s - r_e).norm() + 150.0;
+                sat.range_rate_m_s = 0.2;
+                sat.sigma_pseudorange_m = 3.0;
+                sat.sigma_range_rate_m_s = 0.05;
+                sat.sat_pos_ecef_m = (*r_s).into();
+            }
+            nav.push_gnss(&g).unwrap();
+        }
+        nav.push_imu(&s).unwrap()
+    };
+    let mut k = 0;
+    while k < 10 * rate {
+        k += 1;
+        step(&mut nav, k, false);
+    }
+    assert!(nav.is_navigating());
+    // The solver alone, on the stack.
+    let mut sample = GnssSample::default();
+    sample.n_satellites = sats.len() as u32;
+    for (i, r_s) in sats.iter().enumerate() {
+        let sat = &mut sample.satellites[i];
+        sat.flags = 1;
+        sat.pseudorange_m = (r_s - r_e).norm();
+        sat.sigma_pseudorange_m = 3.0;
+        sat.sat_pos_ecef_m = (*r_s).into();
+    }
+    let before = count();
+    let fix = gnss_ls::solve_sample(&std::hint::black_box(sample)).expect("fix");
+    assert!((fix.position.r_e_m - r_e).norm() < 1e-3);
+    for _ in 0..5 * rate {
+        k += 1;
+        step(&mut nav, k, true).expect("navigating");
+    }
+    let used = count() - before;
+    assert_eq!(used, 0, "GNSS paths allocated {used} times");
+    // Every counted epoch was cross-checked, and the clock was started (bias 150 m).
+    let d = nav.diagnostics();
+    assert!(d.gnss_ls_checks >= 45, "{d:?}");
+    assert_eq!(d.gnss_ls_disagreements, 0, "{d:?}");
+    assert!(nav.health()[SensorId::Gnss as usize].fused >= 45);
+    assert!(
+        (nav.clock().bias_m - 150.0).abs() < 10.0,
+        "{:?}",
+        nav.clock()
+    );
+}
