@@ -5,10 +5,10 @@
 //!
 //! Finding (session 3), per mechanism, each measured on its own in
 //! `each_step_of_the_loop_costs_what_it_costs` and together in `daemon_loop_allocations`:
-//! - publishing a message (`msgs::ipc::Pub::send_raw`): 3 allocations — 2 because its two
-//!   `map_err(ice(format!(..)))` build the error-context string before the call, i.e. on every
-//!   send, and 1 inside iceoryx2 0.10 (`Publisher::loan_uninit` allocates an `Rc` of shared
-//!   state per sample). The daemon publishes one solution per IMU step (decimation 1).
+//! - publishing a message (`msgs::ipc::Pub::send_raw`): 1 allocation inside iceoryx2 0.10
+//!   (`Publisher::loan_uninit` allocates an `Rc` of shared state per sample). It was 3: its two
+//!   `map_err(ice(format!(..)))` built the error-context string on every send; they now format
+//!   only on failure. The daemon publishes one solution per IMU step (decimation 1).
 //! - each WaitSet wake-up: 2 allocations inside iceoryx2 0.10 (`WaitSet::wait_and_process_once*`
 //!   collects the triggered file descriptors into a `vec![]` and builds a second `Vec` in
 //!   `handle_all_attachments`).
@@ -189,9 +189,9 @@ impl NavEngine for Probe {
     }
 }
 
-/// Allocations per published message (`Pub::send_raw`): two eager `format!`s + iceoryx2's
-/// per-loan `Rc`.
-const PER_SEND: u64 = 3;
+/// Allocations per published message (`Pub::send_raw`): iceoryx2's per-loan `Rc` only (its
+/// error contexts are formatted on failure only since session 3; they were 2 eager `format!`s).
+const PER_SEND: u64 = 1;
 /// Allocations per WaitSet wake-up inside iceoryx2 0.10.
 const PER_WAKEUP: u64 = 2;
 

@@ -174,12 +174,14 @@ impl<T: Message> Pub<T> {
 
     /// Send `msg` as it is (header untouched), e.g. when republishing a recording.
     pub fn send_raw(&mut self, msg: T) -> Result<(), IpcError> {
+        // The error context is formatted only on failure: this runs once per published
+        // message, which must not allocate (the daemon's hot path).
         self.publisher
             .send_copy(msg)
-            .map_err(ice(format!("send on {}", T::CHANNEL.name())))?;
+            .map_err(|e| ice(format!("send on {}", T::CHANNEL.name()))(e))?;
         self.notifier
             .notify()
-            .map_err(ice(format!("notify on {}", T::CHANNEL.name())))?;
+            .map_err(|e| ice(format!("notify on {}", T::CHANNEL.name()))(e))?;
         Ok(())
     }
 }
