@@ -1,7 +1,7 @@
 //! Error-state extended Kalman filter in ECEF, closed loop (corrections are fed back into the
 //! strapdown state and the sensor-error estimates, after which the error state is zero again).
 //!
-//! # Error state (fixed size [`NX`] = 28; groups switchable, see [`ActiveStates`])
+//! # Error state (fixed size [`NX`] = 31; groups switchable, see [`ActiveStates`])
 //! Every error is *truth minus estimate* (so that a measurement residual `y = z − h(x̂)` is
 //! `y = H·δx + v` with `H = ∂h/∂x` and the correction is `x̂ ← x̂ + δx`):
 //!
@@ -19,6 +19,7 @@
 //! | 23..26 | [`idx::KAPPA`] | `δκ`, star-tracker boresight angles κ1..κ3 (paper 000) | rad |
 //! | 26 | [`idx::CLK`] | `δb_clk`, receiver clock bias × c | m |
 //! | 27 | [`idx::CLK_DRIFT`] | `δd_clk`, receiver clock drift × c | m/s |
+//! | 28..31 | [`idx::SGM`] | `δp_g = (δS_xy, δS_xz, δS_yz)`, gyro non-orthogonality | rad |
 //!
 //! An inactive group keeps zero covariance rows/columns and zero process noise: its Kalman
 //! gain rows are then zero (`K = P Hᵀ S⁻¹`), so it is never corrected and costs nothing in
@@ -29,10 +30,17 @@
 //! RMS 1.1 m with the odometer scale as noise, 0.24 m as a state, in the default vehicle run).
 //!
 //! # Sensor error models (the simulator's, `drivers-sim/src/imu.rs`)
-//! `ω̃ = (1 + s_g)∘ω + b_g + n_g`, `f̃ = (1 + s_a)∘f + b_a + n_a` (∘ element-wise), so the
-//! corrected outputs are `ω̂ = (ω̃ − b̂_g) ⊘ (1 + ŝ_g)` and `f̂ = (f̃ − b̂_a) ⊘ (1 + ŝ_a)`
+//! `ω̃ = (1 + s_g)∘((I + S_g)·ω) + b_g + n_g`, `f̃ = (1 + s_a)∘f + b_a + n_a` (∘ element-wise),
+//! `S_g` the gyro triad's symmetric non-orthogonality (the triad defines the body frame, so a
+//! rigid rotation is not an error; `S_g·ω = W(ω)·p_g` with `p_g = (S_xy, S_xz, S_yz)` and
+//! `W(ω) = [[ω_y, ω_z, 0], [ω_x, 0, ω_z], [0, ω_x, ω_y]]`), so the corrected outputs are
+//! `ω̂ = (I − Ŝ_g)·((ω̃ − b̂_g) ⊘ (1 + ŝ_g))` and `f̂ = (f̃ − b̂_a) ⊘ (1 + ŝ_a)`
 //! ([`ErrorStateEkf::correct_increment`]) and, to first order,
-//! `ω − ω̂ = −δb_g − diag(ω̂)·δs_g`, `f − f̂ = −δb_a − diag(f̂)·δs_a`.
+//! `ω − ω̂ = −δb_g − diag(ω̂)·δs_g − W(ω̂)·δp_g`, `f − f̂ = −δb_a − diag(f̂)·δs_a`.
+//! The accelerometer misalignment is not a state: with the vehicle level its gravity part is
+//! a bias (absorbed by `b_a`, whose prior the navigator widens for it) and its part times the
+//! vehicle acceleration is below a metre over 10 minutes of free inertial (the
+//! `inertial-budget` experiment: 0.17 m in the tight-coupling window).
 //!
 //! # Dynamics (Groves, *Principles of GNSS, Inertial and Multisensor Integrated Navigation*,
 //! 2nd ed., §14.2.3 ECEF and §14.2.7 scale factors; paper 002 eq. 22)
@@ -40,9 +48,10 @@
 //! ```text
 //! δṙ = δv
 //! δv̇ = G·δr − 2[ω_ie×]·δv − [f̂_e×]·ψ − Ĉ_e_b·δb_a − Ĉ_e_b·diag(f̂)·δs_a − Ĉ_e_b·n_a
-//! ψ̇  = −[ω_ie×]·ψ − Ĉ_e_b·δb_g − Ĉ_e_b·diag(ω̂)·δs_g − Ĉ_e_b·n_g
+//! ψ̇  = −[ω_ie×]·ψ − Ĉ_e_b·δb_g − Ĉ_e_b·diag(ω̂)·δs_g − Ĉ_e_b·W(ω̂)·δp_g − Ĉ_e_b·n_g
 //! δḃ_clk = δd_clk + w_b,   δḋ_clk = w_d                (two-state receiver clock)
-//! biases, baro bias, odometer scale: random walks; scale factors, κ: random constants
+//! biases, baro bias, odometer scale: random walks; scale factors, non-orthogonality, κ:
+//! random constants
 //! ```
 //! `G = ∂g/∂r = GM/r³·(3 u uᵀ − I) − [ω_ie×]²` is the gravity gradient: the `−GM/r³·I` part is
 //! paper 002's `−ν²Δr` (Schuler frequency `ν² = g/r`), `3GM/r³ u uᵀ` its `3ν² r (r·Δr)/r²`
@@ -84,7 +93,7 @@ use crate::strapdown::NavState;
 use nalgebra::{Cholesky, Matrix3, Rotation3, SMatrix, SVector, UnitQuaternion, Vector3};
 
 /// Number of error states.
-pub const NX: usize = 28;
+pub const NX: usize = 31;
 
 /// Start index of each state group in the error-state vector.
 pub mod idx {
@@ -112,6 +121,8 @@ pub mod idx {
     pub const CLK: usize = 26;
     /// Receiver clock drift × c, m/s.
     pub const CLK_DRIFT: usize = 27;
+    /// Gyro non-orthogonality `(S_xy, S_xz, S_yz)` (symmetric), rad.
+    pub const SGM: usize = 28;
 }
 
 /// Error-state vector (see the module table for layout and units).
@@ -135,6 +146,9 @@ pub struct ActiveStates {
     pub boresight: bool,
     /// Receiver clock bias and drift (2).
     pub clock: bool,
+    /// Gyro non-orthogonality (3). Off: its attitude error enters as noise per radian turned
+    /// ([`MISALIGNMENT_COHERENCE_RAD`]).
+    pub gyro_misalignment: bool,
 }
 
 impl ActiveStates {
@@ -144,6 +158,7 @@ impl ActiveStates {
         accel_scale: true,
         boresight: true,
         clock: true,
+        gyro_misalignment: true,
     };
 
     /// Per-state flag: true when the state is estimated.
@@ -154,6 +169,7 @@ impl ActiveStates {
             (self.accel_scale, idx::SA, 3),
             (self.boresight, idx::KAPPA, 3),
             (self.clock, idx::CLK, 2),
+            (self.gyro_misalignment, idx::SGM, 3),
         ] {
             for v in m.iter_mut().skip(start).take(len) {
                 *v = on;
@@ -183,8 +199,8 @@ pub struct ProcessNoise {
     /// Receiver clock drift (random-walk frequency noise) PSD, m²/s³.
     pub clock_drift_psd_m2_s3: f64,
     /// 1-σ non-orthogonality of the gyro triad (each off-diagonal of its symmetric part),
-    /// rad: not a state, its attitude error enters as noise per radian turned
-    /// ([`MISALIGNMENT_COHERENCE_RAD`]).
+    /// rad: the prior σ of the [`idx::SGM`] states, or, with that group off, the size of
+    /// the attitude noise per radian turned ([`MISALIGNMENT_COHERENCE_RAD`]).
     pub gyro_misalignment_rad: f64,
 }
 
@@ -256,6 +272,18 @@ pub struct TransitionAccumulator {
     sum_c_diag_w: Matrix3<f64>,
     /// `∫ ω̂ dt` (body angle increment), rad.
     sum_dtheta_b: Vector3<f64>,
+    /// `∫ Ĉ_e_b W(ω̂) dt` (non-orthogonality Jacobian, module docs), rad.
+    sum_c_w_mis: Matrix3<f64>,
+}
+
+/// `W(ω)` with `S·ω = W(ω)·(S_xy, S_xz, S_yz)` for a symmetric `S` with zero diagonal.
+pub fn nonorthogonality_jacobian(w: &Vector3<f64>) -> Matrix3<f64> {
+    Matrix3::new(w.y, w.z, 0.0, w.x, 0.0, w.z, 0.0, w.x, w.y)
+}
+
+/// The symmetric zero-diagonal matrix `S` of the parameters `p = (S_xy, S_xz, S_yz)`.
+pub fn nonorthogonality_matrix(p: &Vector3<f64>) -> Matrix3<f64> {
+    Matrix3::new(0.0, p.x, p.y, p.x, 0.0, p.z, p.y, p.z, 0.0)
 }
 
 impl TransitionAccumulator {
@@ -267,6 +295,7 @@ impl TransitionAccumulator {
         self.sum_c_e_b += c_dt;
         self.sum_f_e += c_dt * f_b;
         self.sum_dtheta_b += w_b * dt_s;
+        self.sum_c_w_mis += c_dt * nonorthogonality_jacobian(w_b);
         for j in 0..3 {
             for i in 0..3 {
                 self.sum_c_diag_f[(i, j)] += c_dt[(i, j)] * f_b[j];
@@ -317,6 +346,8 @@ impl TransitionAccumulator {
             .copy_from(&(-self.sum_c_e_b));
         fi.fixed_view_mut::<3, 3>(idx::ATT, idx::SG)
             .copy_from(&(-self.sum_c_diag_w));
+        fi.fixed_view_mut::<3, 3>(idx::ATT, idx::SGM)
+            .copy_from(&(-self.sum_c_w_mis));
         // F has non-zero rows only in 0..9 (plus the clock row, whose column 27 meets no
         // non-zero row of F), so (F̄T)² restricted to rows 0..9 is F̄T[:, 0..9] · F̄T[0..9, :].
         let sq = fi.fixed_columns::<9>(0) * fi;
@@ -359,6 +390,8 @@ pub fn error_dynamics(
         .copy_from(&(-c_e_b));
     f.fixed_view_mut::<3, 3>(idx::ATT, idx::SG)
         .copy_from(&(-c_e_b * Matrix3::from_diagonal(w_b)));
+    f.fixed_view_mut::<3, 3>(idx::ATT, idx::SGM)
+        .copy_from(&(-c_e_b * nonorthogonality_jacobian(w_b)));
     f[(idx::CLK, idx::CLK_DRIFT)] = 1.0;
     f
 }
@@ -387,6 +420,8 @@ pub struct ErrorStateEkf {
     pub clock_bias_m: f64,
     /// Estimated receiver clock drift × c, m/s.
     pub clock_drift_m_s: f64,
+    /// Estimated gyro non-orthogonality `(S_xy, S_xz, S_yz)`, rad.
+    pub gyro_misalignment_rad: Vector3<f64>,
     /// Process noise densities.
     pub noise: ProcessNoise,
     active: [bool; NX],
@@ -396,7 +431,9 @@ pub struct ErrorStateEkf {
 
 impl ErrorStateEkf {
     /// A filter with initial covariance `p0` (rows/columns of inactive groups are zeroed),
-    /// zero error estimates, the given noise and active state groups.
+    /// zero error estimates, the given noise and active state groups. Active
+    /// non-orthogonality states to which `p0` gives no variance start with the grade's
+    /// `noise.gyro_misalignment_rad²` (the prior of a random constant).
     pub fn new(p0: Covariance, noise: ProcessNoise, active: ActiveStates) -> Self {
         let mut f = Self {
             p: p0,
@@ -409,12 +446,18 @@ impl ErrorStateEkf {
             kappa_rad: Vector3::zeros(),
             clock_bias_m: 0.0,
             clock_drift_m_s: 0.0,
+            gyro_misalignment_rad: Vector3::zeros(),
             noise,
             active: [true; NX],
             qc: StateVector::zeros(),
             acc: TransitionAccumulator::default(),
         };
         f.set_active(active);
+        for i in idx::SGM..idx::SGM + 3 {
+            if f.p[(i, i)] == 0.0 {
+                f.set_initial_sigma(i, noise.gyro_misalignment_rad);
+            }
+        }
         f
     }
 
@@ -448,7 +491,9 @@ impl ErrorStateEkf {
     }
 
     /// Correct one raw IMU increment (`delta_angle_rad`, `delta_velocity_m_s`, body, over
-    /// `dt_s`) with the bias and scale-factor estimates: `(x̃ − b̂ dt) ⊘ (1 + ŝ)`.
+    /// `dt_s`) with the bias and scale-factor estimates, `(x̃ − b̂ dt) ⊘ (1 + ŝ)`, and the
+    /// delta-angle also with the non-orthogonality, `(I − Ŝ_g)·(…)` (`(I + Ŝ)⁻¹` to first
+    /// order; the second-order term `Ŝ²` is ≈ 10⁻⁹ for 10″).
     pub fn correct_increment(
         &self,
         delta_angle_rad: &Vector3<f64>,
@@ -457,6 +502,7 @@ impl ErrorStateEkf {
     ) -> (Vector3<f64>, Vector3<f64>) {
         let dth = (delta_angle_rad - self.gyro_bias_rad_s * dt_s)
             .component_div(&self.gyro_scale.add_scalar(1.0));
+        let dth = dth - nonorthogonality_matrix(&self.gyro_misalignment_rad) * dth;
         let dv = (delta_velocity_m_s - self.accel_bias_m_s2 * dt_s)
             .component_div(&self.accel_scale.add_scalar(1.0));
         (dth, dv)
@@ -489,9 +535,14 @@ impl ErrorStateEkf {
             return;
         }
         let a = self.acc.nav_rows(ell, r_e);
-        let q_mis = self
-            .acc
-            .misalignment_noise(self.noise.gyro_misalignment_rad);
+        // With the non-orthogonality estimated its error is in F; otherwise it is bounded as
+        // attitude noise.
+        let q_mis = if self.active[idx::SGM] {
+            Matrix3::zeros()
+        } else {
+            self.acc
+                .misalignment_noise(self.noise.gyro_misalignment_rad)
+        };
         self.acc = TransitionAccumulator::default();
         let mut p = self.p;
         for i in 0..NX {
@@ -550,6 +601,7 @@ impl ErrorStateEkf {
         self.kappa_rad += dx.fixed_rows::<3>(idx::KAPPA);
         self.clock_bias_m += dx[idx::CLK];
         self.clock_drift_m_s += dx[idx::CLK_DRIFT];
+        self.gyro_misalignment_rad += dx.fixed_rows::<3>(idx::SGM);
     }
 }
 
@@ -1290,6 +1342,7 @@ mod tests {
             accel_scale: true,
             boresight: false,
             clock: false,
+            gyro_misalignment: false,
         };
         let mut noise = crate::navigator::ImuSpec::default().process_noise();
         noise.clock_bias_psd_m2_s = 0.1;
@@ -1313,7 +1366,10 @@ mod tests {
             1e-4,
         );
         let out = update(&f.p, &m, f64::INFINITY);
-        for i in (idx::SG..idx::SG + 3).chain(idx::KAPPA..NX) {
+        for i in (idx::SG..idx::SG + 3)
+            .chain(idx::KAPPA..idx::CLK + 2)
+            .chain(idx::SGM..NX)
+        {
             assert_eq!(out.p.row(i).abs().max(), 0.0, "row {i}");
             assert_eq!(out.dx[i], 0.0);
         }

@@ -50,7 +50,7 @@ use drivers_sim::imu::{ImuErrorModel, IntervalErrors};
 use drivers_sim::offline::{Channel, OfflineSim, SatelliteLimit, SimMessage, compare, feed};
 use drivers_sim::scenario::period_ns;
 use drivers_sim::truth::{TruthGenerator, TruthPoint};
-use fusion::ekf::{Covariance, ErrorStateEkf, gravity_gradient, idx};
+use fusion::ekf::{Covariance, ErrorStateEkf, gravity_gradient, idx, nonorthogonality_matrix};
 use fusion::navigator::{Navigator, NavigatorConfig};
 use fusion::strapdown::{ImuIncrement, NavState, Strapdown};
 use nalgebra::{Matrix3, SVector, UnitQuaternion, Vector2, Vector3};
@@ -433,6 +433,9 @@ pub fn run_with(
     let f_ref_b = tp0.f_b_m_s2;
     let dsg = gc.scale - ekf.gyro_scale;
     let dsa = ac.scale - ekf.accel_scale;
+    // Residual gyro non-orthogonality (the filter estimates it when the state group is on).
+    let dmg = gc.misalignment - nonorthogonality_matrix(&ekf.gyro_misalignment_rad);
+    let mis_g_estimated = ekf.is_active(idx::SGM);
     let sigma_mis_g = scn.imu.gyro.misalignment_arcsec.to_radians() / 3600.0;
     let sigma_mis_a = scn.imu.accel.misalignment_arcsec.to_radians() / 3600.0;
 
@@ -587,11 +590,15 @@ pub fn run_with(
         },
         Term {
             key: "gyro_nonorthogonality_x_rate",
-            label: "gyro non-orthogonality × turn rate",
+            label: "gyro non-orthogonality residual × turn rate",
             x0: Lin::zeros(),
-            input: Input::GyroMis(gc.misalignment),
-            units: mis_units_g,
-            cov: Some(diag(3, sigma_mis_g)),
+            input: Input::GyroMis(dmg),
+            units: mis_units_g.clone(),
+            cov: Some(if mis_g_estimated {
+                sub_cov(&snap.p, &rows3(idx::SGM))
+            } else {
+                diag(3, sigma_mis_g)
+            }),
             closed_sigma_m: None,
         },
         Term {
@@ -634,7 +641,7 @@ pub fn run_with(
 
     // The filter-model prediction without process noise: unit responses of the 21 estimated
     // navigation and IMU states, weighted by the full covariance at t₀ (correlations kept).
-    let joint_cols: Vec<usize> = (0..9)
+    let mut joint_cols: Vec<usize> = (0..9)
         .chain(rows3(idx::BG))
         .chain(rows3(idx::BA))
         .chain(rows3(idx::SG))
@@ -651,6 +658,10 @@ pub fn run_with(
     joint_units.extend(body_units(&Input::AccelConst));
     joint_units.extend(body_units(&Input::GyroScale));
     joint_units.extend(body_units(&Input::AccelScaleFull));
+    if mis_g_estimated {
+        joint_cols.extend(rows3(idx::SGM));
+        joint_units.extend(mis_units_g.iter().cloned());
+    }
 
     // Propagate: the first interval fixes b(t₀).
     let n_steps = ((t1_ns - t0_ns) / period) as u64;
@@ -694,7 +705,7 @@ pub fn run_with(
         let kin = dv - f_ref_b * dt;
         let model_g = (e0.gyro_bias_rad_s - ekf.gyro_bias_rad_s) * dt
             + dsg.component_mul(&dth)
-            + gc.misalignment * dth
+            + dmg * dth
             + (e.gyro_bias_rad_s - e0.gyro_bias_rad_s) * dt;
         let model_a = (e0.accel_bias_m_s2 - ekf.accel_bias_m_s2
             + (Matrix3::from_diagonal(&dsa) + ac.misalignment) * f_ref_b)
@@ -780,7 +791,8 @@ pub fn run_with(
             "nonlinear_horizontal_m": nonlin.norm(),
             "expected_sigma_horizontal_m": sigma,
             "sigma_source": match (&t.cov, t.closed_sigma_m) {
-                (Some(_), _) if t.key.contains("misalignment") || t.key.contains("nonorth") =>
+                (Some(_), _) if t.key.contains("misalignment")
+                    || (t.key.contains("nonorth") && !mis_g_estimated) =>
                     "grade sigma (not a filter state)",
                 (Some(_), _) => "filter covariance at window start",
                 _ => "closed form, grade noise densities",
@@ -842,6 +854,10 @@ pub fn run_with(
         "filter_model_sigma_without_noise_horizontal_m": joint_sigma,
         "filter_model_noise_sigma_closed_form_horizontal_m": filter_noise_sigma,
         "mechanization_reference_error_horizontal_m": ref_ne.norm(),
+        "gyro_nonorthogonality_estimated": mis_g_estimated,
+        "estimated_gyro_nonorthogonality_arcsec": (ekf.gyro_misalignment_rad
+            .map(|x| x.to_degrees() * 3600.0))
+        .as_slice(),
         "drawn_gyro_nonorthogonality_arcsec": [
             gc.misalignment[(0, 1)].to_degrees() * 3600.0,
             gc.misalignment[(0, 2)].to_degrees() * 3600.0,
