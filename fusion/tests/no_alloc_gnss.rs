@@ -93,8 +93,10 @@ fn gnss_cross_check_and_clock_start_allocate_nothing() {
     }
     assert!(nav.is_navigating());
     // The solver alone, on the stack.
-    let mut sample = GnssSample::default();
-    sample.n_satellites = sats.len() as u32;
+    let mut sample = GnssSample {
+        n_satellites: sats.len() as u32,
+        ..GnssSample::default()
+    };
     for (i, r_s) in sats.iter().enumerate() {
         let sat = &mut sample.satellites[i];
         sat.flags = 1;
