@@ -24,8 +24,11 @@
 //! * latitude from the GNSS fix and from the IMU alone (unindexed and indexed) with their
 //!   closed forms.
 
-use super::plot::{Chart, Line, color, line_chart};
-use super::{ExperimentError, create_out_dir, fmt_num, progress_bar, write_summary};
+use super::plot::{Chart, Line, color, line_chart, row_points};
+use super::{
+    ExperimentError, create_out_dir, fmt_num, measurement, progress_bar, scenario_file,
+    write_summary,
+};
 use drivers_sim::scenario::{Scenario, Trajectory, TurntableMove};
 use drivers_sim::sources::{GnssSource, ImuSource, SampleSource};
 use drivers_sim::truth::TruthGenerator;
@@ -91,11 +94,7 @@ impl Default for Settings {
 }
 
 fn scenario_path() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../config/scenarios/alignment.toml")
-}
-
-fn measurement(e: impl std::fmt::Display) -> ExperimentError {
-    ExperimentError::Measurement(e.to_string())
+    scenario_file("alignment.toml")
 }
 
 /// The scenario of one run.
@@ -404,16 +403,12 @@ pub fn run_with(
 fn plots(out_dir: &Path, settings: &Settings, summary: &Value) -> Result<(), ExperimentError> {
     let rows = summary["rows"].as_array().cloned().unwrap_or_default();
     let t_max = settings.times_s.iter().cloned().fold(0.0, f64::max);
-    let mut lines = Vec::new();
-    let mut ci = 0;
-    for g in &settings.grades {
-        let pick = |key: &str| -> Vec<(f64, f64)> {
-            rows.iter()
-                .filter(|r| r["grade"] == g.label.as_str() && r["alignment_time_s"] == t_max)
-                .filter_map(|r| Some((r["latitude_deg"].as_f64()?, r[key].as_f64()?)))
-                .collect()
-        };
-        for (key, what, dashed) in [
+    let lines = heading_lines(
+        settings,
+        &rows,
+        |r| r["alignment_time_s"] == t_max,
+        "latitude_deg",
+        [
             ("unindexed_heading_rms_deg", "unindexed", false),
             ("indexed_heading_rms_deg", "indexed 0/180", false),
             (
@@ -426,17 +421,8 @@ fn plots(out_dir: &Path, settings: &Settings, summary: &Value) -> Result<(), Exp
                 "indexed prediction",
                 true,
             ),
-        ] {
-            lines.push(Line {
-                label: format!("{} {what}", g.label),
-                points: pick(key),
-                color: color(ci),
-                dashed,
-                markers: true,
-            });
-            ci += 1;
-        }
-    }
+        ],
+    );
     let title = format!("Heading error (RMS over seeds) at T = {t_max:.0} s");
     line_chart(
         &out_dir.join("heading_vs_latitude.png"),
@@ -449,22 +435,18 @@ fn plots(out_dir: &Path, settings: &Settings, summary: &Value) -> Result<(), Exp
             lines: &lines,
         },
     )?;
-    let mut lines = Vec::new();
-    let mut ci = 0;
     let lat_pick = settings
         .latitudes_deg
         .iter()
         .cloned()
         .find(|l| (*l - 55.655).abs() < 1e-9)
         .unwrap_or(settings.latitudes_deg[0]);
-    for g in &settings.grades {
-        let pick = |key: &str| -> Vec<(f64, f64)> {
-            rows.iter()
-                .filter(|r| r["grade"] == g.label.as_str() && r["latitude_deg"] == lat_pick)
-                .filter_map(|r| Some((r["alignment_time_s"].as_f64()?, r[key].as_f64()?)))
-                .collect()
-        };
-        for (key, what, dashed) in [
+    let lines = heading_lines(
+        settings,
+        &rows,
+        |r| r["latitude_deg"] == lat_pick,
+        "alignment_time_s",
+        [
             ("unindexed_heading_rms_deg", "unindexed", false),
             ("indexed_heading_rms_deg", "indexed 0/180", false),
             ("white_noise_heading_sigma_deg", "white-noise floor", true),
@@ -473,17 +455,8 @@ fn plots(out_dir: &Path, settings: &Settings, summary: &Value) -> Result<(), Exp
                 "indexed prediction",
                 true,
             ),
-        ] {
-            lines.push(Line {
-                label: format!("{} {what}", g.label),
-                points: pick(key),
-                color: color(ci),
-                dashed,
-                markers: true,
-            });
-            ci += 1;
-        }
-    }
+        ],
+    );
     let title = format!("Heading error vs alignment time at {lat_pick}°");
     line_chart(
         &out_dir.join("heading_vs_time.png"),
@@ -496,6 +469,35 @@ fn plots(out_dir: &Path, settings: &Settings, summary: &Value) -> Result<(), Exp
             lines: &lines,
         },
     )
+}
+
+/// One line per grade and per `(summary key, legend, dashed)` of `series`: the rows of the
+/// grade that `in_cell` selects, `x_key` against the key.
+fn heading_lines(
+    settings: &Settings,
+    rows: &[Value],
+    in_cell: impl Fn(&Value) -> bool,
+    x_key: &str,
+    series: [(&str, &str, bool); 4],
+) -> Vec<Line> {
+    let mut lines = Vec::new();
+    for g in &settings.grades {
+        for (key, what, dashed) in series {
+            lines.push(Line {
+                label: format!("{} {what}", g.label),
+                points: row_points(
+                    rows,
+                    |r| r["grade"] == g.label.as_str() && in_cell(r),
+                    x_key,
+                    key,
+                ),
+                color: color(lines.len()),
+                dashed,
+                markers: true,
+            });
+        }
+    }
+    lines
 }
 
 /// Human table.

@@ -142,6 +142,19 @@ pub(crate) fn write_summary(
     std::fs::write(&path, text + "\n").map_err(|source| ExperimentError::Io { path, source })
 }
 
+/// A shipped scenario file: `config/scenarios/NAME` of the repository.
+pub(crate) fn scenario_file(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../config/scenarios")
+        .join(name)
+}
+
+/// A step of the measurement that failed (a scenario that does not load, a solver that does
+/// not converge), as an experiment error: `.map_err(measurement)?`.
+pub(crate) fn measurement(e: impl std::fmt::Display) -> ExperimentError {
+    ExperimentError::Measurement(e.to_string())
+}
+
 /// Create the output directory.
 pub(crate) fn create_out_dir(out_dir: &Path) -> Result<(), ExperimentError> {
     std::fs::create_dir_all(out_dir).map_err(|source| ExperimentError::Io {

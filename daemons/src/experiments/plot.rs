@@ -54,6 +54,21 @@ pub struct Chart<'a> {
     pub lines: &'a [Line],
 }
 
+/// The points `(row[x_key], row[y_key])` of the summary rows that `keep` selects, in row
+/// order; rows where either is not a number are skipped. For plotting a table of results
+/// (`summary["rows"]`) one line per cell selection.
+pub fn row_points(
+    rows: &[serde_json::Value],
+    keep: impl Fn(&serde_json::Value) -> bool,
+    x_key: &str,
+    y_key: &str,
+) -> Vec<(f64, f64)> {
+    rows.iter()
+        .filter(|r| keep(r))
+        .filter_map(|r| Some((r[x_key].as_f64()?, r[y_key].as_f64()?)))
+        .collect()
+}
+
 type DynErr = Box<dyn std::error::Error>;
 
 /// Draw `chart` into the PNG file `path` (1000 × 600 px).
@@ -219,6 +234,20 @@ mod tests {
         assert_eq!(tick_label(-12.5, false), "-12.5");
         assert_eq!(tick_label(2.5e7, false), "2.5e7");
         assert_eq!(tick_label(0.0, false), "0");
+    }
+
+    #[test]
+    fn row_points_select_rows_and_skip_non_numbers() {
+        let rows = [
+            serde_json::json!({"g": "a", "x": 1.0, "y": 2.0}),
+            serde_json::json!({"g": "b", "x": 2.0, "y": 3.0}),
+            serde_json::json!({"g": "a", "x": 3.0, "y": null}),
+            serde_json::json!({"g": "a", "x": 4.0, "y": 5}),
+        ];
+        assert_eq!(
+            row_points(&rows, |r| r["g"] == "a", "x", "y"),
+            vec![(1.0, 2.0), (4.0, 5.0)]
+        );
     }
 
     #[test]

@@ -39,7 +39,10 @@
 //! heading in level flight follows the z gyro: ≈ 1.04 and 0.87.
 
 use super::plot::{Chart, Line, color, line_chart};
-use super::{ExperimentError, create_out_dir, fmt_num, progress_bar, write_summary};
+use super::{
+    ExperimentError, create_out_dir, fmt_num, measurement, progress_bar, scenario_file,
+    write_summary,
+};
 use drivers_sim::imu::ChannelErrorModel;
 use drivers_sim::scenario::{
     ChannelFailure, FailedSensor, FailureKind, Scenario, TemperatureProfile, period_ns,
@@ -121,12 +124,8 @@ struct Truth {
     rate_hz: usize,
 }
 
-fn measurement(e: impl std::fmt::Display) -> ExperimentError {
-    ExperimentError::Measurement(e.to_string())
-}
-
 fn scenario_path() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../config/scenarios/uav.toml")
+    scenario_file("uav.toml")
 }
 
 fn build_truth(scn: &Scenario, duration_s: f64, progress: bool) -> Truth {
