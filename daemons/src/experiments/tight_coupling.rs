@@ -38,18 +38,20 @@
 //!   the filter carries the misalignment only as a noise bound (`fusion::ekf`,
 //!   `MISALIGNMENT_COHERENCE_RAD`), which is what makes free inertial reach ≈ 200 m here.
 //!
-//! # Measured (default settings, seed 3, session 3 filter, 2026-11-23)
-//! Horizontal error at the end of the 600 s window: free 206.6 m; loose = free exactly for
-//! 0–3 satellites; tight 216.0 m (1 satellite), 190.1 m (2), 0.23 m (3), 0.25 m (all; loose
-//! 0.25 m). Two satellites: 0.01 m along `u₁ − u₂` (free 8.9 m). One satellite, along its
-//! horizontal line of sight: tight 78.0 m (its σ 41.5 m) vs free 42.6 m (σ 81.0 m) — within
-//! the one-run tolerance 208.9 m; over 20 seeds the RMS along the line of sight is 32.3 m
-//! tight vs 51.1 m free (tight ≤ free in 14 of 20), mean NEES tight 0.61 (band
-//! 0.48–1.71), free 0.40 (pessimistic). Control without IMU misalignment: tight 40.5 m
-//! (σ 41.4 m) vs free 35.6 m. The session-2 figure "82 m vs 44 m" was this single draw, not
-//! a defect of the clock handling (the clock is started with all satellites 300 s before the
-//! window); the clock start by state augmentation (`Navigator::initialize_clock`) is proven
-//! separately in `drivers-sim/tests/filter_tight.rs`.
+//! # Measured (default settings, seed 3, commit 593b89d, 2026-11-23)
+//! Horizontal error at the end of the 600 s window: free 43.4 m; loose = free exactly for
+//! 0–3 satellites; tight 37.0 m (1 satellite), 37.7 m (2), 0.36 m (3; window RMS 0.54 m,
+//! σ 0.50 m), all 0.35 m (window RMS 0.24 m, σ 0.25 m; loose the same). Two satellites:
+//! 0.09 m along `u₁ − u₂` (σ 0.34 m; free 27.3 m). One satellite, along its horizontal line
+//! of sight: tight 24.0 m (σ 9.1 m) vs free 34.8 m (σ 19.7 m; one-run tolerance 52.4 m);
+//! over 20 seeds the RMS along the line of sight is 7.5 m tight vs 18.2 m free (tight ≤ free
+//! in 18 of 20), mean NEES along it tight 0.68, free 0.85 (95 % band 0.48–1.71). Control
+//! without IMU misalignment: tight 23.5 m vs free 36.5 m. Tight GNSS updates NIS/dof
+//! 1.00–1.03; LS cross-check 0 disagreements in 350–950 checks per run. (Session 2's "82 m
+//! vs 44 m" was a single draw with the then 200 m free drift, not the clock handling: the
+//! clock is started with all satellites 300 s before the window; the clock start by state
+//! augmentation, `Navigator::initialize_clock`, is proven in
+//! `drivers-sim/tests/filter_tight.rs`.)
 
 use super::consistency::{filter_config, load_scenario};
 use super::plot::{Chart, Line, color, line_chart};
