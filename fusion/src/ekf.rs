@@ -204,9 +204,10 @@ pub struct ProcessNoise {
     pub gyro_misalignment_rad: f64,
 }
 
-/// Coherence angle of the unmodelled gyro non-orthogonality, rad: the attitude noise added
-/// per covariance interval is `σ_m² · Θ_c · |Δθ|` (per axis, see below), i.e. a random walk
-/// in the angle turned.
+/// Coherence angle of the gyro non-orthogonality when it is not estimated
+/// (`ActiveStates::gyro_misalignment` off), rad: the attitude noise added per covariance
+/// interval is `σ_m² · Θ_c · |Δθ|` (per axis, see below), i.e. a random walk in the angle
+/// turned. A pessimistic bound: the states, on by default, model the error exactly.
 ///
 /// Derivation. The gyro triad defines the body frame, so its misalignment is a symmetric
 /// non-orthogonality `S` (off-diagonals σ_m, zero diagonal; a rigid rotation of the triad
