@@ -40,21 +40,18 @@ fn run(cfg: NavigatorConfig, duration_s: f64) -> OdoRun {
     let mut out = OdoRun::default();
     let (mut h2, mut v2, mut a2, mut n) = (0.0, 0.0, 0.0, 0.0);
     for msg in sim {
-        match &msg {
-            SimMessage::Truth(t) => {
-                if nav.is_navigating() && nav.time_ns() == t.header.time_ns {
-                    let p = compare(&nav, t, epoch);
-                    if p.t_s >= 120.0 {
-                        let e = p.pos_err_ned_m();
-                        h2 += e.x * e.x + e.y * e.y;
-                        v2 += e.z * e.z;
-                        a2 += p.att_err_e_rad.norm_squared();
-                        n += 1.0;
-                    }
+        if let SimMessage::Truth(t) = &msg {
+            if nav.is_navigating() && nav.time_ns() == t.header.time_ns {
+                let p = compare(&nav, t, epoch);
+                if p.t_s >= 120.0 {
+                    let e = p.pos_err_ned_m();
+                    h2 += e.x * e.x + e.y * e.y;
+                    v2 += e.z * e.z;
+                    a2 += p.att_err_e_rad.norm_squared();
+                    n += 1.0;
                 }
-                continue;
             }
-            _ => {}
+            continue;
         }
         feed(&mut nav, &msg).unwrap_or_else(|e| panic!("{e}"));
     }
