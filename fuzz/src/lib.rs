@@ -12,7 +12,9 @@
 //! The functions have the libFuzzer signature, so with a nightly toolchain they can be wrapped in
 //! `libfuzzer_sys::fuzz_target!` as they are; on stable the `sextant-fuzz` binary drives them.
 
-use fusion::navigator::{Navigator, NavigatorConfig};
+pub mod fixture;
+
+use fusion::navigator::Navigator;
 use msgs::{BaroSample, GnssSample, Header, ImuSample, OdometerSample, StarTrackerSample};
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
@@ -126,50 +128,8 @@ fn aligned() -> &'static (Navigator, ImuSample) {
     NAV.get_or_init(|| {
         let text = std::fs::read_to_string(repo_root().join("config/filter.toml"))
             .expect("config/filter.toml");
-        let mut cfg: NavigatorConfig = toml::from_str(&text).expect("filter.toml parses");
-        cfg.alignment_s = 2.0;
-        let mut nav = Navigator::new(cfg).expect("filter.toml validates");
-        let (lat, lon, h) = (55.7f64.to_radians(), 37.5f64.to_radians(), 200.0);
-        let (a, e2) = (6_378_137.0, 6.694_379_990_14e-3);
-        let rn = a / (1.0 - e2 * lat.sin().powi(2)).sqrt();
-        let r = [
-            (rn + h) * lat.cos() * lon.cos(),
-            (rn + h) * lat.cos() * lon.sin(),
-            (rn * (1.0 - e2) + h) * lat.sin(),
-        ];
-        let t0 = 1_398_556_800_000_000_000i64;
-        let dt = 0.005;
-        let w = 7.292_115e-5;
-        let mut last = ImuSample::default();
-        for k in 1..=600i64 {
-            let mut s = ImuSample::default();
-            s.header.seq = k as u64;
-            s.header.time_ns = t0 + k * 5_000_000;
-            s.dt_s = dt;
-            s.delta_angle_rad = [w * lat.cos() * dt, 0.0, -w * lat.sin() * dt];
-            s.delta_velocity_m_s = [0.0, 0.0, -9.8155 * dt];
-            if k % 200 == 1 {
-                let mut g = GnssSample::default();
-                g.header.seq = k as u64;
-                g.header.time_ns = s.header.time_ns;
-                g.fix_valid = 1;
-                g.pos_ecef_m = r;
-                g.pos_cov_ecef_m2 = [4.0, 0.0, 0.0, 0.0, 4.0, 0.0, 0.0, 0.0, 4.0];
-                let _ = nav.push_gnss(&g);
-            }
-            let _ = nav.push_imu(&s);
-            last = s;
-        }
-        assert!(nav.is_navigating());
-        (nav, last)
+        fixture::aligned_static_navigator(&text).expect("navigator fixture")
     })
-}
-
-fn finite(nav: &Navigator) -> bool {
-    let x = nav.nav_state();
-    x.r_e.iter().all(|v| v.is_finite())
-        && x.v_e.iter().all(|v| v.is_finite())
-        && nav.covariance().iter().all(|v| v.is_finite())
 }
 
 /// Messages with arbitrary bit patterns into an aligned navigator. The first byte of each
@@ -269,7 +229,7 @@ pub fn samples(data: &[u8]) {
         if std::env::var_os("SEXTANT_FUZZ_VERBOSE").is_some() {
             eprintln!(
                 "sensor {id} accepted {ok} header {header:?} finite {} r_e {:?}",
-                finite(&nav),
+                fixture::state_is_finite(&nav),
                 nav.nav_state().r_e
             );
         }
@@ -290,6 +250,9 @@ pub fn samples(data: &[u8]) {
                 "a rejected sample changed the covariance"
             );
         }
-        assert!(finite(&nav), "an accepted sample made the state non-finite");
+        assert!(
+            fixture::state_is_finite(&nav),
+            "an accepted sample made the state non-finite"
+        );
     }
 }

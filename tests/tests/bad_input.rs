@@ -12,7 +12,7 @@
 //!   bytes and mutations of the shipped configuration and scenarios, and truncated or corrupted
 //!   recordings, give errors, never panics.
 
-use fusion::navigator::{Navigator, NavigatorConfig};
+use fusion::navigator::Navigator;
 use msgs::{BaroSample, GnssSample, ImuSample, OdometerSample, SensorId, StarTrackerSample};
 use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
@@ -308,49 +308,16 @@ fn malformed_config_and_scenario_are_named_by_file_key_and_line() {
 
 // ------------------------------------------------------------------ property tests
 
+/// The aligned static navigator shared with the fuzz target `samples` (fuzz/src/fixture.rs).
+#[path = "../../fuzz/src/fixture.rs"]
+mod fixture;
+use fixture::state_is_finite;
+
 /// A static navigator that has aligned (IMU and GNSS of a level site), for the bit-pattern
 /// properties.
 fn aligned() -> (Navigator, ImuSample) {
-    let mut cfg: NavigatorConfig =
-        toml::from_str(&std::fs::read_to_string(repo_root().join("config/filter.toml")).unwrap())
-            .unwrap();
-    cfg.alignment_s = 2.0;
-    let mut nav = Navigator::new(cfg).unwrap();
-    // 55.7° N, 37.5° E, 200 m: ECEF from the WGS-84 closed form.
-    let (lat, lon, h) = (55.7f64.to_radians(), 37.5f64.to_radians(), 200.0);
-    let (a, e2) = (6_378_137.0, 6.694_379_990_14e-3);
-    let rn = a / (1.0 - e2 * lat.sin().powi(2)).sqrt();
-    let r = [
-        (rn + h) * lat.cos() * lon.cos(),
-        (rn + h) * lat.cos() * lon.sin(),
-        (rn * (1.0 - e2) + h) * lat.sin(),
-    ];
-    let t0 = 1_398_556_800_000_000_000i64;
-    let dt = 0.005;
-    let mut last = ImuSample::default();
-    for k in 1..=600i64 {
-        let mut s = ImuSample::default();
-        s.header.seq = k as u64;
-        s.header.time_ns = t0 + k * 5_000_000;
-        s.dt_s = dt;
-        // Level, heading north: f_b = (0, 0, -g), ω_ib^b = Ω(cos φ, 0, -sin φ).
-        let w = 7.292_115e-5;
-        s.delta_angle_rad = [w * lat.cos() * dt, 0.0, -w * lat.sin() * dt];
-        s.delta_velocity_m_s = [0.0, 0.0, -9.8155 * dt];
-        if k % 200 == 1 {
-            let mut g = GnssSample::default();
-            g.header.seq = k as u64;
-            g.header.time_ns = s.header.time_ns;
-            g.fix_valid = 1;
-            g.pos_ecef_m = r;
-            g.pos_cov_ecef_m2 = [4.0, 0.0, 0.0, 0.0, 4.0, 0.0, 0.0, 0.0, 4.0];
-            let _ = nav.push_gnss(&g);
-        }
-        let _ = nav.push_imu(&s);
-        last = s;
-    }
-    assert!(nav.is_navigating(), "the fixture must navigate");
-    (nav, last)
+    let text = std::fs::read_to_string(repo_root().join("config/filter.toml")).unwrap();
+    fixture::aligned_static_navigator(&text).unwrap()
 }
 
 /// f64 from raw bits: every pattern, NaNs, infinities, subnormals included.
@@ -481,13 +448,6 @@ fn push(nav: &mut Navigator, m: &AnyMsg) -> (SensorId, bool) {
         AnyMsg::Odo(s) => (SensorId::Odometer, nav.push_odometer(s).is_ok()),
         AnyMsg::Baro(s) => (SensorId::Baro, nav.push_baro(s).is_ok()),
     }
-}
-
-fn state_is_finite(nav: &Navigator) -> bool {
-    let x = nav.nav_state();
-    x.r_e.iter().all(|v| v.is_finite())
-        && x.v_e.iter().all(|v| v.is_finite())
-        && nav.covariance().iter().all(|v| v.is_finite())
 }
 
 proptest! {
