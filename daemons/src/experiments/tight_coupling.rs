@@ -35,8 +35,10 @@
 //!   seed): RMS of the along-line-of-sight error over the seeds and its mean NEES against
 //!   the χ² band;
 //! - a control run with the simulated IMU axis misalignment set to zero (`1*` in the table):
-//!   the filter carries the misalignment only as a noise bound (`fusion::ekf`,
-//!   `MISALIGNMENT_COHERENCE_RAD`), which is what makes free inertial reach ≈ 200 m here.
+//!   until commit 45640ef the filter carried the gyro misalignment only as a noise bound
+//!   (`fusion::ekf`, `MISALIGNMENT_COHERENCE_RAD`) and free inertial reached ≈ 200 m here;
+//!   with the gyro non-orthogonality states (`[states] gyro_misalignment`, default on) it is
+//!   43 m and the control differs little from the default run.
 //!
 //! # Measured (default settings, seed 3, commit 593b89d, 2026-11-23)
 //! Horizontal error at the end of the 600 s window: free 43.4 m; loose = free exactly for
