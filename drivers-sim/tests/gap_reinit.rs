@@ -381,3 +381,36 @@ fn bridged_gap_keeps_the_covariance_honest() {
         a.to_degrees()
     );
 }
+
+/// The IMU time base steps back 600 s for good at 150 s (a clock reset): every sample from
+/// then on is "not increasing" against the old base. The first 19 are held, the 20th
+/// re-initialises (otherwise the IMU would be lost forever); the vehicle is driving, so the
+/// new static alignment cannot finish and the navigator stays aligning — honest, as nothing
+/// is known about the attitude.
+#[test]
+fn clock_reset_backward_reinitialises() {
+    let segments = format!(
+        r#"
+    {{ type = "hold", duration_s = 120.0 }},{DRIVE}
+    {{ type = "hold", duration_s = 5.0 }},
+"#
+    );
+    let scn = vehicle_with(&segments, 170.0);
+    let mut nav = Navigator::new(default_config()).expect("config");
+    let r = run(&scn, &mut nav, |t, s| {
+        if t > 150.0 {
+            Edit::Retime(s.header.time_ns - 600_000_000_000)
+        } else {
+            Edit::Keep
+        }
+    });
+    assert_eq!(nav.diagnostics().reinitializations, 1);
+    assert_eq!(r.imu_rejected.len(), 19, "{:?}", r.imu_rejected);
+    assert!(r.imu_rejected.iter().all(|t| *t > 150.0 && *t < 150.1));
+    assert_eq!(nav.mode(), NavMode::Aligning as u32);
+    assert!(!nav.is_navigating());
+    let h = nav.health()[SensorId::Imu as usize];
+    assert_eq!(h.rejected_invalid, 19);
+    // Every later sample was accepted by the new alignment.
+    assert_eq!(h.fused + h.rejected_invalid, h.received);
+}
