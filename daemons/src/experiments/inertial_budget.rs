@@ -293,6 +293,10 @@ impl Input {
     }
 }
 
+/// One plotted epoch: time since t₀ (s), each term's linear N/E error, the all-sources
+/// strapdown N/E error and the error-free reference run's N/E error (m).
+type SeriesPoint = (f64, Vec<Vector2<f64>>, Vector2<f64>, Vector2<f64>);
+
 /// Linear error state `[δr, δv, ψ]`, ECEF (truth − estimate).
 type Lin = SVector<f64, 9>;
 
@@ -712,7 +716,7 @@ pub fn run_with(
     let mut nl: Vec<Nonlinear> = Vec::new();
     let mut nl_ref = Nonlinear::new(&cfg, &tp0, &Lin::zeros(), Input::None);
     let mut nl_all: Option<Nonlinear> = None;
-    let mut series: Vec<(f64, Vec<Vector2<f64>>, Vector2<f64>, Vector2<f64>)> = Vec::new();
+    let mut series: Vec<SeriesPoint> = Vec::new();
     let mut step_i = 0u64;
     while k * period <= t1_ns {
         let t = k * period;
@@ -779,7 +783,7 @@ pub fn run_with(
             a.step(&tp, &s);
         }
         step_i += 1;
-        if step_i % 200 == 0 || t == t1_ns {
+        if step_i.is_multiple_of(200) || t == t1_ns {
             let ref_ne = nl_ref.error_ne(&tp);
             let per: Vec<Vector2<f64>> = lin_terms
                 .iter()
