@@ -1268,6 +1268,34 @@ mod tests {
         assert!(q[(2, 2)].abs() < 1e-20, "{q}");
     }
 
+    /// The non-orthogonality states use the simulator's form `(I + S)·ω` with `S` symmetric:
+    /// `W(ω)·p = S(p)·ω` exactly, and the compensation `(I − Ŝ)` inverts `I + S` up to
+    /// `S²`, whose norm is at most `‖S‖_F² = 2|p|²`.
+    #[test]
+    fn nonorthogonality_model_matches_the_simulator_form() {
+        let p = Vector3::new(3e-5, -5e-5, 2e-5);
+        let w = Vector3::new(0.1, -0.2, 0.3);
+        let d = (nonorthogonality_jacobian(&w) * p - nonorthogonality_matrix(&p) * w).norm();
+        assert!(d < 1e-18, "{d}");
+        let mut f = ErrorStateEkf::new(
+            Covariance::identity() * 1e-6,
+            crate::navigator::ImuSpec::default().process_noise(),
+            ActiveStates::ALL,
+        );
+        f.gyro_misalignment_rad = p;
+        let dth = Vector3::new(0.01, -0.02, 0.03);
+        let meas = (Matrix3::identity() + nonorthogonality_matrix(&p)) * dth;
+        let (c, _) = f.correct_increment(&meas, &Vector3::zeros(), 0.005);
+        let bound = 2.0 * p.norm_squared() * dth.norm();
+        assert!(
+            (c - dth).norm() <= bound + 1e-18,
+            "{} > {bound}",
+            (c - dth).norm()
+        );
+        // Without a compensation the error would be first order.
+        assert!((meas - dth).norm() > 1e3 * bound);
+    }
+
     fn random_spd(rng: &mut ChaCha8Rng, scale: f64) -> Covariance {
         let a = Covariance::from_fn(|_, _| rng.random_range(-1.0..1.0));
         a * a.transpose() * scale + Covariance::identity() * 1e-6

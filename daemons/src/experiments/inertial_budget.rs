@@ -1132,4 +1132,35 @@ mod tests {
         assert!(dir.join("horizontal_error_budget.png").exists());
         let _ = std::fs::remove_dir_all(&dir);
     }
+
+    /// The full window for seeds 1..=7, default filter and with the non-orthogonality as noise
+    /// (the findings' seed comparison): `cargo test --release -p sextant-daemons --lib
+    /// inertial_budget_seeds -- --ignored --nocapture` (≈ 1 min).
+    #[test]
+    #[ignore]
+    fn inertial_budget_seeds() {
+        for states in [true, false] {
+            for seed in 1..=7u64 {
+                let dir = crate::experiments::test_dir("inertial-budget-seeds");
+                let settings = Settings {
+                    seed: Some(seed),
+                    filter_overrides: vec![(
+                        "states.gyro_misalignment".into(),
+                        toml::Value::Boolean(states),
+                    )],
+                    ..Settings::default()
+                };
+                let s = run_with(&settings, &dir, false).expect("run");
+                let g = |p: &str| s.pointer(p).and_then(Value::as_f64).unwrap_or(f64::NAN);
+                eprintln!(
+                    "states {states} seed {seed}: with baro {:.1} m (σ {:.1}), without {:.1} m (σ {:.1})",
+                    g("/navigator_measured_horizontal_m"),
+                    g("/navigator_sigma_horizontal_m"),
+                    g("/navigator_without_baro_in_window_horizontal_m"),
+                    g("/navigator_without_baro_in_window_sigma_horizontal_m"),
+                );
+                let _ = std::fs::remove_dir_all(&dir);
+            }
+        }
+    }
 }
