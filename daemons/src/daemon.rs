@@ -49,6 +49,10 @@ pub trait NavEngine {
     fn diagnostics(&self) -> fusion::navigator::NavigatorDiagnostics {
         fusion::navigator::NavigatorDiagnostics::default()
     }
+    /// Counters of the pseudo-measurements (zero velocity, non-holonomic constraint).
+    fn constraint_health(&self) -> (fusion::navigator::ZuptHealth, fusion::navigator::NhcHealth) {
+        Default::default()
+    }
 }
 
 /// Fill a status from the engine: mode, per-sensor health and the redundant-IMU counters.
@@ -70,6 +74,12 @@ pub fn engine_status<E: NavEngine>(engine: &E) -> Status {
     st.gnss_ls_last_nis = d.gnss_ls_last_nis;
     st.gnss_ls_pdop = d.gnss_ls_pdop;
     st.reinitializations = d.reinitializations;
+    let (zupt, nhc) = engine.constraint_health();
+    st.zupt_fused = zupt.fused;
+    st.zupt_rejected_gate = zupt.rejected_gate;
+    st.nhc_fused = nhc.fused;
+    st.nhc_rejected_gate = nhc.rejected_gate;
+    st.nhc_nis_sum = nhc.nis_sum;
     st
 }
 
@@ -103,6 +113,9 @@ impl NavEngine for Navigator {
     }
     fn diagnostics(&self) -> fusion::navigator::NavigatorDiagnostics {
         Navigator::diagnostics(self)
+    }
+    fn constraint_health(&self) -> (fusion::navigator::ZuptHealth, fusion::navigator::NhcHealth) {
+        (self.zupt_health(), self.nhc_health())
     }
 }
 

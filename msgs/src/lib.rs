@@ -448,6 +448,17 @@ pub struct Status {
     pub gnss_ls_pdop: f64,
     /// Times the navigator started over (re-alignment after a gap it cannot bridge).
     pub reinitializations: u64,
+    /// Zero-velocity pseudo-measurements fused while static.
+    pub zupt_fused: u64,
+    /// Zero-velocity pseudo-measurements rejected by the gate.
+    pub zupt_rejected_gate: u64,
+    /// Non-holonomic constraint updates (zero lateral/vertical body velocity) fused.
+    pub nhc_fused: u64,
+    /// Non-holonomic constraint updates rejected by the gate.
+    pub nhc_rejected_gate: u64,
+    /// Sum of the NIS of the fused constraint updates (2 dof each: mean NIS/dof =
+    /// nhc_nis_sum / (2·nhc_fused)).
+    pub nhc_nis_sum: f64,
 }
 
 /// The logical channels of the system.
