@@ -26,6 +26,9 @@ fn describe(name: &str) -> &'static str {
             "Paper 000 / issue 5: 10 h astro-inertial without GNSS against its error floor"
         }
         "consistency" => "Issue 5: Monte Carlo NEES of the filter against the chi-square band",
+        "inertial-budget" => {
+            "Issue 5: error budget of 600 s free inertial after GNSS (each IMU error source alone)"
+        }
         "astro-calibration" => "Paper 000: star-tracker / IMU boresight calibration",
         "alignment" => "Paper 003: gyrocompassing with and without turntable indexing",
         "baseline-attitude" => "Paper 003: dual-baseline GNSS attitude",
