@@ -1111,7 +1111,9 @@ const MAX_BRIDGED_GAP_NS: i64 = 1_000_000_000;
 /// Consecutive IMU samples on a new time base that confirm a real gap (0.1 s at 200 Hz). A
 /// corrupt time stamp is one sample (or a burst of unrelated ones); twenty samples, each
 /// within 1 s of the previous and increasing, are a sensor that really continues there.
-const CONFIRM_SAMPLES: u32 = 20;
+/// The first `CONFIRM_SAMPLES − 1` of them are held and counted in `rejected_invalid`
+/// (navigation rejected them); the last one starts the new alignment.
+pub const CONFIRM_SAMPLES: u32 = 20;
 
 /// Slot of a sensor in the health array.
 const fn sid(s: SensorId) -> usize {
