@@ -590,7 +590,7 @@ mod tests {
     #[test]
     #[ignore]
     fn diagnose_velocity_consistency() {
-        let variants: Vec<(&str, Vec<(&str, toml::Value)>)> = [1e-3, 1e-4, 3e-5, 1e-5, 3e-6]
+        let mut variants: Vec<(&str, Vec<(&str, toml::Value)>)> = [1e-3, 1e-4, 3e-5, 1e-5, 3e-6]
             .iter()
             .map(|&s| {
                 (
@@ -599,6 +599,27 @@ mod tests {
                 )
             })
             .collect();
+        let at_1mm = ("aiding.nhc_sigma_m_s", toml::Value::Float(1e-3));
+        variants.extend([
+            (
+                "no NHC",
+                vec![("updates.nonholonomic", toml::Value::Boolean(false))],
+            ),
+            (
+                "1 mm/s, no baro",
+                vec![
+                    at_1mm.clone(),
+                    ("updates.baro", toml::Value::Boolean(false)),
+                ],
+            ),
+            (
+                "1 mm/s, accel bias rw 0.5",
+                vec![
+                    at_1mm.clone(),
+                    ("imu.accel_bias_rw_ug_sqrt_h", toml::Value::Float(0.5)),
+                ],
+            ),
+        ]);
         let settings = Settings::default();
         for (name, ov) in variants {
             let cfg = filter_config(&ov).expect("cfg");
@@ -610,12 +631,12 @@ mod tests {
             let n = runs.len() as f64;
             let mut line = format!("== {name}:");
             line += &format!(" {ov:?}");
-            for g in 0..3 {
+            for (g, group) in GROUPS.iter().enumerate() {
                 let mut nees_sum = 0.0;
                 for e in 0..n_ep {
                     nees_sum += runs.iter().map(|r| r[e].nees[g]).sum::<f64>() / n;
                 }
-                line += &format!(" {} NEES {:.2};", GROUPS[g], nees_sum / n_ep as f64);
+                line += &format!(" {group} NEES {:.2};", nees_sum / n_ep as f64);
             }
             for t_q in [
                 101.0, 105.0, 115.0, 130.0, 160.0, 199.0, 220.0, 239.0, 260.0, 299.0,
