@@ -43,9 +43,37 @@ unsafe impl GlobalAlloc for Counting {
 #[global_allocator]
 static GLOBAL: Counting = Counting;
 
-/// Count the allocations of the calling thread from now on.
+/// Count the allocations of the calling thread from now on, after checking that the counting
+/// allocator is in place (a test that cannot see allocations would pass vacuously).
 pub fn track_this_thread() {
     TRACKED.with(|t| t.set(true));
+    let probe = count();
+    let boxed = std::hint::black_box(Box::new([1.0_f64; 4]));
+    assert!(count() > probe, "the counting allocator must work");
+    drop(boxed);
+}
+
+/// A static site of the tests: its geodetic position, ECEF position (m) and the body → ECEF
+/// attitude of a level vehicle heading 0.7 rad.
+pub fn static_site(
+    lat_deg: f64,
+    lon_deg: f64,
+    height_m: f64,
+) -> (
+    sextant_fusion::earth::Geodetic,
+    nalgebra::Vector3<f64>,
+    nalgebra::UnitQuaternion<f64>,
+) {
+    use sextant_fusion::earth::{Geodetic, WGS84, geodetic_to_ecef};
+    let site = Geodetic {
+        lat_rad: lat_deg.to_radians(),
+        lon_rad: lon_deg.to_radians(),
+        height_m,
+    };
+    let r_e = geodetic_to_ecef(&WGS84, &site);
+    let q_e_b = sextant_fusion::strapdown::q_e_n(site.lat_rad, site.lon_rad)
+        * nalgebra::UnitQuaternion::from_euler_angles(0.0, 0.0, 0.7);
+    (site, r_e, q_e_b)
 }
 
 /// Allocations counted so far.
