@@ -354,7 +354,7 @@ impl Default for AidingNoise {
             baro_min_interval_s: 0.2,
             odometer_sigma_m_s: 0.02,
             odometer_scale_sigma: 0.003,
-            nhc_sigma_m_s: 0.001,
+            nhc_sigma_m_s: 1e-5,
             zupt_sigma_m_s: 0.005,
             baseline_phase_sigma_cycles: 0.01,
             boresight_sigma_deg: 0.1,
