@@ -238,9 +238,17 @@ fn killed_driver_is_reported_degrades_and_is_used_again_after_restart() {
         "GNSS gap {gap_s:.1} s; dead reported {:.1} s after the last fix; horizontal sigma {before:.3} m -> {end_of_gap:.3} m -> {after:.3} m after the restart",
         (t_dead - gap_start) as f64 * 1e-9
     );
+    // Lower bound of the growth: along track the position is then dead reckoning on the
+    // odometer, whose white speed noise (σ 0.02 m/s, config/filter.toml, at 20 Hz in
+    // config/scenarios/vehicle.toml) integrates to a variance σ²·Δt·T over the gap; heading,
+    // scale-factor and bias terms only add to it. (Session 2 asserted a 1.2× growth; with the
+    // odometer model and the gyro non-orthogonality states of session 3 the filter grows
+    // 0.159 → 0.181 m over 42 s, well above this bound.)
+    let odo_growth_m2 = 0.02f64.powi(2) * 0.05 * gap_s;
     assert!(
-        end_of_gap > 1.2 * before,
-        "horizontal sigma {before} m -> {end_of_gap} m over a {gap_s} s GNSS gap"
+        end_of_gap.powi(2) >= before.powi(2) + odo_growth_m2,
+        "horizontal sigma {before} m -> {end_of_gap} m over a {gap_s} s GNSS gap \
+         (odometer dead reckoning alone adds {odo_growth_m2} m²)"
     );
     assert!(
         after < end_of_gap,
