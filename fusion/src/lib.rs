@@ -12,6 +12,9 @@
 //! - [`alignment`]: static coarse alignment (levelling and gyrocompassing, paper 003).
 //! - [`baseline_attitude`]: dual-baseline GNSS attitude from carrier phase (paper 003 eq. 14–21).
 //! - [`gnss_ls`]: receiver-style least-squares GNSS fix with DOPs (paper 003 eq. 12–13).
+//! - [`broadcast_ephemeris`]: GPS broadcast orbits and clocks (IS-GPS-200).
+//! - [`gnss_corrections`]: Klobuchar ionosphere, Saastamoinen troposphere, iono-free code.
+//! - [`point_positioning`]: single-epoch GPS fix from raw code and broadcast ephemerides.
 //! - [`navigator`]: the fusion engine the daemons drive: alignment, mechanization, filter,
 //!   measurement buffering, modes and health.
 
@@ -21,11 +24,14 @@ pub mod atmosphere;
 pub mod attitude;
 pub mod baseline_attitude;
 pub mod boresight;
+pub mod broadcast_ephemeris;
 pub mod celestial;
 pub mod earth;
 pub mod ekf;
+pub mod gnss_corrections;
 pub mod gnss_ls;
 pub mod navigator;
+pub mod point_positioning;
 pub mod redundancy;
 pub mod strapdown;
 pub mod time;
