@@ -687,7 +687,7 @@ mod tests {
         assert!(calls.contains(&(0, false)), "{calls:?}");
         assert!(calls.contains(&(2, true)), "{calls:?}");
 
-        let s = crate::analysis::analyze_recording(&out, &[]).unwrap();
+        let s = sextant_lab::analysis::analyze_recording(&out, &[]).unwrap();
         assert_eq!(s.messages_per_channel["imu"], 100);
         assert_eq!(s.messages_per_channel["truth"], 100);
         assert_eq!(s.messages_per_channel["gnss"], 5);

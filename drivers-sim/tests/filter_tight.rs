@@ -110,7 +110,7 @@ fn run(mode: GnssMode, max_sats: usize, window: (f64, f64), known_start: bool) -
 /// One satellite may not leave the tight run worse than free inertial along its line of
 /// sight, within the noise of ONE run, and the tight run must be consistent there.
 ///
-/// Tolerance (derivation also in `daemons/src/experiments/tight_coupling.rs`): both runs see
+/// Tolerance (derivation also in `lab/src/experiments/tight_coupling.rs`): both runs see
 /// the same truth and IMU samples; the tight estimate is the free one plus a correction `c`
 /// computed from the satellite's innovations, `e_free = e_tight + c`. For a consistent filter
 /// the error is orthogonal to every function of the innovations, so

@@ -4,8 +4,8 @@
 
 use drivers_sim::scenario::Scenario;
 use drivers_sim::sources::{ImuSource, SampleSource, StarTrackerSource};
-use sextant_daemons::calibrate::{self, BoresightOptions, SiteArg};
-use sextant_daemons::recorder::{Record, Recorder, RecorderOptions};
+use sextant_lab::calibrate::{self, BoresightOptions, SiteArg};
+use sextant_lab::recorder::{Record, Recorder, RecorderOptions};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 

@@ -672,7 +672,7 @@ fn analysis_of_a_chunk_claiming_an_absurd_size_is_an_error() {
     let size_at = at + 9 + 16;
     bytes[size_at..size_at + 8].copy_from_slice(&(1u64 << 62).to_le_bytes());
     let p = write_tmp("huge_chunk_analysis.mcap", &bytes);
-    let _ = sextant_daemons::analysis::analyze_recording(&p, &[]);
+    let _ = sextant_lab::analysis::analyze_recording(&p, &[]);
 }
 
 /// A non-finite input value has no JSON encoding (serde_json would write `null`, which the

@@ -7,7 +7,7 @@ use msgs::ipc::Bus;
 use msgs::{NavMode, SensorId, Status};
 use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
-use sextant_daemons::{analysis, config, plots, scenario};
+use sextant_lab::{analysis, config, plots, scenario};
 use std::collections::HashMap;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -148,7 +148,7 @@ enum CalibrateWhat {
         recording: PathBuf,
         /// Known site: latitude, longitude (deg), height (m), e.g. `55.655,37.534,200`.
         #[arg(long, allow_hyphen_values = true)]
-        site: sextant_daemons::calibrate::SiteArg,
+        site: sextant_lab::calibrate::SiteArg,
         /// Output directory.
         #[arg(long, default_value = "out/calibrate")]
         out: PathBuf,
@@ -191,20 +191,20 @@ fn main() -> anyhow::Result<()> {
                     window,
                 },
         }) => {
-            let opts = sextant_daemons::calibrate::BoresightOptions {
+            let opts = sextant_lab::calibrate::BoresightOptions {
                 recording,
                 site,
                 out: out.clone(),
                 window_s: window,
             };
-            let s = sextant_daemons::calibrate::boresight(&opts)?;
-            println!("{}", sextant_daemons::calibrate::table(&s));
+            let s = sextant_lab::calibrate::boresight(&opts)?;
+            println!("{}", sextant_lab::calibrate::table(&s));
             println!("summary.json and plot in {}", out.display());
             Ok(())
         }
         Command::Report(args) => {
-            let s = sextant_daemons::report::report(&args.recording, &args.out)?;
-            println!("{}", sextant_daemons::report::format_table(&s));
+            let s = sextant_lab::report::report(&args.recording, &args.out)?;
+            println!("{}", sextant_lab::report::format_table(&s));
             println!(
                 "REPORT.md, summary.json and plots in {}",
                 args.out.display()
@@ -216,7 +216,7 @@ fn main() -> anyhow::Result<()> {
 
 /// `sextant bench`: run it, print its table.
 fn bench(args: BenchArgs) -> anyhow::Result<()> {
-    use sextant_daemons::bench;
+    use sextant_lab::bench;
     let bin_dir = std::env::current_exe()?
         .parent()
         .map(Path::to_path_buf)
@@ -240,7 +240,7 @@ fn bench(args: BenchArgs) -> anyhow::Result<()> {
 
 /// `sextant experiment NAME`: run it, print its table, point at its files.
 fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
-    use sextant_daemons::experiments;
+    use sextant_lab::experiments;
     if args.name != "all" && !experiments::names().contains(&args.name.as_str()) {
         bail!(
             "unknown experiment `{}`; known: {}",
@@ -800,7 +800,7 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
 
 /// `sextant replay`: offline (table, summary.json, the replay's recording) or live.
 fn replay(args: ReplayArgs) -> anyhow::Result<()> {
-    use sextant_daemons::replay as rp;
+    use sextant_lab::replay as rp;
     if let Some(rec) = args.offline {
         let s = rp::replay_offline(&rp::OfflineOptions {
             recording: rec,
@@ -831,7 +831,7 @@ fn replay(args: ReplayArgs) -> anyhow::Result<()> {
     let Some(rec) = args.live else {
         bail!("give --offline REC.mcap or --live REC.mcap");
     };
-    let stop = sextant_daemons::signals::install()?;
+    let stop = sextant_lab::signals::install()?;
     let s = rp::replay_live(
         &rp::LiveOptions {
             recording: rec,

@@ -585,7 +585,7 @@ mod tests {
     }
 
     /// Issue 5 velocity diagnosis: down-velocity RMS error and filter σ over 10 runs at a few
-    /// epochs, per filter variant (`cargo test --release -p sextant-daemons --lib
+    /// epochs, per filter variant (`cargo test --release -p sextant-lab --lib
     /// diagnose_velocity -- --ignored --nocapture`).
     #[test]
     #[ignore]

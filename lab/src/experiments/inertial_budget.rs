@@ -1134,7 +1134,7 @@ mod tests {
     }
 
     /// The full window for seeds 1..=7, default filter and with the non-orthogonality as noise
-    /// (the findings' seed comparison): `cargo test --release -p sextant-daemons --lib
+    /// (the findings' seed comparison): `cargo test --release -p sextant-lab --lib
     /// inertial_budget_seeds -- --ignored --nocapture` (≈ 1 min).
     #[test]
     #[ignore]

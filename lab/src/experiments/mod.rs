@@ -241,7 +241,7 @@ mod tests {
         assert!(!dir.exists());
     }
 
-    /// The full-length runs, timed: `cargo test --release -p sextant-daemons --lib
+    /// The full-length runs, timed: `cargo test --release -p sextant-lab --lib
     /// full_length -- --ignored --nocapture` (seconds in release mode). With
     /// `SEXTANT_EXPERIMENT_KEEP=DIR` the results are kept in `DIR/NAME`.
     #[test]
