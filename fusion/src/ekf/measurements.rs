@@ -1,0 +1,405 @@
+//! Measurement models of the [`ErrorStateEkf`](super::ErrorStateEkf).
+//!
+//! [`gnss_position`], [`gnss_velocity`] (loose), [`gnss_pseudorange`], [`gnss_range_rate`]
+//! (tight, one satellite each, paper 003), [`star_attitude`] (with boresight κ),
+//! [`gnss_baseline_attitude`] (dual-baseline GNSS attitude, paper 003),
+//! [`baro_height`], [`odometer_nhc`] / [`odometer_speed`], [`zero_velocity`]; each returns a
+//! [`Measurement`] (innovation, `H`, `R`) evaluated at the inertial state of the sample's time
+//! of validity.
+
+use super::{Measurement, NX, idx};
+use crate::attitude::skew;
+use crate::earth::Ellipsoid;
+use crate::strapdown::NavState;
+use nalgebra::{Matrix3, Rotation3, SMatrix, SVector, UnitQuaternion, Vector3};
+
+/// GNSS position (antenna at the IMU, no lever arm): `z = r_e` (ECEF, m) with covariance
+/// `cov` (ECEF, m²); `nav` is the inertial state at the fix's time of validity.
+pub fn gnss_position(nav: &NavState, pos_e: &Vector3<f64>, cov: &Matrix3<f64>) -> Measurement<3> {
+    let mut h = SMatrix::<f64, 3, NX>::zeros();
+    h.fixed_view_mut::<3, 3>(0, idx::POS)
+        .copy_from(&Matrix3::identity());
+    Measurement {
+        innovation: pos_e - nav.r_e,
+        h,
+        r: *cov,
+    }
+}
+
+/// GNSS velocity: `z = v_e` (ECEF, Earth-relative, m/s) with covariance `cov` ((m/s)²).
+pub fn gnss_velocity(nav: &NavState, vel_e: &Vector3<f64>, cov: &Matrix3<f64>) -> Measurement<3> {
+    let mut h = SMatrix::<f64, 3, NX>::zeros();
+    h.fixed_view_mut::<3, 3>(0, idx::VEL)
+        .copy_from(&Matrix3::identity());
+    Measurement {
+        innovation: vel_e - nav.v_e,
+        h,
+        r: *cov,
+    }
+}
+
+/// One satellite's pseudorange (tight coupling, paper 003 eq. 12 linearised at the inertial
+/// solution; antenna at the IMU). The satellite position `sat_pos_e` is the one at
+/// transmission rotated into the ECEF frame of reception (Sagnac included, as the receiver
+/// and `drivers-sim/src/gnss.rs` give it), so `ρ̂ = |r_s − r̂_e| + b̂_clk`,
+/// `H_r = −uᵀ` (u = unit line of sight receiver → satellite), `H_clk = 1`; noise `sigma_m`.
+pub fn gnss_pseudorange(
+    nav: &NavState,
+    sat_pos_e: &Vector3<f64>,
+    pseudorange_m: f64,
+    clock_bias_m: f64,
+    sigma_m: f64,
+) -> Measurement<1> {
+    let d = sat_pos_e - nav.r_e;
+    let range = d.norm();
+    let u = d / range;
+    let mut h = SMatrix::<f64, 1, NX>::zeros();
+    h.fixed_view_mut::<1, 3>(0, idx::POS)
+        .copy_from(&(-u.transpose()));
+    h[(0, idx::CLK)] = 1.0;
+    Measurement {
+        innovation: SVector::<f64, 1>::new(pseudorange_m - range - clock_bias_m),
+        h,
+        r: SMatrix::<f64, 1, 1>::new(sigma_m * sigma_m),
+    }
+}
+
+/// One satellite's Doppler range rate (tight coupling): `ρ̇̂ = (v_s − v̂_e)·u + d̂_clk` with
+/// `u = (r_s − r̂_e)/|r_s − r̂_e|` (the simulator's definition). `H_v = −uᵀ`, `H_d = 1`, and
+/// through the line of sight `H_r = −(v_s − v̂_e)ᵀ (I − u uᵀ)/ρ` (`∂u/∂r̂ = −(I − u uᵀ)/ρ`,
+/// ~10⁻⁴ per m: small but kept exact); noise `sigma_m_s`.
+pub fn gnss_range_rate(
+    nav: &NavState,
+    sat_pos_e: &Vector3<f64>,
+    sat_vel_e: &Vector3<f64>,
+    range_rate_m_s: f64,
+    clock_drift_m_s: f64,
+    sigma_m_s: f64,
+) -> Measurement<1> {
+    let d = sat_pos_e - nav.r_e;
+    let range = d.norm();
+    let u = d / range;
+    let dv = sat_vel_e - nav.v_e;
+    let mut h = SMatrix::<f64, 1, NX>::zeros();
+    let h_r = -(dv.transpose() * (Matrix3::identity() - u * u.transpose())) / range;
+    h.fixed_view_mut::<1, 3>(0, idx::POS).copy_from(&h_r);
+    h.fixed_view_mut::<1, 3>(0, idx::VEL)
+        .copy_from(&(-u.transpose()));
+    h[(0, idx::CLK_DRIFT)] = 1.0;
+    Measurement {
+        innovation: SVector::<f64, 1>::new(range_rate_m_s - dv.dot(&u) - clock_drift_m_s),
+        h,
+        r: SMatrix::<f64, 1, 1>::new(sigma_m_s * sigma_m_s),
+    }
+}
+
+/// Zero-velocity update: `z = 0` for the ECEF velocity, isotropic noise `sigma_m_s`.
+pub fn zero_velocity(nav: &NavState, sigma_m_s: f64) -> Measurement<3> {
+    let mut m = gnss_velocity(
+        nav,
+        &Vector3::zeros(),
+        &(Matrix3::identity() * sigma_m_s * sigma_m_s),
+    );
+    m.innovation = -nav.v_e;
+    m
+}
+
+/// Paper 000 boresight misalignment `M(κ) = R_z(κ1)·R_x(κ2)·R_y(κ3)` (κ in rad); the true
+/// mount is `C_s_b = C_s_b,nominal · M(κ)` (the simulator's `kappa_matrix`, `drivers-sim`).
+pub fn kappa_matrix(kappa_rad: &Vector3<f64>) -> Matrix3<f64> {
+    let rz = Rotation3::from_axis_angle(&Vector3::z_axis(), kappa_rad[0]);
+    let rx = Rotation3::from_axis_angle(&Vector3::x_axis(), kappa_rad[1]);
+    let ry = Rotation3::from_axis_angle(&Vector3::y_axis(), kappa_rad[2]);
+    (rz * rx * ry).into_inner()
+}
+
+/// Right Jacobian `B(κ)` of the boresight matrix: `M(κ + δκ) ≈ M(κ)·(I + [B δκ ×])`.
+/// From `∂M/∂κ1 = [e_z×] M`, `∂M/∂κ2 = R_z [e_x×] R_x R_y`, `∂M/∂κ3 = M [e_y×]` and
+/// `Mᵀ[a×]M = [(Mᵀa)×]`: `B = [R_yᵀR_xᵀ e_z, R_yᵀ e_x, e_y]`.
+pub fn kappa_jacobian(kappa_rad: &Vector3<f64>) -> Matrix3<f64> {
+    let rx = Rotation3::from_axis_angle(&Vector3::x_axis(), kappa_rad[1]).into_inner();
+    let ry = Rotation3::from_axis_angle(&Vector3::y_axis(), kappa_rad[2]).into_inner();
+    let c1 = ry.transpose() * rx.transpose() * Vector3::z();
+    let c2 = ry.transpose() * Vector3::x();
+    Matrix3::from_columns(&[c1, c2, Vector3::y()])
+}
+
+/// Star-tracker attitude with boresight states.
+///
+/// Measured `C̃_s_i` (ICRF → sensor, from `q_s_i_meas`), predicted
+/// `Ĉ_s_i = C_s_b,nom · M(κ̂) · Ĉ_b_e · C_e_i(t)` with `c_e_i` = GCRS → ITRS at the exposure
+/// time (ICRF → ITRS → body → sensor). With `C_b_e = Ĉ_b_e (I − [ψ×])`,
+/// `M(κ) = M(κ̂)(I + [B δκ×])` ([`kappa_jacobian`]) and sensor-frame noise ν
+/// (`C̃_s_i = (I − [ν×]) C_s_i`), the residual rotation vector
+/// `y = rotvec(Ĉ_s_i C̃_s_iᵀ) = Ĉ_s_b Ĉ_b_e ψ − Ĉ_s_b B δκ + ν` (sensor axes, rad), so
+/// `H_ψ = Ĉ_s_e`, `H_κ = −Ĉ_s_b B`, `R = diag(σ_cross², σ_cross², σ_roll²)` (optical axis =
+/// sensor z). Only a heading change separates κ from ψ: a rotation of the mount and one of
+/// the vehicle look the same until the body turns relative to the Earth (or the Earth turns
+/// relative to the stars, which `C_e_i(t)` carries).
+pub fn star_attitude(
+    nav: &NavState,
+    q_s_i_meas: &UnitQuaternion<f64>,
+    c_e_i: &Matrix3<f64>,
+    c_s_b_nominal: &Matrix3<f64>,
+    kappa_rad: &Vector3<f64>,
+    sigma_cross_rad: f64,
+    sigma_roll_rad: f64,
+) -> Measurement<3> {
+    let c_b_e = nav.q_e_b.to_rotation_matrix().into_inner().transpose();
+    let c_s_b = c_s_b_nominal * kappa_matrix(kappa_rad);
+    let c_s_e = c_s_b * c_b_e;
+    let c_s_i_pred = c_s_e * c_e_i;
+    let c_s_i_meas = q_s_i_meas.to_rotation_matrix().into_inner();
+    let e = c_s_i_pred * c_s_i_meas.transpose();
+    let y =
+        UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(e)).scaled_axis();
+    let mut h = SMatrix::<f64, 3, NX>::zeros();
+    h.fixed_view_mut::<3, 3>(0, idx::ATT).copy_from(&c_s_e);
+    h.fixed_view_mut::<3, 3>(0, idx::KAPPA)
+        .copy_from(&(-c_s_b * kappa_jacobian(kappa_rad)));
+    let r = Matrix3::from_diagonal(&Vector3::new(
+        sigma_cross_rad.powi(2),
+        sigma_cross_rad.powi(2),
+        sigma_roll_rad.powi(2),
+    ));
+    Measurement {
+        innovation: y,
+        h,
+        r,
+    }
+}
+
+/// Dual-baseline GNSS attitude (paper 003 eq. 14–21, [`crate::baseline_attitude`]) as a
+/// measurement. The solver reports `C̃_e_b = (I + [ε×])·C_e_b` with covariance `cov_e` of the
+/// ECEF rotation ε; with `C_e_b = (I + [ψ×])·Ĉ_e_b`, the residual rotation vector
+/// `y = rotvec(C̃_e_b Ĉ_e_bᵀ) = ψ + ε` (ECEF, rad), so `H_ψ = I`, `R = cov_e`.
+pub fn gnss_baseline_attitude(
+    nav: &NavState,
+    c_e_b_meas: &Matrix3<f64>,
+    cov_e_rad2: &Matrix3<f64>,
+) -> Measurement<3> {
+    let c_e_b = nav.q_e_b.to_rotation_matrix().into_inner();
+    let e = c_e_b_meas * c_e_b.transpose();
+    let y =
+        UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(e)).scaled_axis();
+    let mut h = SMatrix::<f64, 3, NX>::zeros();
+    h.fixed_view_mut::<3, 3>(0, idx::ATT)
+        .copy_from(&Matrix3::identity());
+    Measurement {
+        innovation: y,
+        h,
+        r: *cov_e_rad2,
+    }
+}
+
+/// Baro altitude taken as height above the WGS-84 ellipsoid (no geoid, as simulated): `z = h_baro` (m),
+/// predicted `ĥ + b̂_h` (geodetic height of `r̂_e` plus the estimated baro bias
+/// `baro_bias_m`); `H_r = u_upᵀ` (ECEF unit up vector at the estimated latitude/longitude),
+/// `H_b = 1`; white noise `sigma_m`.
+pub fn baro_height(
+    nav: &NavState,
+    ell: &Ellipsoid,
+    height_baro_m: f64,
+    baro_bias_m: f64,
+    sigma_m: f64,
+) -> Measurement<1> {
+    let g = crate::earth::ecef_to_geodetic(ell, &nav.r_e);
+    let up = Vector3::new(
+        g.lat_rad.cos() * g.lon_rad.cos(),
+        g.lat_rad.cos() * g.lon_rad.sin(),
+        g.lat_rad.sin(),
+    );
+    let mut h = SMatrix::<f64, 1, NX>::zeros();
+    h.fixed_view_mut::<1, 3>(0, idx::POS)
+        .copy_from(&up.transpose());
+    h[(0, idx::BARO)] = 1.0;
+    Measurement {
+        innovation: SVector::<f64, 1>::new(height_baro_m - g.height_m - baro_bias_m),
+        h,
+        r: SMatrix::<f64, 1, 1>::new(sigma_m * sigma_m),
+    }
+}
+
+/// Body-frame velocity Jacobians: `v_b = C_b_e v_e`; with the error definitions
+/// `δv_b = Ĉ_b_e δv + Ĉ_b_e [v̂_e×] ψ`.
+fn body_velocity_jacobians(nav: &NavState) -> (Vector3<f64>, Matrix3<f64>, Matrix3<f64>) {
+    let c_b_e = nav.q_e_b.to_rotation_matrix().into_inner().transpose();
+    (c_b_e * nav.v_e, c_b_e, c_b_e * skew(&nav.v_e))
+}
+
+/// Odometer speed along body x plus non-holonomic constraints (zero lateral and vertical body
+/// velocity) for a ground vehicle: `z = [speed, 0, 0]` (body, m/s), noise
+/// `diag(σ_odo², σ_nhc², σ_nhc²)`. The odometer reads `(1 + k)·v_x`, `k` the scale-factor
+/// state with estimate `odo_scale`.
+pub fn odometer_nhc(
+    nav: &NavState,
+    odo_scale: f64,
+    speed_m_s: f64,
+    sigma_speed_m_s: f64,
+    sigma_nhc_m_s: f64,
+) -> Measurement<3> {
+    let (v_b, h_v, h_psi) = body_velocity_jacobians(nav);
+    let mut h = SMatrix::<f64, 3, NX>::zeros();
+    h.fixed_view_mut::<3, 3>(0, idx::VEL).copy_from(&h_v);
+    h.fixed_view_mut::<3, 3>(0, idx::ATT).copy_from(&h_psi);
+    let scale = 1.0 + odo_scale;
+    for j in 0..NX {
+        h[(0, j)] *= scale;
+    }
+    h[(0, idx::ODO)] = v_b.x;
+    Measurement {
+        innovation: Vector3::new(speed_m_s - scale * v_b.x, -v_b.y, -v_b.z),
+        h,
+        r: Matrix3::from_diagonal(&Vector3::new(
+            sigma_speed_m_s.powi(2),
+            sigma_nhc_m_s.powi(2),
+            sigma_nhc_m_s.powi(2),
+        )),
+    }
+}
+
+/// Odometer speed along body x alone (non-holonomic constraints switched off).
+pub fn odometer_speed(
+    nav: &NavState,
+    odo_scale: f64,
+    speed_m_s: f64,
+    sigma_speed_m_s: f64,
+) -> Measurement<1> {
+    let (v_b, h_v, h_psi) = body_velocity_jacobians(nav);
+    let scale = 1.0 + odo_scale;
+    let mut h = SMatrix::<f64, 1, NX>::zeros();
+    h.fixed_view_mut::<1, 3>(0, idx::VEL)
+        .copy_from(&(h_v.fixed_rows::<1>(0) * scale));
+    h.fixed_view_mut::<1, 3>(0, idx::ATT)
+        .copy_from(&(h_psi.fixed_rows::<1>(0) * scale));
+    h[(0, idx::ODO)] = v_b.x;
+    Measurement {
+        innovation: SVector::<f64, 1>::new(speed_m_s - scale * v_b.x),
+        h,
+        r: SMatrix::<f64, 1, 1>::new(sigma_speed_m_s.powi(2)),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::test_support::nav_at_origin;
+    use super::super::{StateVector, correct_nav_state};
+    use super::*;
+
+    #[test]
+    fn star_jacobian_matches_finite_differences() {
+        // Truth = estimate + (ψ, δκ): the innovation must equal H·δx to second order.
+        // With |ψ|, |δκ| ≤ 3e-4 rad the neglected terms are ≲ |δ|² ≈ 1e-7 rad.
+        let mut nav = nav_at_origin();
+        nav.q_e_b = UnitQuaternion::from_euler_angles(0.3, -0.4, 1.2);
+        let c_s_b_nom = Matrix3::new(1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, -1.0);
+        let c_e_i = UnitQuaternion::from_euler_angles(0.1, 0.2, 1.0)
+            .to_rotation_matrix()
+            .into_inner();
+        let kappa_hat = Vector3::new(2e-3, -1e-3, 3e-3);
+        for (psi, dk) in [
+            (Vector3::new(1e-4, -2e-4, 3e-4), Vector3::zeros()),
+            (Vector3::zeros(), Vector3::new(3e-4, 0.0, 0.0)),
+            (Vector3::zeros(), Vector3::new(0.0, 3e-4, 0.0)),
+            (Vector3::zeros(), Vector3::new(0.0, 0.0, 3e-4)),
+            (
+                Vector3::new(-2e-4, 1e-4, 0.0),
+                Vector3::new(1e-4, -2e-4, 2e-4),
+            ),
+        ] {
+            let c_e_b_true = UnitQuaternion::from_scaled_axis(psi) * nav.q_e_b;
+            let c_s_b_true = c_s_b_nom * kappa_matrix(&(kappa_hat + dk));
+            let c_s_i_true =
+                c_s_b_true * c_e_b_true.to_rotation_matrix().into_inner().transpose() * c_e_i;
+            let q = UnitQuaternion::from_matrix(&c_s_i_true);
+            let m = star_attitude(&nav, &q, &c_e_i, &c_s_b_nom, &kappa_hat, 1e-5, 1e-4);
+            let mut dx = StateVector::zeros();
+            dx.fixed_rows_mut::<3>(idx::ATT).copy_from(&psi);
+            dx.fixed_rows_mut::<3>(idx::KAPPA).copy_from(&dk);
+            let d = m.innovation - m.h * dx;
+            assert!(d.norm() < 2e-7, "ψ {psi:?} δκ {dk:?}: {d}");
+            assert!(m.innovation.norm() > 1e-4);
+        }
+        // B itself against central differences of M(κ): Mᵀ ∂M/∂κ_j = [b_j×].
+        let h = 1e-6;
+        let b = kappa_jacobian(&kappa_hat);
+        let m0 = kappa_matrix(&kappa_hat);
+        for j in 0..3 {
+            let mut kp = kappa_hat;
+            let mut km = kappa_hat;
+            kp[j] += h;
+            km[j] -= h;
+            let dm = (kappa_matrix(&kp) - kappa_matrix(&km)) / (2.0 * h);
+            let w = m0.transpose() * dm;
+            let col = Vector3::new(w[(2, 1)], w[(0, 2)], w[(1, 0)]);
+            assert!((col - b.column(j)).norm() < 1e-9, "column {j}");
+        }
+    }
+
+    #[test]
+    fn pseudorange_and_range_rate_jacobians_match_finite_differences() {
+        let mut nav = nav_at_origin();
+        nav.v_e = Vector3::new(5.0, -12.0, 3.0);
+        let r_s = Vector3::new(2.0e7, 1.2e7, 0.9e7);
+        let v_s = Vector3::new(-1200.0, 2500.0, 800.0);
+        let m0 = gnss_pseudorange(&nav, &r_s, 2.3e7, 100.0, 3.0);
+        let d0 = gnss_range_rate(&nav, &r_s, &v_s, -300.0, 1.5, 0.05);
+        let mut dx = StateVector::zeros();
+        dx.fixed_rows_mut::<3>(idx::POS)
+            .copy_from(&Vector3::new(30.0, -20.0, 10.0));
+        dx.fixed_rows_mut::<3>(idx::VEL)
+            .copy_from(&Vector3::new(0.5, 0.2, -0.3));
+        dx[idx::CLK] = 7.0;
+        dx[idx::CLK_DRIFT] = 0.3;
+        let mut nav2 = nav;
+        correct_nav_state(&mut nav2, &dx);
+        let m1 = gnss_pseudorange(&nav2, &r_s, 2.3e7, 100.0 + 7.0, 3.0);
+        let d1 = gnss_range_rate(&nav2, &r_s, &v_s, -300.0, 1.5 + 0.3, 0.05);
+        // Second-order terms: |δr|²/(2ρ) ≈ 2e-5 m for the range; |δr||δv|/ρ ≈ 1e-6 m/s and
+        // |δr|²|v|/ρ² ≈ 1e-8 m/s for the rate.
+        let e_pr = m0.innovation[0] - m1.innovation[0] - (m0.h * dx)[0];
+        let e_rr = d0.innovation[0] - d1.innovation[0] - (d0.h * dx)[0];
+        assert!(e_pr.abs() < 1e-4, "{e_pr}");
+        assert!(e_rr.abs() < 1e-5, "{e_rr}");
+        // The position column of the rate Jacobian is not negligible against its noise.
+        assert!((d0.h.fixed_view::<1, 3>(0, idx::POS) * dx.fixed_rows::<3>(0))[0].abs() > 1e-4);
+    }
+
+    #[test]
+    fn baseline_attitude_residual_is_psi_plus_noise() {
+        // Truth = (I + [ψ×])·estimate, measurement = (I + [ε×])·truth: y = ψ + ε to second
+        // order (|ψ|·|ε| ≈ 1e-7 rad here).
+        let mut nav = nav_at_origin();
+        nav.q_e_b = UnitQuaternion::from_euler_angles(0.3, -0.4, 1.2);
+        let psi = Vector3::new(2e-4, -1e-4, 3e-4);
+        let eps = Vector3::new(-1e-4, 2e-4, 1e-4);
+        let truth = UnitQuaternion::from_scaled_axis(psi) * nav.q_e_b;
+        let meas = UnitQuaternion::from_scaled_axis(eps) * truth;
+        let m = gnss_baseline_attitude(
+            &nav,
+            &meas.to_rotation_matrix().into_inner(),
+            &(Matrix3::identity() * 1e-6),
+        );
+        let mut dx = StateVector::zeros();
+        dx.fixed_rows_mut::<3>(idx::ATT).copy_from(&psi);
+        let d = m.innovation - m.h * dx - eps;
+        assert!(d.norm() < 2e-7, "{d}");
+    }
+
+    #[test]
+    fn odometer_jacobian_matches_finite_difference() {
+        let mut nav = nav_at_origin();
+        nav.v_e = Vector3::new(1.0, 10.0, -2.0);
+        nav.q_e_b = UnitQuaternion::from_euler_angles(0.2, 0.1, 1.3);
+        let m0 = odometer_nhc(&nav, 0.0, 5.0, 0.1, 0.1);
+        let mut dx = StateVector::zeros();
+        dx[idx::VEL + 1] = 0.01;
+        dx[idx::ATT + 2] = 1e-5;
+        let mut nav2 = nav;
+        correct_nav_state(&mut nav2, &dx);
+        let m1 = odometer_nhc(&nav2, 0.0, 5.0, 0.1, 0.1);
+        // Innovation shrinks by H·dx when the estimate moves by dx.
+        let d = m0.innovation - m1.innovation - m0.h * dx;
+        assert!(d.norm() < 1e-6, "{d}"); // second order: |δv|·|ψ| = 1e-7
+    }
+}
