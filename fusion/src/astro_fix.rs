@@ -3,7 +3,7 @@
 //! gravity vertical (roll and pitch) and time.
 //!
 //! Paper chain (eq. 4): `M_ISK→ZPSK = M_APSK→ZPSK · C_γ C_θ C_ψ · M_GSK→MSK · M_ISK→GSK`.
-//! In Sextant's frames (HELPERS.md physical contracts) the same chain reads
+//! In Sextant's frames (the simulator's star-tracker contract) the same chain reads
 //! `c_s_i = c_s_b · c_b_n · c_n_e · c_e_i(t)` with `c_n_b = R_z(ψ) · R_y(θ) · R_x(γ)`.
 //! Solving for the Earth-fixed attitude of the local level (eq. 5):
 //! `c_n_e = R_z(ψ) · [R_y(θ) R_x(γ)] · c_s_bᵀ · c_s_i · c_e_iᵀ`.
@@ -11,7 +11,9 @@
 //! heading: it is the gravity direction `d_e = c_e_i · c_s_iᵀ · c_s_b · d_b`, with
 //! `d_b = [−sin θ, cos θ sin γ, cos θ cos γ]` the down vector in body axes. The paper's ENU
 //! third row is `up = −d = [cos φ cos λ, cos φ sin λ, sin φ]`, hence eqs. 6–7:
-//! `φ = asin(up_z)`, `λ = atan2(up_y, up_x)`.
+//! `φ = asin(up_z)`, `λ = atan2(up_y, up_x)`. The chains are written with the frame-typed
+//! rotations of [`crate::frames`] (`c_s_i: Rotation<Icrf, StarSensor>`, …), so a transposed
+//! or misordered factor does not compile.
 //!
 //! The latitude is the direction of the gravity vertical, i.e. astronomical latitude; it equals
 //! geodetic latitude where the deflection of the vertical is zero (as in the simulator, whose
@@ -24,6 +26,7 @@
 //! can measure what ignoring precession–nutation costs.
 
 use crate::celestial::{self, EarthOrientation};
+use crate::frames::{Body, Ecef, Icrf, Ned, Rotation, StarSensor, Vector};
 use crate::time::GpsTime;
 use nalgebra::{Matrix3, Vector3};
 
@@ -194,7 +197,8 @@ pub fn lat_lon_of_down(down_e: &Vector3<f64>) -> (f64, f64) {
     (up.z.clamp(-1.0, 1.0).asin(), up.y.atan2(up.x))
 }
 
-/// Astro fix without input checks (the hot loop of calibrations over already checked data).
+/// Astro fix without input checks (the hot loop of calibrations over already checked data),
+/// on bare DCMs with the meaning of [`astro_fix`]'s typed arguments.
 pub fn astro_fix_unchecked(
     c_s_i: &Matrix3<f64>,
     roll_rad: f64,
@@ -202,7 +206,28 @@ pub fn astro_fix_unchecked(
     c_s_b: &Matrix3<f64>,
     c_e_i: &Matrix3<f64>,
 ) -> AstroFix {
-    let down_e = (c_e_i * (c_s_i.transpose() * (c_s_b * down_b(roll_rad, pitch_rad)))).normalize();
+    fix_of_chain(
+        &Rotation::from_dcm_unchecked(*c_s_i),
+        roll_rad,
+        pitch_rad,
+        &Rotation::from_dcm_unchecked(*c_s_b),
+        &Rotation::from_dcm_unchecked(*c_e_i),
+    )
+}
+
+/// The down direction measured through the star tracker, `d_e = c_e_i · c_s_iᵀ · c_s_b · d_b`,
+/// and its latitude and longitude.
+fn fix_of_chain(
+    c_s_i: &Rotation<Icrf, StarSensor>,
+    roll_rad: f64,
+    pitch_rad: f64,
+    c_s_b: &Rotation<Body, StarSensor>,
+    c_e_i: &Rotation<Icrf, Ecef>,
+) -> AstroFix {
+    let d_b = Vector::<Body>::new(down_b(roll_rad, pitch_rad));
+    let down_e = (c_e_i * &(c_s_i.inverse() * (c_s_b * &d_b)))
+        .into_coords()
+        .normalize();
     let (lat_rad, lon_rad) = lat_lon_of_down(&down_e);
     AstroFix {
         lat_rad,
@@ -218,36 +243,34 @@ pub fn astro_fix_unchecked(
 /// boresight misalignment (`v_s = c_s_b v_b`); `c_e_i`, ICRF → ECEF at the sample's time.
 /// Fails on non-finite values, non-rotation matrices or |roll|, |pitch| > 80°.
 pub fn astro_fix(
-    c_s_i: &Matrix3<f64>,
+    c_s_i: &Rotation<Icrf, StarSensor>,
     roll_rad: f64,
     pitch_rad: f64,
-    c_s_b: &Matrix3<f64>,
-    c_e_i: &Matrix3<f64>,
+    c_s_b: &Rotation<Body, StarSensor>,
+    c_e_i: &Rotation<Icrf, Ecef>,
 ) -> Result<AstroFix, AstroError> {
-    check_rotation("c_s_i (star-tracker attitude)", c_s_i)?;
-    check_rotation("c_s_b (mounting)", c_s_b)?;
-    check_rotation("c_e_i (ICRF → ECEF)", c_e_i)?;
+    check_rotation("c_s_i (star-tracker attitude)", c_s_i.dcm())?;
+    check_rotation("c_s_b (mounting)", c_s_b.dcm())?;
+    check_rotation("c_e_i (ICRF → ECEF)", c_e_i.dcm())?;
     check_tilt(roll_rad, pitch_rad)?;
-    Ok(astro_fix_unchecked(
-        c_s_i, roll_rad, pitch_rad, c_s_b, c_e_i,
-    ))
+    Ok(fix_of_chain(c_s_i, roll_rad, pitch_rad, c_s_b, c_e_i))
 }
 
 /// The paper's full eq. 5 with heading: the ECEF → NED DCM
 /// `c_n_e = R_z(ψ)·R_y(θ)·R_x(γ)·c_s_bᵀ·c_s_i·c_e_iᵀ` (rows: north, east, down in ECEF).
 /// Its first two rows depend on the heading; the third is [`astro_fix`]'s `down_e`.
 pub fn c_n_e_from_star(
-    c_s_i: &Matrix3<f64>,
+    c_s_i: &Rotation<Icrf, StarSensor>,
     roll_rad: f64,
     pitch_rad: f64,
     heading_rad: f64,
-    c_s_b: &Matrix3<f64>,
-    c_e_i: &Matrix3<f64>,
-) -> Matrix3<f64> {
-    crate::attitude::c_n_b_from_rpy(roll_rad, pitch_rad, heading_rad)
-        * c_s_b.transpose()
-        * c_s_i
-        * c_e_i.transpose()
+    c_s_b: &Rotation<Body, StarSensor>,
+    c_e_i: &Rotation<Icrf, Ecef>,
+) -> Rotation<Ecef, Ned> {
+    crate::attitude::body_to_ned(roll_rad, pitch_rad, heading_rad)
+        * c_s_b.inverse()
+        * *c_s_i
+        * c_e_i.inverse()
 }
 
 /// Great-circle angle (rad) between two directions given as latitude/longitude pairs (rad).
@@ -260,30 +283,32 @@ pub fn angular_distance_rad(lat1: f64, lon1: f64, lat2: f64, lon2: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::attitude::c_n_b_from_rpy;
-    use crate::earth::{WGS84, c_e_n, radii_of_curvature};
+    use crate::attitude::body_to_ned;
+    use crate::earth::{WGS84, c_e_n, ned_to_ecef, radii_of_curvature};
 
-    fn nominal_c_s_b() -> Matrix3<f64> {
-        Matrix3::from_diagonal(&Vector3::new(1.0, -1.0, -1.0))
+    fn nominal_c_s_b() -> Rotation<Body, StarSensor> {
+        Rotation::from_dcm_unchecked(Matrix3::from_diagonal(&Vector3::new(1.0, -1.0, -1.0)))
     }
 
-    fn rot(axis: Vector3<f64>, angle: f64) -> Matrix3<f64> {
-        nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(axis), angle)
-            .into_inner()
+    fn rot(axis: Vector3<f64>, angle: f64) -> Rotation<Body, Body> {
+        Rotation::from_dcm_unchecked(
+            nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(axis), angle)
+                .into_inner(),
+        )
     }
 
-    /// Simulated truth: `c_s_i = c_s_b · c_b_n · c_n_e · c_e_i` (HELPERS.md contract).
+    /// Simulated truth: `c_s_i = c_s_b · c_b_n · c_n_e · c_e_i` (the simulator's contract).
     fn c_s_i_true(
-        c_s_b: &Matrix3<f64>,
+        c_s_b: &Rotation<Body, StarSensor>,
         rph: (f64, f64, f64),
         lat: f64,
         lon: f64,
-        c_e_i: &Matrix3<f64>,
-    ) -> Matrix3<f64> {
-        c_s_b
-            * c_n_b_from_rpy(rph.0, rph.1, rph.2).transpose()
-            * c_e_n(lat, lon).transpose()
-            * c_e_i
+        c_e_i: &Rotation<Icrf, Ecef>,
+    ) -> Rotation<Icrf, StarSensor> {
+        *c_s_b
+            * body_to_ned(rph.0, rph.1, rph.2).inverse()
+            * ned_to_ecef(lat, lon).inverse()
+            * *c_e_i
     }
 
     #[test]
@@ -301,7 +326,7 @@ mod tests {
         let attitudes = [(0.0, 0.0, 0.0), (2.0, -3.0, 120.0), (-10.0, 5.0, -75.0)];
         for (k, &(lat_d, lon_d)) in sites.iter().enumerate() {
             let t = GpsTime::from_utc(2025, 3, 20, 21, 0, 600.0 * k as f64);
-            let c_e_i = celestial::c_e_i(t, &eop);
+            let c_e_i = celestial::icrf_to_ecef(t, &eop);
             for &(r, p, h) in &attitudes {
                 let (lat, lon) = (f64::to_radians(lat_d), f64::to_radians(lon_d));
                 let rph = (f64::to_radians(r), f64::to_radians(p), f64::to_radians(h));
@@ -318,7 +343,7 @@ mod tests {
                 assert!(dlon.abs() < 1e-12, "{lat_d} {lon_d}: dlon {dlon}");
                 // Eq. 5: the full c_n_e with the heading equals the true ECEF → NED DCM.
                 let c_n_e = c_n_e_from_star(&c_s_i, rph.0, rph.1, rph.2, &c_s_b, &c_e_i);
-                assert!((c_n_e - c_e_n(lat, lon).transpose()).abs().max() < 1e-12);
+                assert!((c_n_e.dcm() - c_e_n(lat, lon).transpose()).abs().max() < 1e-12);
             }
         }
     }
@@ -328,7 +353,7 @@ mod tests {
         let eop = EarthOrientation::default();
         let c_s_b = nominal_c_s_b();
         let t = GpsTime::from_utc(2025, 3, 20, 22, 0, 0.0);
-        let c_e_i = celestial::c_e_i(t, &eop);
+        let c_e_i = celestial::icrf_to_ecef(t, &eop);
         let (lat, lon) = (0.9713, 0.6551);
         let a = astro_fix(
             &c_s_i_true(&c_s_b, (0.01, 0.02, 0.3), lat, lon, &c_e_i),
@@ -361,7 +386,7 @@ mod tests {
         let eop = EarthOrientation::default();
         let c_s_b = nominal_c_s_b();
         let t = GpsTime::from_utc(2025, 3, 20, 23, 0, 0.0);
-        let c_e_i = celestial::c_e_i(t, &eop);
+        let c_e_i = celestial::icrf_to_ecef(t, &eop);
         let (lat, lon) = (55.655f64.to_radians(), 37.534f64.to_radians());
         let (m_r, n_r) = radii_of_curvature(&WGS84, lat);
         let delta = (1.0f64 / 60.0).to_radians();
@@ -400,17 +425,26 @@ mod tests {
     #[test]
     fn bad_inputs_are_rejected_with_their_names() {
         let i = Matrix3::identity();
-        let e = astro_fix(&(i * 2.0), 0.0, 0.0, &i, &i).unwrap_err();
+        let fix = |c_s_i: Matrix3<f64>, roll: f64, pitch: f64, c_s_b: Matrix3<f64>, c_e_i| {
+            astro_fix(
+                &Rotation::from_dcm_unchecked(c_s_i),
+                roll,
+                pitch,
+                &Rotation::from_dcm_unchecked(c_s_b),
+                &Rotation::from_dcm_unchecked(c_e_i),
+            )
+        };
+        let e = fix(i * 2.0, 0.0, 0.0, i, i).unwrap_err();
         assert!(matches!(e, AstroError::NotRotation { what, .. } if what.starts_with("c_s_i")));
-        let e = astro_fix(&i, 0.0, 0.0, &(-i), &i).unwrap_err();
+        let e = fix(i, 0.0, 0.0, -i, i).unwrap_err();
         assert!(matches!(e, AstroError::NotRotation { what, .. } if what.starts_with("c_s_b")));
         let mut nan = i;
         nan[(1, 1)] = f64::NAN;
-        let e = astro_fix(&i, 0.0, 0.0, &i, &nan).unwrap_err();
+        let e = fix(i, 0.0, 0.0, i, nan).unwrap_err();
         assert!(matches!(e, AstroError::NotFinite { what } if what.starts_with("c_e_i")));
-        let e = astro_fix(&i, f64::INFINITY, 0.0, &i, &i).unwrap_err();
+        let e = fix(i, f64::INFINITY, 0.0, i, i).unwrap_err();
         assert_eq!(e, AstroError::NotFinite { what: "roll" });
-        let e = astro_fix(&i, 0.0, 1.5, &i, &i).unwrap_err();
+        let e = fix(i, 0.0, 1.5, i, i).unwrap_err();
         assert!(matches!(
             e,
             AstroError::TiltOutOfRange { what: "pitch", .. }

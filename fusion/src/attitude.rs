@@ -14,9 +14,8 @@
 //!
 //! Rotation vectors: `q(φ) = [cos(|φ|/2), sin(|φ|/2) φ/|φ|]`, evaluated by its Taylor series
 //! near zero so that small rotations (one IMU increment) lose no precision.
-//!
-//! OWNER: foundations helper.
 
+use crate::frames::{Body, Ned, Rotation};
 use nalgebra::{Matrix3, Quaternion, UnitQuaternion, Vector3};
 
 /// Below this angle squared (rad², i.e. |φ| < 1e-3 rad) [`quat_from_rotation_vector`] uses the
@@ -39,6 +38,12 @@ pub fn rpy_from_q_n_b(q_n_b: &UnitQuaternion<f64>) -> Vector3<f64> {
 /// Body → NED rotation from roll, pitch, heading (rad): `R_z(heading) R_y(pitch) R_x(roll)`.
 pub fn q_n_b_from_rpy(roll: f64, pitch: f64, heading: f64) -> UnitQuaternion<f64> {
     UnitQuaternion::from_euler_angles(roll, pitch, heading)
+}
+
+/// The rotation body → NED from roll, pitch, heading (rad), frame-typed ([`c_n_b_from_rpy`]'s
+/// matrix).
+pub fn body_to_ned(roll: f64, pitch: f64, heading: f64) -> Rotation<Body, Ned> {
+    Rotation::from_dcm_unchecked(c_n_b_from_rpy(roll, pitch, heading))
 }
 
 /// Body → NED DCM `c_n_b = R_z(heading) R_y(pitch) R_x(roll)` from roll, pitch, heading (rad).

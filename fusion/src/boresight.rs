@@ -2,9 +2,9 @@
 //! three-stage procedure), and a least-squares estimator over all samples.
 //!
 //! The boresight (mounting) misalignment is the paper's `M_APSK→ZPSK = R_z(κ1)·R_x(κ2)·R_y(κ3)`.
-//! In Sextant it sits between the body (IMU) axes and the nominal sensor mounting
-//! (HELPERS.md): `c_s_b = c_s_b_nominal · M(κ)`, with the rotations of [`kappa_matrix`] exactly as
-//! the simulator applies them (`drivers_sim::sensors::kappa_matrix`; a test in drivers-sim holds
+//! In Sextant it sits between the body (IMU) axes and the nominal sensor mounting (the
+//! simulator's contract): `c_s_b = c_s_b_nominal · M(κ)`, with the rotations of
+//! [`kappa_matrix`] exactly as the simulator applies them (`drivers_sim::sensors::kappa_matrix`; a test in drivers-sim holds
 //! the two equal).
 //!
 //! **Paper procedure** ([`three_stage`]):
@@ -33,12 +33,15 @@
 //! turning the IMU; the experiment measures that term.
 //!
 //! Pure functions over slices of samples; the caller evaluates `c_e_i(t)` once per sample
-//! ([`c_e_i_of`]) and passes it in, so the celestial model is a choice of the caller.
+//! ([`c_e_i_of`]) and passes it in, so the celestial model is a choice of the caller. The
+//! samples hold bare DCMs (they come from files and the wire); where the chains meet they are
+//! written with the frame-typed rotations of [`crate::frames`].
 
 use crate::astro_fix::{
     AstroError, CelestialModel, astro_fix_unchecked, check_rotation, check_tilt, down_b,
 };
-use crate::earth::{WGS84, c_e_n, radii_of_curvature};
+use crate::earth::{WGS84, ned_to_ecef, radii_of_curvature};
+use crate::frames::{Body, Ecef, Icrf, Rotation, StarSensor, Vector};
 use crate::time::GpsTime;
 use nalgebra::{Matrix2, Matrix3, Matrix3x2, Rotation3, Vector2, Vector3};
 
@@ -64,9 +67,32 @@ pub struct BoresightSample {
     pub heading_rad: f64,
 }
 
-/// Nominal star-tracker mounting (HELPERS.md): 180° about body x, `v_s = c_s_b v_b`.
+impl BoresightSample {
+    /// The star-tracker attitude [`Self::c_s_i`] as a frame-typed rotation ICRF → sensor.
+    pub fn icrf_to_sensor(&self) -> Rotation<Icrf, StarSensor> {
+        Rotation::from_dcm_unchecked(self.c_s_i)
+    }
+}
+
+/// A sample's ICRF → ECEF matrix as a frame-typed rotation.
+fn icrf_to_ecef(c_e_i: &Matrix3<f64>) -> Rotation<Icrf, Ecef> {
+    Rotation::from_dcm_unchecked(*c_e_i)
+}
+
+/// Nominal star-tracker mounting (the simulator's contract): 180° about body x,
+/// `v_s = c_s_b v_b` (optical axis up when the vehicle is level).
 pub fn c_s_b_nominal() -> Matrix3<f64> {
     Matrix3::from_diagonal(&Vector3::new(1.0, -1.0, -1.0))
+}
+
+/// [`c_s_b_nominal`] as a frame-typed rotation body → star sensor.
+pub fn body_to_sensor_nominal() -> Rotation<Body, StarSensor> {
+    Rotation::from_dcm_unchecked(c_s_b_nominal())
+}
+
+/// [`c_s_b_of_kappa`] as a frame-typed rotation body → star sensor.
+pub fn body_to_sensor(kappa_rad: &Vector3<f64>) -> Rotation<Body, StarSensor> {
+    Rotation::from_dcm_unchecked(c_s_b_of_kappa(kappa_rad))
 }
 
 /// The misalignment `M = R_z(κ1)·R_x(κ2)·R_y(κ3)` (κ in rad; rotations as nalgebra's
@@ -213,12 +239,15 @@ pub fn initial_kappa(
         (a + s.heading_rad.sin(), b + s.heading_rad.cos())
     });
     let heading = sh.atan2(ch);
-    let c_n_b = crate::attitude::c_n_b_from_rpy(roll, pitch, heading);
-    let c_e_n_site = c_e_n(site.lat_rad, site.lon_rad);
-    let nom_t = c_s_b_nominal().transpose();
+    let c_n_b = crate::attitude::body_to_ned(roll, pitch, heading);
+    let c_e_n_site = ned_to_ecef(site.lat_rad, site.lon_rad);
+    let nom_t = body_to_sensor_nominal().inverse();
     let mut sum = Matrix3::zeros();
     for (s, c) in w.iter().zip(c_e_i) {
-        sum += nom_t * s.c_s_i * c.transpose() * c_e_n_site * c_n_b;
+        // M = c_s_b,nomᵀ · c_s_i · c_e_iᵀ · c_e_n · c_n_b: body axes onto themselves.
+        let m: Rotation<Body, Body> =
+            nom_t * s.icrf_to_sensor() * icrf_to_ecef(c).inverse() * c_e_n_site * c_n_b;
+        sum += m.into_dcm();
     }
     let m = nearest_rotation(&(sum / nf));
     Ok(InitialCalibration {
@@ -557,7 +586,10 @@ pub fn least_squares(
     let d_meas: Vec<Vector3<f64>> = samples
         .iter()
         .zip(c_e_i)
-        .map(|(s, c)| s.c_s_i * (c.transpose() * down_e_site))
+        .map(|(s, c)| {
+            let d_e = Vector::<Ecef>::new(down_e_site);
+            (s.icrf_to_sensor() * (icrf_to_ecef(c).inverse() * d_e)).into_coords()
+        })
         .collect();
     let d_b: Vec<Vector3<f64>> = samples
         .iter()
@@ -653,7 +685,7 @@ pub fn least_squares(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::attitude::c_n_b_from_rpy;
+    use crate::attitude::body_to_ned;
     use crate::celestial::EarthOrientation;
     use rand::{Rng, SeedableRng};
     use rand_distr::StandardNormal;
@@ -699,10 +731,10 @@ mod tests {
             (40.0f64 / 3600.0).to_radians(),
             (20.0f64 / 3600.0).to_radians(),
         );
-        let c_s_b = c_s_b_of_kappa(kappa);
+        let c_s_b = body_to_sensor(kappa);
         let (roll, pitch, heading) = (2e-5, -3e-5, 30f64.to_radians());
-        let c_b_n = c_n_b_from_rpy(roll, pitch, heading).transpose();
-        let c_n_e = c_e_n(site.lat_rad, site.lon_rad).transpose();
+        let c_b_n = body_to_ned(roll, pitch, heading).inverse();
+        let c_n_e = ned_to_ecef(site.lat_rad, site.lon_rad).inverse();
         let t0 = GpsTime::from_utc(2025, 3, 20, 21, 0, 0.0);
         let model = CelestialModel::Full(EarthOrientation::default());
         let mut samples = Vec::new();
@@ -710,7 +742,7 @@ mod tests {
         for k in 0..n {
             let time = t0.add_ns(k as i64 * 1_000_000_000);
             let c_e_i = model.c_e_i(time);
-            let truth = c_s_b * c_b_n * c_n_e * c_e_i;
+            let truth = (c_s_b * c_b_n * c_n_e * icrf_to_ecef(&c_e_i)).into_dcm();
             let err = Rotation3::from_scaled_axis(Vector3::new(
                 cross_sigma * g(),
                 cross_sigma * g(),

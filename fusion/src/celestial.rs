@@ -51,6 +51,7 @@
 pub mod nut2000a;
 pub mod s06;
 
+use crate::frames::{Ecef, Icrf, Rotation};
 use crate::time::GpsTime;
 use nalgebra::Matrix3;
 
@@ -439,6 +440,12 @@ pub fn polar_motion_matrix(xp: f64, yp: f64, sp: f64) -> Matrix3<f64> {
 /// IAU 2006/2000A, CIO based (ERFA `eraC2t06a` with TT and UT1 from `t` and `eop`).
 pub fn c_e_i(t: GpsTime, eop: &EarthOrientation) -> Matrix3<f64> {
     c_e_i_model(t, eop, NutationModel::Iau2000A)
+}
+
+/// The rotation GCRS (≈ ICRF axes) → ITRS (ECEF) at time `t`, frame-typed ([`c_e_i`]'s
+/// matrix).
+pub fn icrf_to_ecef(t: GpsTime, eop: &EarthOrientation) -> Rotation<Icrf, Ecef> {
+    Rotation::from_dcm_unchecked(c_e_i(t, eop))
 }
 
 /// DCM GCRS → ITRS with IAU 2006 precession and the cheaper IAU 2000B nutation

@@ -18,9 +18,8 @@
 //!   (NIMA TR8350.2 eq. 4-3). `γ_e`, `γ_p` are derived from (a, f, GM, ω) by the closed
 //!   formulas of the normal field (Moritz, Geodetic Reference System 1980), which give the
 //!   WGS-84 values 9.7803253359 / 9.8321849378 m/s².
-//!
-//! OWNER: foundations helper. Signatures are the contract other modules build against.
 
+use crate::frames::{Ecef, Ned, Rotation};
 use nalgebra::{Matrix3, Vector3};
 
 /// A reference ellipsoid with its gravity constants.
@@ -189,6 +188,12 @@ pub fn c_e_n(lat_rad: f64, lon_rad: f64) -> Matrix3<f64> {
         0.0,
         -sl,
     )
+}
+
+/// The rotation NED → ECEF at (lat, lon), frame-typed ([`c_e_n`]'s matrix; its inverse is
+/// `c_n_e`, ECEF → NED).
+pub fn ned_to_ecef(lat_rad: f64, lon_rad: f64) -> Rotation<Ned, Ecef> {
+    Rotation::from_dcm_unchecked(c_e_n(lat_rad, lon_rad))
 }
 
 /// Unit vector of the ellipsoid normal ("up", outward) in ECEF at (lat, lon).

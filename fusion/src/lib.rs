@@ -5,6 +5,7 @@
 //! - [`earth`]: ellipsoids, geodetic ↔ ECEF, gravity (normal and J2, paper 002), rates, radii.
 //! - [`atmosphere`]: ISA pressure ↔ altitude for the barometer.
 //! - [`attitude`]: rotation helpers (Euler angles, rotation vectors, skew matrices).
+//! - [`frames`]: frame-typed rotations (ICRF, ECEF, NED, body, star sensor) where chains meet.
 //! - [`time`]: time scales (GPS, TAI, UTC, TT, UT1).
 //! - [`celestial`]: GCRS/ICRF → ITRS (IAU 2006/2000A precession-nutation, ERA, polar motion).
 //! - [`strapdown`]: ECEF strapdown mechanization with selectable integrators (paper 002).
@@ -28,6 +29,7 @@ pub mod broadcast_ephemeris;
 pub mod celestial;
 pub mod earth;
 pub mod ekf;
+pub mod frames;
 pub mod gnss_corrections;
 pub mod gnss_ls;
 pub mod navigator;

@@ -90,7 +90,8 @@ pub struct ImuSample {
 pub struct StarTrackerSample {
     /// Header; `time_ns` is the exposure mid-time.
     pub header: Header,
-    /// Attitude quaternion ICRF → sensor (`v_sensor = q ⊗ v_icrf ⊗ q*`), `[w, x, y, z]`.
+    /// Attitude quaternion ICRF → sensor (`v_sensor = q ⊗ v_icrf ⊗ q*`), `[w, x, y, z]`:
+    /// fusion's `c_s_i`, a `frames::Rotation<Icrf, StarSensor>`.
     pub q_sensor_icrf: [f64; 4],
     /// 1-σ error about the two axes across the optical axis, rad.
     pub sigma_cross_rad: f64,
@@ -213,7 +214,10 @@ pub struct TruthSample {
     pub pos_ecef_m: [f64; 3],
     /// Velocity relative to the Earth in NED, m/s.
     pub vel_ned_m_s: [f64; 3],
-    /// Attitude body → NED, `[w, x, y, z]`.
+    /// Attitude body → NED, `[w, x, y, z]` (Hamilton): `v_ned = q ⊗ v_body ⊗ q*`, the NED frame
+    /// being the local level at (`lat_rad`, `lon_rad`). This is fusion's `q_n_b`
+    /// (`attitude::q_n_b_from_rpy`); fusion's navigation state carries `q_e_b` (body → ECEF),
+    /// and `q_n_b = q_e_n⁻¹ ⊗ q_e_b`.
     pub q_ned_body: [f64; 4],
     /// Roll, pitch, heading (z-y-x Euler angles of `q_ned_body`), rad.
     pub roll_pitch_heading_rad: [f64; 3],
@@ -294,7 +298,9 @@ pub struct NavSolution {
     pub pos_ecef_m: [f64; 3],
     /// Velocity relative to the Earth in NED, m/s.
     pub vel_ned_m_s: [f64; 3],
-    /// Attitude body → NED, `[w, x, y, z]`.
+    /// Attitude body → NED, `[w, x, y, z]` (Hamilton): `v_ned = q ⊗ v_body ⊗ q*`, the NED frame
+    /// being the local level at (`lat_rad`, `lon_rad`). This is fusion's `q_n_b`, obtained from
+    /// the filter's body → ECEF attitude `q_e_b` as `q_n_b = q_e_n⁻¹ ⊗ q_e_b`.
     pub q_ned_body: [f64; 4],
     /// Roll, pitch, heading, rad.
     pub roll_pitch_heading_rad: [f64; 3],
