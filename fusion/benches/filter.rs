@@ -10,6 +10,7 @@ use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use sextant_fusion::celestial::{EarthOrientation, c_e_i};
 use sextant_fusion::earth::{Geodetic, GravityModel, WGS84, geodetic_to_ecef};
 use sextant_fusion::ekf::{self, ActiveStates, Covariance, ErrorStateEkf, GateTable};
+use sextant_fusion::frames::Rotation;
 use sextant_fusion::navigator::{GnssMode, ImuSpec, Navigator, NavigatorConfig};
 use sextant_fusion::strapdown::{NavState, q_e_n, stationary_increment};
 use sextant_fusion::time::GpsTime;
@@ -283,9 +284,13 @@ fn bench(c: &mut Criterion) {
     let c_s_i = c_s_b * nav.q_e_b.to_rotation_matrix().into_inner().transpose() * c_e_i;
     let q = UnitQuaternion::from_matrix(&c_s_i);
     let kappa = Vector3::new(1e-3, -2e-3, 5e-4);
+    let (c_e_i_t, c_s_b_t) = (
+        Rotation::from_dcm_unchecked(c_e_i),
+        Rotation::from_dcm_unchecked(c_s_b),
+    );
     c.bench_function("update_star_tracker_boresight", |b| {
         b.iter(|| {
-            let m = ekf::star_attitude(black_box(&nav), &q, &c_e_i, &c_s_b, &kappa, 1e-5, 1e-4);
+            let m = ekf::star_attitude(black_box(&nav), &q, &c_e_i_t, &c_s_b_t, &kappa, 1e-5, 1e-4);
             ekf::update(&f.p, &m, gates.threshold(3))
         })
     });

@@ -2503,8 +2503,8 @@ impl Navigator {
         let m = ekf::star_attitude(
             &self.nav,
             &q,
-            &c_e_i,
-            &self.c_s_b,
+            &crate::frames::Rotation::from_dcm_unchecked(c_e_i),
+            &crate::frames::Rotation::from_dcm_unchecked(self.c_s_b),
             &self.ekf.kappa_rad,
             obs.sigma_cross,
             obs.sigma_roll,

@@ -14,6 +14,7 @@ use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use sextant_fusion::celestial::{EarthOrientation, c_e_i};
 use sextant_fusion::earth::{GravityModel, WGS84};
 use sextant_fusion::ekf::{self, GateTable};
+use sextant_fusion::frames::Rotation;
 use sextant_fusion::navigator::{GnssMode, Navigator, NavigatorConfig};
 use sextant_fusion::strapdown::{q_e_n, stationary_increment};
 use sextant_fusion::time::GpsTime;
@@ -202,8 +203,8 @@ fn filter_allocates_nothing_in_steady_state() {
             &ekf::star_attitude(
                 &state,
                 &q,
-                &c_e_i_now,
-                &c_s_b,
+                &Rotation::from_dcm_unchecked(c_e_i_now),
+                &Rotation::from_dcm_unchecked(c_s_b),
                 &Vector3::zeros(),
                 2e-5,
                 1e-4,

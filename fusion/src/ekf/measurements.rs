@@ -10,6 +10,7 @@
 use super::{Measurement, NX, idx};
 use crate::attitude::skew;
 use crate::earth::Ellipsoid;
+use crate::frames::{Body, Ecef, Icrf, Rotation, StarSensor};
 use crate::strapdown::NavState;
 use nalgebra::{Matrix3, Rotation3, SMatrix, SVector, UnitQuaternion, Vector3};
 
@@ -128,9 +129,11 @@ pub fn kappa_jacobian(kappa_rad: &Vector3<f64>) -> Matrix3<f64> {
 ///
 /// Measured `C̃_s_i` (ICRF → sensor, from `q_s_i_meas`), predicted
 /// `Ĉ_s_i = C_s_b,nom · M(κ̂) · Ĉ_b_e · C_e_i(t)` with `c_e_i` = GCRS → ITRS at the exposure
-/// time (ICRF → ITRS → body → sensor). With `C_b_e = Ĉ_b_e (I − [ψ×])`,
-/// `M(κ) = M(κ̂)(I + [B δκ×])` ([`kappa_jacobian`]) and sensor-frame noise ν
-/// (`C̃_s_i = (I − [ν×]) C_s_i`), the residual rotation vector
+/// time (ICRF → ITRS → body → sensor) and `c_s_b_nominal` the nominal body → sensor mounting;
+/// both are frame-typed ([`crate::frames`]), so the chain cannot be assembled in a wrong order
+/// (the misalignment `M(κ)` turns the body axes onto themselves). With
+/// `C_b_e = Ĉ_b_e (I − [ψ×])`, `M(κ) = M(κ̂)(I + [B δκ×])` ([`kappa_jacobian`]) and
+/// sensor-frame noise ν (`C̃_s_i = (I − [ν×]) C_s_i`), the residual rotation vector
 /// `y = rotvec(Ĉ_s_i C̃_s_iᵀ) = Ĉ_s_b Ĉ_b_e ψ − Ĉ_s_b B δκ + ν` (sensor axes, rad), so
 /// `H_ψ = Ĉ_s_e`, `H_κ = −Ĉ_s_b B`, `R = diag(σ_cross², σ_cross², σ_roll²)` (optical axis =
 /// sensor z). Only a heading change separates κ from ψ: a rotation of the mount and one of
@@ -139,24 +142,25 @@ pub fn kappa_jacobian(kappa_rad: &Vector3<f64>) -> Matrix3<f64> {
 pub fn star_attitude(
     nav: &NavState,
     q_s_i_meas: &UnitQuaternion<f64>,
-    c_e_i: &Matrix3<f64>,
-    c_s_b_nominal: &Matrix3<f64>,
+    c_e_i: &Rotation<Icrf, Ecef>,
+    c_s_b_nominal: &Rotation<Body, StarSensor>,
     kappa_rad: &Vector3<f64>,
     sigma_cross_rad: f64,
     sigma_roll_rad: f64,
 ) -> Measurement<3> {
-    let c_b_e = nav.q_e_b.to_rotation_matrix().into_inner().transpose();
-    let c_s_b = c_s_b_nominal * kappa_matrix(kappa_rad);
+    let c_b_e = Rotation::<Body, Ecef>::from_quaternion(&nav.q_e_b).inverse();
+    let c_s_b =
+        c_s_b_nominal * &Rotation::<Body, Body>::from_dcm_unchecked(kappa_matrix(kappa_rad));
     let c_s_e = c_s_b * c_b_e;
-    let c_s_i_pred = c_s_e * c_e_i;
-    let c_s_i_meas = q_s_i_meas.to_rotation_matrix().into_inner();
-    let e = c_s_i_pred * c_s_i_meas.transpose();
-    let y =
-        UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(e)).scaled_axis();
+    let c_s_i_pred = &c_s_e * c_e_i;
+    let c_s_i_meas = Rotation::<Icrf, StarSensor>::from_quaternion(q_s_i_meas);
+    let y = (c_s_i_pred * c_s_i_meas.inverse())
+        .to_quaternion()
+        .scaled_axis();
     let mut h = SMatrix::<f64, 3, NX>::zeros();
-    h.fixed_view_mut::<3, 3>(0, idx::ATT).copy_from(&c_s_e);
+    h.fixed_view_mut::<3, 3>(0, idx::ATT).copy_from(c_s_e.dcm());
     h.fixed_view_mut::<3, 3>(0, idx::KAPPA)
-        .copy_from(&(-c_s_b * kappa_jacobian(kappa_rad)));
+        .copy_from(&(-c_s_b.dcm() * kappa_jacobian(kappa_rad)));
     let r = Matrix3::from_diagonal(&Vector3::new(
         sigma_cross_rad.powi(2),
         sigma_cross_rad.powi(2),
@@ -192,10 +196,10 @@ pub fn gnss_baseline_attitude(
     }
 }
 
-/// Baro altitude taken as height above the WGS-84 ellipsoid (no geoid, as simulated): `z = h_baro` (m),
-/// predicted `ĥ + b̂_h` (geodetic height of `r̂_e` plus the estimated baro bias
-/// `baro_bias_m`); `H_r = u_upᵀ` (ECEF unit up vector at the estimated latitude/longitude),
-/// `H_b = 1`; white noise `sigma_m`.
+/// Baro altitude taken as height above the WGS-84 ellipsoid (no geoid, as simulated):
+/// `z = h_baro` (m), predicted `ĥ + b̂_h` (geodetic height of `r̂_e` plus the estimated baro
+/// bias `baro_bias_m`); `H_r = u_upᵀ` (ECEF unit up vector at the estimated
+/// latitude/longitude), `H_b = 1`; white noise `sigma_m`.
 pub fn baro_height(
     nav: &NavState,
     ell: &Ellipsoid,
@@ -296,6 +300,10 @@ mod tests {
         let c_e_i = UnitQuaternion::from_euler_angles(0.1, 0.2, 1.0)
             .to_rotation_matrix()
             .into_inner();
+        let (c_s_b_nom_t, c_e_i_t) = (
+            Rotation::from_dcm_unchecked(c_s_b_nom),
+            Rotation::from_dcm_unchecked(c_e_i),
+        );
         let kappa_hat = Vector3::new(2e-3, -1e-3, 3e-3);
         for (psi, dk) in [
             (Vector3::new(1e-4, -2e-4, 3e-4), Vector3::zeros()),
@@ -312,7 +320,7 @@ mod tests {
             let c_s_i_true =
                 c_s_b_true * c_e_b_true.to_rotation_matrix().into_inner().transpose() * c_e_i;
             let q = UnitQuaternion::from_matrix(&c_s_i_true);
-            let m = star_attitude(&nav, &q, &c_e_i, &c_s_b_nom, &kappa_hat, 1e-5, 1e-4);
+            let m = star_attitude(&nav, &q, &c_e_i_t, &c_s_b_nom_t, &kappa_hat, 1e-5, 1e-4);
             let mut dx = StateVector::zeros();
             dx.fixed_rows_mut::<3>(idx::ATT).copy_from(&psi);
             dx.fixed_rows_mut::<3>(idx::KAPPA).copy_from(&dk);

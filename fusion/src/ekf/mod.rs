@@ -356,8 +356,10 @@ mod tests {
         let m = star_attitude(
             &nav,
             &UnitQuaternion::from_euler_angles(PI_X, 0.0, 0.0),
-            &Matrix3::identity(),
-            &Matrix3::new(1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, -1.0),
+            &crate::frames::Rotation::from_dcm_unchecked(Matrix3::identity()),
+            &crate::frames::Rotation::from_dcm_unchecked(Matrix3::new(
+                1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, -1.0,
+            )),
             &Vector3::zeros(),
             1e-4,
             1e-4,
