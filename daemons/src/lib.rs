@@ -7,6 +7,7 @@
 //! - [`recording`]: the bounded, corruption-tolerant reader of those recordings.
 //! - [`foxglove`]: the solution on Foxglove's well-known schemas.
 //! - [`signals`]: SIGINT/SIGTERM to a stop flag.
+//! - [`supervisor`]: `sextant run`'s process supervisor (start, restart, ordered stop, status).
 //!
 //! The offline lab (experiments, reports, analysis, plots) is the `sextant-lab` crate.
 
@@ -16,3 +17,4 @@ pub mod foxglove;
 pub mod recorder;
 pub mod recording;
 pub mod signals;
+pub mod supervisor;

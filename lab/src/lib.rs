@@ -5,25 +5,29 @@
 //! - [`analysis`]: errors against truth, drops and latency from a recording.
 //! - [`stats`]: RMS, maximum, percentiles.
 //! - [`plots`]: PNG plots of an analysis.
+//! - [`fonts`]: the font embedded for the plots' text.
 //! - [`scenario`]: what the analysis needs from a scenario file (GNSS outage windows).
 //! - [`report`]: post-analysis of a recording (REPORT.md, summary.json, plots).
 //! - [`replay`]: a recording re-run through the fusion (bit-exact check) or republished live.
 //! - [`calibrate`]: star-tracker boresight calibration from a static recording.
 //! - [`bench`]: latency, throughput and resources of the real processes.
 //! - [`experiments`]: the named offline experiments of `sextant experiment`.
+//! - [`shipped_config`]: where they find their scenarios (embedded, or `--config DIR`).
 //!
 //! The runtime modules the lab reads (configuration, daemon, recorder, recording reader,
-//! Foxglove conversion, signals) are those of `sextant-daemons`, re-exported here under the
+//! Foxglove conversion, signals, supervisor) are those of `sextant-daemons`, re-exported here under the
 //! same names.
 
-pub use sextant_daemons::{config, daemon, foxglove, recorder, recording, signals};
+pub use sextant_daemons::{config, daemon, foxglove, recorder, recording, signals, supervisor};
 
 pub mod analysis;
 pub mod bench;
 pub mod calibrate;
 pub mod experiments;
+pub mod fonts;
 pub mod plots;
 pub mod replay;
 pub mod report;
 pub mod scenario;
+pub mod shipped_config;
 pub mod stats;

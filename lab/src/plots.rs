@@ -40,6 +40,7 @@ fn time_plot(
     s: &Series,
     lines: &[(&str, &[f64], RGBColor)],
 ) -> Result<(), DynErr> {
+    crate::fonts::register();
     let root = BitMapBackend::new(path, (1000, 500)).into_drawing_area();
     root.fill(&WHITE)?;
     let (x0, x1) = range(s.t_s.iter().copied());
@@ -81,6 +82,7 @@ fn time_plot(
 }
 
 fn trajectory_plot(path: &Path, s: &Series) -> Result<(), DynErr> {
+    crate::fonts::register();
     let root = BitMapBackend::new(path, (800, 800)).into_drawing_area();
     root.fill(&WHITE)?;
     let all_e = s.truth_ne_m.iter().chain(&s.nav_ne_m).map(|p| p.1);

@@ -1,22 +1,14 @@
-//! The `sextant` command. `sextant run`: start the drivers and the fusion daemon, supervise them,
-//! stop them cleanly, then analyse the recording (table, `summary.json`, PNG plots).
+//! The `sextant` command. `sextant run`: check the configuration, start the drivers and the
+//! fusion daemon under the supervisor (`sextant_daemons::supervisor`), then analyse the
+//! recording (table, `summary.json`, PNG plots).
 
 use anyhow::{Context, bail};
 use clap::{Parser, Subcommand};
-use msgs::ipc::Bus;
-use msgs::{NavMode, SensorId, Status};
-use nix::sys::signal::{Signal, kill};
-use nix::unistd::Pid;
+use sextant_lab::shipped_config as experiments_config;
+use sextant_lab::supervisor::{self, ChildSpec, End};
 use sextant_lab::{analysis, config, plots, scenario};
-use std::collections::HashMap;
-use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::process::{ExitStatus, Stdio};
-use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
-use tokio::signal::unix::{SignalKind, signal};
-use tokio::sync::mpsc;
 
 /// Sextant navigation computer.
 #[derive(Debug, Parser)]
@@ -104,6 +96,11 @@ struct ExperimentArgs {
     /// Output directory (default out/experiment/NAME).
     #[arg(long)]
     out: Option<PathBuf>,
+    /// Configuration directory laid out like `config/` (scenarios/, sensors/), or its
+    /// sextant.toml, to read the scenarios from (default: the configuration embedded in the
+    /// binary).
+    #[arg(long)]
+    config: Option<PathBuf>,
 }
 
 #[derive(Debug, clap::Args)]
@@ -214,6 +211,59 @@ fn main() -> anyhow::Result<()> {
     }
 }
 
+/// Check that the process binaries `names` are in `bin_dir` (next to `sextant`). When some are
+/// missing and `sextant` was started by `cargo run` (which sets `CARGO` and
+/// `CARGO_MANIFEST_DIR` for the program it runs), build the workspace's binaries first with that
+/// cargo, into the same target directory and profile: on a fresh checkout
+/// `cargo run --release -- run` alone suffices. (`cargo run` builds only the package it runs;
+/// the drivers and `sextant-fusion` are binaries of other packages.)
+fn ensure_binaries(bin_dir: &Path, names: &[String]) -> anyhow::Result<()> {
+    let missing = || -> Vec<String> {
+        names
+            .iter()
+            .filter(|n| !bin_dir.join(n).is_file())
+            .cloned()
+            .collect()
+    };
+    let first = missing();
+    if first.is_empty() {
+        return Ok(());
+    }
+    if let (Some(cargo), Some(manifest_dir), Some(target_dir), Some(profile)) = (
+        std::env::var_os("CARGO"),
+        std::env::var_os("CARGO_MANIFEST_DIR"),
+        bin_dir.parent(),
+        bin_dir.file_name().and_then(|p| p.to_str()),
+    ) {
+        // The directory of the `dev` profile is called `debug`.
+        let profile = if profile == "debug" { "dev" } else { profile };
+        eprintln!(
+            "sextant: building the process binaries first ({}): cargo build --workspace --bins --profile {profile}",
+            first.join(", ")
+        );
+        let status = std::process::Command::new(cargo)
+            .args(["build", "--workspace", "--bins", "--profile", profile])
+            .arg("--manifest-path")
+            .arg(Path::new(&manifest_dir).join("Cargo.toml"))
+            .arg("--target-dir")
+            .arg(target_dir)
+            .status()
+            .context("running cargo build")?;
+        if !status.success() {
+            bail!("cargo build of the process binaries failed ({status})");
+        }
+    }
+    let still = missing();
+    if !still.is_empty() {
+        bail!(
+            "missing binaries in {}: {} (build them: cargo build --workspace --bins)",
+            bin_dir.display(),
+            still.join(", ")
+        );
+    }
+    Ok(())
+}
+
 /// `sextant bench`: run it, print its table.
 fn bench(args: BenchArgs) -> anyhow::Result<()> {
     use sextant_lab::bench;
@@ -221,6 +271,18 @@ fn bench(args: BenchArgs) -> anyhow::Result<()> {
         .parent()
         .map(Path::to_path_buf)
         .context("no directory of the current executable")?;
+    let names: Vec<String> = [
+        "sextant-fusion",
+        "sextant-sim-imu",
+        "sextant-sim-star-tracker",
+        "sextant-sim-gnss",
+        "sextant-sim-odometer",
+        "sextant-sim-baro",
+        "sextant-sim-truth",
+    ]
+    .map(String::from)
+    .into();
+    ensure_binaries(&bin_dir, &names)?;
     let cleaned = msgs::ipc::cleanup_dead_nodes()?;
     if cleaned > 0 {
         tracing::info!("removed the shared memory of {cleaned} dead node(s) of an earlier run");
@@ -248,6 +310,17 @@ fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
             experiments::names().join(", ")
         );
     }
+    if let Some(c) = args.config {
+        let dir = if c.is_file() {
+            c.parent().map(Path::to_path_buf).unwrap_or_default()
+        } else {
+            c
+        };
+        if !dir.join("scenarios").is_dir() {
+            bail!("--config {}: no scenarios/ directory there", dir.display());
+        }
+        experiments_config::use_dir(dir);
+    }
     let out = args
         .out
         .unwrap_or_else(|| PathBuf::from("out/experiment").join(&args.name));
@@ -256,201 +329,6 @@ fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
     println!("{}", experiments::table_by_name(&args.name, &summary)?);
     println!("summary and plots in {}", out.display());
     Ok(())
-}
-
-/// One supervised child process.
-struct Slot {
-    name: String,
-    program: PathBuf,
-    args: Vec<String>,
-    log: PathBuf,
-    restarts: u32,
-    finished: bool,
-    pid: Option<i32>,
-}
-
-fn spawn(
-    idx: usize,
-    slot: &mut Slot,
-    tx: &mpsc::UnboundedSender<(usize, std::io::Result<ExitStatus>)>,
-) -> anyhow::Result<()> {
-    let log = std::fs::OpenOptions::new()
-        .create(true)
-        .append(true)
-        .open(&slot.log)
-        .with_context(|| format!("open log {}", slot.log.display()))?;
-    let mut cmd = tokio::process::Command::new(&slot.program);
-    cmd.args(&slot.args)
-        .stdin(Stdio::null())
-        .stdout(log.try_clone()?)
-        .stderr(log)
-        // Own process group: a terminal Ctrl-C reaches only `sextant`, which stops the children
-        // in order (drivers, then fusion, so that the recorder sees everything).
-        .process_group(0);
-    // SAFETY: only calls prctl(2), async-signal-safe, between fork and exec.
-    unsafe {
-        cmd.pre_exec(|| {
-            // If `sextant` dies (even by SIGKILL), the child gets SIGTERM: no orphans.
-            nix::sys::prctl::set_pdeathsig(Signal::SIGTERM).map_err(std::io::Error::from)
-        });
-    }
-    let mut child = cmd
-        .spawn()
-        .with_context(|| format!("start {}", slot.program.display()))?;
-    slot.pid = child.id().map(|p| p as i32);
-    tracing::debug!("started {} (pid {:?})", slot.name, slot.pid);
-    let tx = tx.clone();
-    tokio::spawn(async move {
-        let r = child.wait().await;
-        let _ = tx.send((idx, r));
-    });
-    Ok(())
-}
-
-fn signal_pid(slot: &Slot, sig: Signal) {
-    if let Some(pid) = slot.pid
-        && let Err(e) = kill(Pid::from_raw(pid), sig)
-    {
-        tracing::debug!("{sig} to {} ({pid}): {e}", slot.name);
-    }
-}
-
-/// Wait until every slot in `which` has exited, up to `timeout`; then SIGKILL the rest and wait
-/// for them too.
-async fn stop_and_wait(
-    slots: &mut [Slot],
-    which: &[usize],
-    rx: &mut mpsc::UnboundedReceiver<(usize, std::io::Result<ExitStatus>)>,
-    timeout: Duration,
-    results: &mut HashMap<usize, ExitStatus>,
-) {
-    for &i in which {
-        if slots[i].pid.is_some() {
-            signal_pid(&slots[i], Signal::SIGTERM);
-        }
-    }
-    let live = |slots: &[Slot]| which.iter().any(|&i| slots[i].pid.is_some());
-    let deadline = tokio::time::Instant::now() + timeout;
-    let mut killed = false;
-    while live(slots) {
-        match tokio::time::timeout_at(deadline, rx.recv()).await {
-            Ok(Some((i, r))) => {
-                slots[i].pid = None;
-                if let Ok(st) = r {
-                    results.insert(i, st);
-                }
-            }
-            Ok(None) => break,
-            Err(_) if !killed => {
-                killed = true;
-                for &i in which {
-                    if slots[i].pid.is_some() {
-                        tracing::warn!("{} did not stop in {timeout:?}: SIGKILL", slots[i].name);
-                        signal_pid(&slots[i], Signal::SIGKILL);
-                    }
-                }
-                // Reaping after SIGKILL is immediate.
-                while live(slots) {
-                    match tokio::time::timeout(Duration::from_secs(5), rx.recv()).await {
-                        Ok(Some((i, _))) => slots[i].pid = None,
-                        _ => return,
-                    }
-                }
-            }
-            Err(_) => break,
-        }
-    }
-}
-
-/// Recording of the `k`-th fusion daemon of a run: `recording.mcap` for the first (k = 0),
-/// `recording.k.mcap` after its k-th restart.
-fn recording_path(out: &Path, k: usize) -> PathBuf {
-    if k == 0 {
-        out.join("recording.mcap")
-    } else {
-        out.join(format!("recording.{k}.mcap"))
-    }
-}
-
-/// Remove the shared memory of crashed processes (a SIGKILLed driver or daemon leaves its
-/// iceoryx2 node and ports behind; they would hold port slots of the services).
-fn clean_dead_nodes() {
-    match msgs::ipc::cleanup_dead_nodes() {
-        Ok(n) if n > 0 => tracing::info!("cleaned the shared memory of {n} dead node(s)"),
-        Ok(_) => {}
-        Err(e) => tracing::warn!("cleanup of dead nodes: {e}"),
-    }
-}
-
-fn status_line(st: &Status) -> String {
-    let mode = NavMode::from_u32(st.mode).map_or("?", |m| m.name());
-    let t = if st.header.time_ns > 0 {
-        let s = st.header.time_ns as f64 * 1e-9;
-        format!("{:.1}", s % 86_400.0)
-    } else {
-        "—".into()
-    };
-    let alive: Vec<&str> = SensorId::ALL
-        .iter()
-        .filter(|s| st.alive_mask & (1 << (**s as u32)) != 0)
-        .map(|s| s.name())
-        .collect();
-    let gated: u64 = st.sensors.iter().map(|h| h.rejected_gate).sum();
-    format!(
-        "\r[GPS tod {t} s] {mode:<19} alive: {:<38} nav {} rec {} dropped {} gated {}   ",
-        alive.join(","),
-        st.solutions_published,
-        st.records_written,
-        st.records_dropped,
-        gated
-    )
-}
-
-/// Subscribe to the status on a plain thread and print a live one-line status.
-fn status_thread(prefix: String, stop: Arc<AtomicBool>) -> std::thread::JoinHandle<()> {
-    std::thread::spawn(move || {
-        use iceoryx2::prelude::*;
-        let run = || -> Result<(), String> {
-            let bus = Bus::new(&prefix, "sextant-run").map_err(|e| e.to_string())?;
-            let sub = bus.subscriber::<Status>().map_err(|e| e.to_string())?;
-            let ws = WaitSetBuilder::new()
-                .signal_handling_mode(SignalHandlingMode::Disabled)
-                .create::<ipc::Service>()
-                .map_err(|e| format!("{e:?}"))?;
-            let _g = ws
-                .attach_notification(sub.listener())
-                .map_err(|e| format!("{e:?}"))?;
-            let _tick = ws
-                .attach_interval(Duration::from_millis(200))
-                .map_err(|e| format!("{e:?}"))?;
-            let mut printed = false;
-            while !stop.load(Ordering::SeqCst) {
-                ws.wait_and_process_once_with_timeout(
-                    |_| CallbackProgression::Continue,
-                    Duration::from_secs(1),
-                )
-                .map_err(|e| format!("{e:?}"))?;
-                sub.clear_events();
-                let mut last = None;
-                while let Ok(Some(st)) = sub.receive() {
-                    last = Some(st);
-                }
-                if let Some(st) = last {
-                    let mut err = std::io::stderr().lock();
-                    let _ = write!(err, "{}", status_line(&st));
-                    let _ = err.flush();
-                    printed = true;
-                }
-            }
-            if printed {
-                eprintln!();
-            }
-            Ok(())
-        };
-        if let Err(e) = run() {
-            tracing::warn!("status display: {e}");
-        }
-    })
 }
 
 fn load_config(args: &RunArgs, out: &Path) -> anyhow::Result<config::LoadedConfig> {
@@ -503,9 +381,9 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
         .with_context(|| format!("create {}", out.display()))?;
     let recording = out.join("recording.mcap");
     // Recordings of an earlier run in this directory: recording.mcap and, after fusion restarts,
-    // recording.1.mcap, recording.2.mcap, ... (see `recording_path`).
+    // recording.1.mcap, recording.2.mcap, ... (see `supervisor::recording_path`).
     for k in 0..=64 {
-        let old = recording_path(&out, k);
+        let old = supervisor::recording_path(&out, k);
         if old.exists() {
             std::fs::remove_file(&old).with_context(|| format!("remove old {}", old.display()))?;
         }
@@ -529,68 +407,39 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
         .context("no directory of the current executable")?;
     let mut names: Vec<String> = rc.drivers.clone();
     names.push("sextant-fusion".into());
-    let missing: Vec<_> = names
-        .iter()
-        .filter(|n| !bin_dir.join(n).is_file())
-        .cloned()
-        .collect();
-    if !missing.is_empty() {
-        bail!(
-            "missing binaries in {}: {} (build them: cargo build --workspace --bins)",
-            bin_dir.display(),
-            missing.join(", ")
-        );
-    }
+    ensure_binaries(&bin_dir, &names)?;
 
-    let mut sigint = signal(SignalKind::interrupt())?;
-    let mut sigterm = signal(SignalKind::terminate())?;
-
+    let interrupt = supervisor::stop_signals()?;
     let start_mono_ns = msgs::monotonic_ns() + (rc.start_delay_s * 1e9) as u64;
-    let scenario_arg = scenario_path.display().to_string();
-    let mut slots: Vec<Slot> = rc
+    let drivers: Vec<ChildSpec> = rc
         .drivers
         .iter()
-        .map(|n| Slot {
+        .map(|n| ChildSpec {
             name: n.clone(),
             program: bin_dir.join(n),
-            args: vec![
-                "--scenario".into(),
-                scenario_arg.clone(),
-                "--prefix".into(),
-                prefix.clone(),
-                "--start-mono-ns".into(),
-                start_mono_ns.to_string(),
-                "--speed".into(),
-                speed.to_string(),
-                "--duration".into(),
-                duration.to_string(),
-            ],
+            args: supervisor::driver_args(&scenario_path, &prefix, start_mono_ns, speed, duration),
             log: out.join("logs").join(format!("{n}.log")),
-            restarts: 0,
-            finished: false,
-            pid: None,
         })
         .collect();
-    let fusion_idx = slots.len();
-    slots.push(Slot {
+    let fusion = ChildSpec {
         name: "sextant-fusion".into(),
         program: bin_dir.join("sextant-fusion"),
-        args: vec![
-            "--config".into(),
-            cfg.path.display().to_string(),
-            "--prefix".into(),
-            prefix.clone(),
-            "--out".into(),
-            recording.display().to_string(),
-            "--speed".into(),
-            speed.to_string(),
-        ],
+        args: supervisor::fusion_args(&cfg.path, &prefix, &recording, speed),
         log: out.join("logs").join("sextant-fusion.log"),
-        restarts: 0,
-        finished: false,
-        pid: None,
-    });
-    let driver_idx: Vec<usize> = (0..fusion_idx).collect();
+    };
+    let fusion_log = fusion.log.clone();
+    // The drivers end by themselves; a watchdog stops a run that overruns by far.
+    let expected = Duration::from_secs_f64(rc.start_delay_s + duration / speed);
+    let plan = supervisor::RunPlan {
+        drivers,
+        fusion,
+        out: out.clone(),
+        max_restarts: rc.max_restarts,
+        restart_delay,
+        stop_timeout: Duration::from_secs_f64(rc.stop_timeout_s),
+        watchdog: expected + Duration::from_secs(30) + expected / 2,
+        status_prefix: Some(prefix.clone()),
+    };
 
     eprintln!(
         "sextant run: scenario {} ({}), {duration} s at {speed}x, prefix {prefix}, output {}",
@@ -598,152 +447,20 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
         scen.name,
         out.display()
     );
-    let (tx, mut rx) = mpsc::unbounded_channel();
-    // Fusion first, so that its subscribers exist before the first sample.
-    spawn(fusion_idx, &mut slots[fusion_idx], &tx)?;
-    for &i in &driver_idx {
-        if let Err(e) = spawn(i, &mut slots[i], &tx) {
-            let mut results = HashMap::new();
-            let all: Vec<usize> = (0..slots.len()).collect();
-            stop_and_wait(
-                &mut slots,
-                &all,
-                &mut rx,
-                Duration::from_secs(5),
-                &mut results,
-            )
-            .await;
-            return Err(e);
-        }
-    }
-    let status_stop = Arc::new(AtomicBool::new(false));
-    let status = status_thread(prefix.clone(), status_stop.clone());
-
-    // The drivers end by themselves; a watchdog stops a run that overruns by far.
-    let expected = Duration::from_secs_f64(rc.start_delay_s + duration / speed);
-    let watchdog = tokio::time::sleep(expected + Duration::from_secs(30) + expected / 2);
-    tokio::pin!(watchdog);
-    let stop_timeout = Duration::from_secs_f64(rc.stop_timeout_s);
-    let mut results: HashMap<usize, ExitStatus> = HashMap::new();
-    #[derive(Debug, PartialEq)]
-    enum End {
-        Completed,
-        Interrupted(&'static str),
-        FusionDied,
-        Watchdog,
-    }
-    // Recordings written, in order: the first fusion writes recording.mcap, the k-th restart
-    // recording.k.mcap; each is a complete MCAP up to its last flushed chunk.
-    let mut recordings: Vec<PathBuf> = vec![recording.clone()];
-    // Drivers waiting out `restart_delay` before their restart.
-    let (respawn_tx, mut respawn_rx) = mpsc::unbounded_channel::<usize>();
-    let end = loop {
-        tokio::select! {
-            _ = sigint.recv() => break End::Interrupted("SIGINT"),
-            _ = sigterm.recv() => break End::Interrupted("SIGTERM"),
-            _ = &mut watchdog => break End::Watchdog,
-            Some(i) = respawn_rx.recv() => {
-                clean_dead_nodes();
-                let slot = &mut slots[i];
-                if let Err(e) = spawn(i, slot, &tx) {
-                    tracing::error!("restart of {} failed: {e:#}", slot.name);
-                    slot.finished = true;
-                    if driver_idx.iter().all(|&d| slots[d].finished) {
-                        break End::Completed;
-                    }
-                }
-            }
-            Some((i, r)) = rx.recv() => {
-                slots[i].pid = None;
-                if i == fusion_idx {
-                    let slot = &mut slots[i];
-                    if slot.restarts >= rc.max_restarts {
-                        tracing::error!("sextant-fusion exited unexpectedly: {r:?} after {} restarts (see {})", slot.restarts, slot.log.display());
-                        if let Ok(st) = r { results.insert(i, st); }
-                        break End::FusionDied;
-                    }
-                    slot.restarts += 1;
-                    let next = recording_path(&out, slot.restarts as usize);
-                    eprintln!();
-                    tracing::warn!(
-                        "sextant-fusion died ({r:?}): restart {}/{}, new recording {} ({} stays readable up to its last chunk)",
-                        slot.restarts, rc.max_restarts, next.display(),
-                        recordings.last().map_or(String::new(), |p| p.display().to_string())
-                    );
-                    if let Some(k) = slot.args.iter().position(|a| a == "--out") {
-                        slot.args[k + 1] = next.display().to_string();
-                    }
-                    recordings.push(next);
-                    // The dead daemon's ports still occupy the services: free them first.
-                    clean_dead_nodes();
-                    if let Err(e) = spawn(i, slot, &tx) {
-                        tracing::error!("restart of sextant-fusion failed: {e:#}");
-                        break End::FusionDied;
-                    }
-                    continue;
-                }
-                match r {
-                    Ok(st) if st.success() => {
-                        slots[i].finished = true;
-                        results.insert(i, st);
-                    }
-                    other => {
-                        let slot = &mut slots[i];
-                        if slot.restarts < rc.max_restarts {
-                            slot.restarts += 1;
-                            eprintln!();
-                            tracing::warn!("{} died ({other:?}): restart {}/{} in {restart_delay:?}", slot.name, slot.restarts, rc.max_restarts);
-                            let respawn_tx = respawn_tx.clone();
-                            tokio::spawn(async move {
-                                tokio::time::sleep(restart_delay).await;
-                                let _ = respawn_tx.send(i);
-                            });
-                        } else {
-                            tracing::error!("{} died ({other:?}) after {} restarts: giving up on it", slot.name, slot.restarts);
-                            slot.finished = true;
-                            if let Ok(st) = other { results.insert(i, st); }
-                        }
-                    }
-                }
-                if driver_idx.iter().all(|&d| slots[d].finished) {
-                    break End::Completed;
-                }
-            }
-        }
-    };
-    if end != End::Completed {
-        eprintln!();
-        tracing::info!("stopping ({end:?})");
-    }
-    // Drivers first, then the fusion daemon (which drains, finishes the recording and exits).
-    stop_and_wait(&mut slots, &driver_idx, &mut rx, stop_timeout, &mut results).await;
-    stop_and_wait(
-        &mut slots,
-        &[fusion_idx],
-        &mut rx,
-        stop_timeout * 4,
-        &mut results,
-    )
-    .await;
-    status_stop.store(true, Ordering::SeqCst);
-    let _ = tokio::task::spawn_blocking(move || status.join()).await;
-    match msgs::ipc::cleanup_dead_nodes() {
-        Ok(n) if n > 0 => tracing::warn!("cleaned the shared memory of {n} dead node(s)"),
-        Ok(_) => {}
-        Err(e) => tracing::warn!("cleanup: {e}"),
-    }
-    let fusion_ok = results.get(&fusion_idx).is_some_and(|s| s.success());
+    let outcome = supervisor::supervise(&plan, interrupt).await?;
+    let end = outcome.end;
+    let fusion_ok = outcome.fusion_ok();
     if !fusion_ok {
         tracing::error!(
             "sextant-fusion did not exit cleanly ({:?}); see {}",
-            results.get(&fusion_idx),
-            slots[fusion_idx].log.display()
+            outcome.fusion_exit,
+            fusion_log.display()
         );
     }
 
     let wall_s = wall_start.elapsed().as_secs_f64();
     // The summary is of the last fusion's recording (the whole run when it never crashed).
-    let recording = recordings.last().cloned().unwrap_or(recording);
+    let recording = outcome.recordings.last().cloned().unwrap_or(recording);
     if !recording.exists() {
         bail!("no recording was written ({})", recording.display());
     }
@@ -752,15 +469,19 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
     let mut json = serde_json::to_value(&a.summary)?;
     if let Some(m) = json.as_object_mut() {
         m.insert("run_wall_time_s".into(), wall_s.into());
-        m.insert("scenario".into(), scenario_arg.clone().into());
+        m.insert(
+            "scenario".into(),
+            scenario_path.display().to_string().into(),
+        );
         m.insert("requested_duration_s".into(), duration.into());
         m.insert("speed".into(), speed.into());
         m.insert("service_prefix".into(), prefix.clone().into());
         m.insert("end".into(), format!("{end:?}").into());
-        m.insert("fusion_restarts".into(), slots[fusion_idx].restarts.into());
+        m.insert("fusion_restarts".into(), outcome.fusion_restarts.into());
         m.insert(
             "recordings".into(),
-            recordings
+            outcome
+                .recordings
                 .iter()
                 .map(|p| serde_json::Value::from(p.display().to_string()))
                 .collect(),
@@ -772,9 +493,10 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
         m.insert(
             "driver_restarts".into(),
             serde_json::Value::Object(
-                slots[..fusion_idx]
+                outcome
+                    .driver_restarts
                     .iter()
-                    .map(|s| (s.name.clone(), s.restarts.into()))
+                    .map(|(name, n)| (name.clone(), (*n).into()))
                     .collect(),
             ),
         );

@@ -103,7 +103,7 @@ impl Settings {
 
 /// Path of the scenario file.
 pub fn scenario_path() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../config/scenarios/astro_stand.toml")
+    crate::shipped_config::scenario("astro_stand.toml")
 }
 
 fn measurement(e: impl std::fmt::Display) -> ExperimentError {

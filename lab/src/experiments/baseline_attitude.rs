@@ -59,7 +59,7 @@ impl Default for Settings {
 }
 
 fn scenario_path() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../config/scenarios/vehicle.toml")
+    crate::shipped_config::scenario("vehicle.toml")
 }
 
 fn measurement(e: impl std::fmt::Display) -> ExperimentError {

@@ -72,9 +72,7 @@ use std::path::{Path, PathBuf};
 
 /// Path of a scenario file shipped in `config/scenarios`.
 pub(crate) fn scenario_path(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../config/scenarios")
-        .join(format!("{name}.toml"))
+    crate::shipped_config::scenario(&format!("{name}.toml"))
 }
 
 /// Load `config/scenarios/NAME.toml`, replacing its seed when `seed` is given.

@@ -144,9 +144,7 @@ pub(crate) fn write_summary(
 
 /// A shipped scenario file: `config/scenarios/NAME` of the repository.
 pub(crate) fn scenario_file(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../config/scenarios")
-        .join(name)
+    crate::shipped_config::scenario(name)
 }
 
 /// A step of the measurement that failed (a scenario that does not load, a solver that does

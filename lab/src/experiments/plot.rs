@@ -157,6 +157,7 @@ where
     XR::CoordDescType: ValueFormatter<f64>,
     YR::CoordDescType: ValueFormatter<f64>,
 {
+    crate::fonts::register();
     let root = BitMapBackend::new(path, (1000, 600)).into_drawing_area();
     root.fill(&WHITE)?;
     let mut ctx = ChartBuilder::on(&root)
