@@ -13,6 +13,7 @@ pub mod offline;
 pub mod scenario;
 pub mod sensors;
 pub mod sources;
+pub mod stand;
 pub mod truth;
 
 #[cfg(test)]

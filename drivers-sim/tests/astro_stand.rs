@@ -83,10 +83,9 @@ fn static_shortcut_equals_the_driver_sources() {
 
 /// The navigator's online boresight κ and its reported σ (rad) on the stand with seed `seed`,
 /// over the first `seconds`, configured as the astro-calibration experiment configures it
-/// (boresight states on with a 1° prior; the stand's accelerometer grade, turn-on bias and
-/// the temperature term at the start combined).
+/// ([`sextant_drivers_sim::stand::boresight_filter_config`]).
 fn online_boresight(seed: u64, seconds: f64) -> (Vector3<f64>, Vector3<f64>, Vector3<f64>) {
-    use fusion::navigator::{Navigator, NavigatorConfig};
+    use fusion::navigator::Navigator;
     use sextant_drivers_sim::offline::{Channel, OfflineSim, run_navigator};
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../config/scenarios/astro_stand.toml");
     let text = std::fs::read_to_string(&path)
@@ -97,14 +96,7 @@ fn online_boresight(seed: u64, seconds: f64) -> (Vector3<f64>, Vector3<f64>, Vec
     let sim = OfflineSim::with_channels(&scn, &[Channel::Imu, Channel::StarTracker, Channel::Gnss])
         .with_duration_s(seconds);
     let epoch = sim.epoch_ns();
-    let mut config = NavigatorConfig::default();
-    config.states.boresight = true;
-    config.aiding.boresight_sigma_deg = 1.0;
-    let a = &scn.imu.accel;
-    let dtemp_c = scn.spec.imu.temperature.initial_c - scn.imu.reference_temperature_c;
-    config.imu.accel_bias_ug = a.bias_ug.hypot(a.temp_coeff_ug_per_c * dtemp_c);
-    config.imu.vrw_ug_sqrt_hz = a.vrw_ug_per_rt_hz;
-    config.imu.accel_bias_rw_ug_sqrt_h = a.bias_rw_ug_per_rt_h;
+    let config = sextant_drivers_sim::stand::boresight_filter_config(&scn);
     let mut nav = Navigator::new(config).expect("config");
     run_navigator(sim, epoch, &mut nav, |_| {}).expect("run");
     assert!(nav.is_navigating());

@@ -326,7 +326,7 @@ fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
         .unwrap_or_else(|| PathBuf::from("out/experiment").join(&args.name));
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     let summary = experiments::run_by_name(&args.name, &out, true)?;
-    println!("{}", experiments::table_by_name(&args.name, &summary)?);
+    println!("{}", summary.table());
     println!("summary and plots in {}", out.display());
     Ok(())
 }

@@ -24,9 +24,9 @@
 //! * latitude from the GNSS fix and from the IMU alone (unindexed and indexed) with their
 //!   closed forms.
 
-use super::plot::{Chart, Line, color, line_chart, row_points};
+use super::plot::{Chart, Line, color, finite_points, line_chart};
 use super::{
-    ExperimentError, create_out_dir, fmt_num, measurement, progress_bar, scenario_file,
+    Experiment, ExperimentError, create_out_dir, fmt_f64, measurement, progress_bar, scenario_file,
     write_summary,
 };
 use drivers_sim::scenario::{Scenario, Trajectory, TurntableMove};
@@ -39,7 +39,7 @@ use fusion::alignment::{
 use fusion::earth::WGS84;
 use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
-use serde_json::{Value, json};
+use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
 const DEG: f64 = 180.0 / std::f64::consts::PI;
@@ -271,9 +271,123 @@ fn rms(xs: impl Iterator<Item = f64>) -> f64 {
     (s / f64::max(n, 1.0)).sqrt()
 }
 
-/// Run with the default settings.
-pub fn run(out_dir: &Path, progress: bool) -> Result<Value, ExperimentError> {
-    run_with(out_dir, progress, &Settings::default())
+/// One cell (grade, latitude, alignment time): RMS over its seeds, deg.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Row {
+    /// Grade label.
+    pub grade: String,
+    /// Latitude, deg.
+    pub latitude_deg: f64,
+    /// Static alignment time T, s.
+    pub alignment_time_s: f64,
+    /// Seeds.
+    pub runs: usize,
+    /// Heading error without indexing.
+    pub unindexed_heading_rms_deg: f64,
+    /// Heading error with 0°/180° indexing.
+    pub indexed_heading_rms_deg: f64,
+    /// Roll error without indexing.
+    pub unindexed_roll_rms_deg: f64,
+    /// Pitch error without indexing.
+    pub unindexed_pitch_rms_deg: f64,
+    /// Roll error with indexing.
+    pub indexed_roll_rms_deg: f64,
+    /// Pitch error with indexing.
+    pub indexed_pitch_rms_deg: f64,
+    /// The paper's closed form `−b_E/(Ω cos φ)` of the true mean gyro bias.
+    pub closed_form_bias_heading_rms_deg: f64,
+    /// Unindexed heading error minus that closed form.
+    pub unindexed_minus_bias_closed_form_rms_deg: f64,
+    /// Unindexed heading error minus the exact gyrocompass error of the effective sensor
+    /// error.
+    pub unindexed_minus_effective_closed_form_rms_deg: f64,
+    /// The first-order tilt coupling bound.
+    pub tilt_coupling_bound_rms_deg: f64,
+    /// Heading σ of white sensor noise alone.
+    pub white_noise_heading_sigma_deg: f64,
+    /// Predicted heading σ with indexing.
+    pub indexed_predicted_heading_sigma_deg: f64,
+    /// Latitude of the GNSS fix minus the true one.
+    pub latitude_gnss_error_rms_deg: f64,
+    /// Latitude from the IMU alone, unindexed, minus the true one.
+    pub latitude_imu_unindexed_error_rms_deg: f64,
+    /// Latitude from the IMU alone, indexed, minus the true one.
+    pub latitude_imu_indexed_error_rms_deg: f64,
+    /// Closed form of the unindexed IMU latitude error.
+    pub latitude_imu_unindexed_closed_form_rms_deg: f64,
+    /// Closed form of the indexed IMU latitude error.
+    pub latitude_imu_indexed_closed_form_rms_deg: f64,
+}
+
+/// One run (grade, latitude, alignment time, seed), deg.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RunRow {
+    /// Grade label.
+    pub grade: String,
+    /// Latitude, deg.
+    pub latitude_deg: f64,
+    /// Static alignment time T, s.
+    pub alignment_time_s: f64,
+    /// Seed of the scenario.
+    pub seed: u64,
+    /// Heading error without indexing.
+    pub unindexed_heading_error_deg: f64,
+    /// Heading error with indexing.
+    pub indexed_heading_error_deg: f64,
+    /// The paper's closed form of the true mean gyro bias.
+    pub closed_form_bias_heading_deg: f64,
+    /// The exact gyrocompass error of the effective sensor error.
+    pub closed_form_effective_heading_deg: f64,
+    /// The first-order tilt coupling bound.
+    pub tilt_coupling_bound_deg: f64,
+}
+
+/// The settings the summary was measured with.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SettingsFigures {
+    /// Latitudes, deg.
+    pub latitudes_deg: Vec<f64>,
+    /// Static alignment times, s.
+    pub alignment_times_s: Vec<f64>,
+    /// Grade labels.
+    pub grades: Vec<String>,
+    /// Seeds per cell.
+    pub seeds: u64,
+    /// Duration of the 0° → 180° move, s.
+    pub turntable_move_s: f64,
+}
+
+/// The figures of `alignment` (`summary.json`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Summary {
+    /// `"alignment"`.
+    pub experiment: String,
+    /// The paper reproduced, `"003"`.
+    pub paper: String,
+    /// The settings.
+    pub settings: SettingsFigures,
+    /// Per cell.
+    pub rows: Vec<Row>,
+    /// Per run.
+    pub runs: Vec<RunRow>,
+    /// Largest indexed / unindexed heading RMS over the cells.
+    pub indexed_over_unindexed_heading_rms_ratio_max: f64,
+}
+
+/// `sextant experiment alignment`.
+pub struct Alignment;
+
+impl Experiment for Alignment {
+    const NAME: &'static str = "alignment";
+    const DESCRIPTION: &'static str =
+        "Paper 003: gyrocompassing with and without turntable indexing";
+    type Summary = Summary;
+    fn run(out_dir: &Path, progress: bool) -> Result<Summary, ExperimentError> {
+        run_with(out_dir, progress, &Settings::default())
+    }
+    fn table(summary: &Summary) -> String {
+        table(summary)
+    }
 }
 
 /// Run with `settings`.
@@ -281,7 +395,7 @@ pub fn run_with(
     out_dir: &Path,
     progress: bool,
     settings: &Settings,
-) -> Result<Value, ExperimentError> {
+) -> Result<Summary, ExperimentError> {
     create_out_dir(out_dir)?;
     let mut jobs = Vec::new();
     for (gi, _) in settings.grades.iter().enumerate() {
@@ -335,89 +449,96 @@ pub fn run_with(
                 let (_, noise_h) = expected_sigmas(&spec, t, latr, omega, 9.81);
                 let (_, idx_h) = expected_indexed_sigmas(&spec, q_g, q_a, t, latr, omega, 9.81);
                 let f = |k: &dyn Fn(&RunFigures) -> f64| rms(cell.iter().map(|r| k(r))) * DEG;
-                rows.push(json!({
-                    "grade": gs.label,
-                    "latitude_deg": lat,
-                    "alignment_time_s": t,
-                    "runs": cell.len(),
-                    "unindexed_heading_rms_deg": f(&|r| r.unindexed_rph_rad[2]),
-                    "indexed_heading_rms_deg": f(&|r| r.indexed_rph_rad[2]),
-                    "unindexed_roll_rms_deg": f(&|r| r.unindexed_rph_rad[0]),
-                    "unindexed_pitch_rms_deg": f(&|r| r.unindexed_rph_rad[1]),
-                    "indexed_roll_rms_deg": f(&|r| r.indexed_rph_rad[0]),
-                    "indexed_pitch_rms_deg": f(&|r| r.indexed_rph_rad[1]),
-                    "closed_form_bias_heading_rms_deg": f(&|r| r.closed_form_bias_heading_rad),
-                    "unindexed_minus_bias_closed_form_rms_deg":
-                        f(&|r| r.unindexed_rph_rad[2] - r.closed_form_bias_heading_rad),
-                    "unindexed_minus_effective_closed_form_rms_deg":
-                        f(&|r| r.unindexed_rph_rad[2] - r.closed_form_effective_heading_rad),
-                    "tilt_coupling_bound_rms_deg": f(&|r| r.tilt_coupling_rad),
-                    "white_noise_heading_sigma_deg": noise_h * DEG,
-                    "indexed_predicted_heading_sigma_deg": idx_h * DEG,
-                    "latitude_gnss_error_rms_deg": f(&|r| r.lat_gnss_err_rad),
-                    "latitude_imu_unindexed_error_rms_deg": f(&|r| r.lat_imu_unindexed_err_rad),
-                    "latitude_imu_indexed_error_rms_deg": f(&|r| r.lat_imu_indexed_err_rad),
-                    "latitude_imu_unindexed_closed_form_rms_deg":
-                        f(&|r| r.lat_closed_unindexed_rad),
-                    "latitude_imu_indexed_closed_form_rms_deg": f(&|r| r.lat_closed_indexed_rad),
-                }));
+                rows.push(Row {
+                    grade: gs.label.clone(),
+                    latitude_deg: lat,
+                    alignment_time_s: t,
+                    runs: cell.len(),
+                    unindexed_heading_rms_deg: f(&|r| r.unindexed_rph_rad[2]),
+                    indexed_heading_rms_deg: f(&|r| r.indexed_rph_rad[2]),
+                    unindexed_roll_rms_deg: f(&|r| r.unindexed_rph_rad[0]),
+                    unindexed_pitch_rms_deg: f(&|r| r.unindexed_rph_rad[1]),
+                    indexed_roll_rms_deg: f(&|r| r.indexed_rph_rad[0]),
+                    indexed_pitch_rms_deg: f(&|r| r.indexed_rph_rad[1]),
+                    closed_form_bias_heading_rms_deg: f(&|r| r.closed_form_bias_heading_rad),
+                    unindexed_minus_bias_closed_form_rms_deg: f(&|r| {
+                        r.unindexed_rph_rad[2] - r.closed_form_bias_heading_rad
+                    }),
+                    unindexed_minus_effective_closed_form_rms_deg: f(&|r| {
+                        r.unindexed_rph_rad[2] - r.closed_form_effective_heading_rad
+                    }),
+                    tilt_coupling_bound_rms_deg: f(&|r| r.tilt_coupling_rad),
+                    white_noise_heading_sigma_deg: noise_h * DEG,
+                    indexed_predicted_heading_sigma_deg: idx_h * DEG,
+                    latitude_gnss_error_rms_deg: f(&|r| r.lat_gnss_err_rad),
+                    latitude_imu_unindexed_error_rms_deg: f(&|r| r.lat_imu_unindexed_err_rad),
+                    latitude_imu_indexed_error_rms_deg: f(&|r| r.lat_imu_indexed_err_rad),
+                    latitude_imu_unindexed_closed_form_rms_deg: f(&|r| r.lat_closed_unindexed_rad),
+                    latitude_imu_indexed_closed_form_rms_deg: f(&|r| r.lat_closed_indexed_rad),
+                });
             }
         }
     }
     for ((gi, lat, t, seed), r) in jobs.iter().zip(&runs) {
-        per_run.push(json!({
-            "grade": settings.grades[*gi].label, "latitude_deg": lat, "alignment_time_s": t,
-            "seed": seed,
-            "unindexed_heading_error_deg": r.unindexed_rph_rad[2] * DEG,
-            "indexed_heading_error_deg": r.indexed_rph_rad[2] * DEG,
-            "closed_form_bias_heading_deg": r.closed_form_bias_heading_rad * DEG,
-            "closed_form_effective_heading_deg": r.closed_form_effective_heading_rad * DEG,
-            "tilt_coupling_bound_deg": r.tilt_coupling_rad * DEG,
-        }));
+        per_run.push(RunRow {
+            grade: settings.grades[*gi].label.clone(),
+            latitude_deg: *lat,
+            alignment_time_s: *t,
+            seed: *seed,
+            unindexed_heading_error_deg: r.unindexed_rph_rad[2] * DEG,
+            indexed_heading_error_deg: r.indexed_rph_rad[2] * DEG,
+            closed_form_bias_heading_deg: r.closed_form_bias_heading_rad * DEG,
+            closed_form_effective_heading_deg: r.closed_form_effective_heading_rad * DEG,
+            tilt_coupling_bound_deg: r.tilt_coupling_rad * DEG,
+        });
     }
     let ratio_max = rows
         .iter()
-        .filter_map(|r| {
-            Some(r["indexed_heading_rms_deg"].as_f64()? / r["unindexed_heading_rms_deg"].as_f64()?)
+        .filter(|r| {
+            r.indexed_heading_rms_deg.is_finite() && r.unindexed_heading_rms_deg.is_finite()
         })
+        .map(|r| r.indexed_heading_rms_deg / r.unindexed_heading_rms_deg)
         .fold(0.0, f64::max);
-    let summary = json!({
-        "experiment": "alignment",
-        "paper": "003",
-        "settings": {
-            "latitudes_deg": settings.latitudes_deg,
-            "alignment_times_s": settings.times_s,
-            "grades": settings.grades.iter().map(|g| g.label.clone()).collect::<Vec<_>>(),
-            "seeds": settings.seeds,
-            "turntable_move_s": settings.move_s,
+    let summary = Summary {
+        experiment: Alignment::NAME.into(),
+        paper: "003".into(),
+        settings: SettingsFigures {
+            latitudes_deg: settings.latitudes_deg.clone(),
+            alignment_times_s: settings.times_s.clone(),
+            grades: settings.grades.iter().map(|g| g.label.clone()).collect(),
+            seeds: settings.seeds,
+            turntable_move_s: settings.move_s,
         },
-        "rows": rows,
-        "runs": per_run,
-        "indexed_over_unindexed_heading_rms_ratio_max": ratio_max,
-    });
+        rows,
+        runs: per_run,
+        indexed_over_unindexed_heading_rms_ratio_max: ratio_max,
+    };
     write_summary(out_dir, &summary)?;
     plots(out_dir, settings, &summary)?;
     Ok(summary)
 }
 
-fn plots(out_dir: &Path, settings: &Settings, summary: &Value) -> Result<(), ExperimentError> {
-    let rows = summary["rows"].as_array().cloned().unwrap_or_default();
+/// A figure of a cell, for plotting.
+type RowFigure = fn(&Row) -> f64;
+
+fn plots(out_dir: &Path, settings: &Settings, summary: &Summary) -> Result<(), ExperimentError> {
+    let rows = &summary.rows;
     let t_max = settings.times_s.iter().cloned().fold(0.0, f64::max);
     let lines = heading_lines(
         settings,
-        &rows,
-        |r| r["alignment_time_s"] == t_max,
-        "latitude_deg",
+        rows,
+        |r| r.alignment_time_s == t_max,
+        |r| r.latitude_deg,
         [
-            ("unindexed_heading_rms_deg", "unindexed", false),
-            ("indexed_heading_rms_deg", "indexed 0/180", false),
+            (|r| r.unindexed_heading_rms_deg, "unindexed", false),
+            (|r| r.indexed_heading_rms_deg, "indexed 0/180", false),
             (
-                "closed_form_bias_heading_rms_deg",
+                |r| r.closed_form_bias_heading_rms_deg,
                 "closed form b_E/(Ω cos φ)",
                 true,
             ),
             (
-                "indexed_predicted_heading_sigma_deg",
+                |r| r.indexed_predicted_heading_sigma_deg,
                 "indexed prediction",
                 true,
             ),
@@ -443,15 +564,19 @@ fn plots(out_dir: &Path, settings: &Settings, summary: &Value) -> Result<(), Exp
         .unwrap_or(settings.latitudes_deg[0]);
     let lines = heading_lines(
         settings,
-        &rows,
-        |r| r["latitude_deg"] == lat_pick,
-        "alignment_time_s",
+        rows,
+        |r| r.latitude_deg == lat_pick,
+        |r| r.alignment_time_s,
         [
-            ("unindexed_heading_rms_deg", "unindexed", false),
-            ("indexed_heading_rms_deg", "indexed 0/180", false),
-            ("white_noise_heading_sigma_deg", "white-noise floor", true),
+            (|r| r.unindexed_heading_rms_deg, "unindexed", false),
+            (|r| r.indexed_heading_rms_deg, "indexed 0/180", false),
             (
-                "indexed_predicted_heading_sigma_deg",
+                |r| r.white_noise_heading_sigma_deg,
+                "white-noise floor",
+                true,
+            ),
+            (
+                |r| r.indexed_predicted_heading_sigma_deg,
                 "indexed prediction",
                 true,
             ),
@@ -471,37 +596,37 @@ fn plots(out_dir: &Path, settings: &Settings, summary: &Value) -> Result<(), Exp
     )
 }
 
-/// One line per grade and per `(summary key, legend, dashed)` of `series`: the rows of the
-/// grade that `in_cell` selects, `x_key` against the key.
+/// One line per grade and per `(figure, legend, dashed)` of `series`: the rows of the grade
+/// that `in_cell` selects, `x` against the figure.
 fn heading_lines(
     settings: &Settings,
-    rows: &[Value],
-    in_cell: impl Fn(&Value) -> bool,
-    x_key: &str,
-    series: [(&str, &str, bool); 4],
+    rows: &[Row],
+    in_cell: impl Fn(&Row) -> bool,
+    x: RowFigure,
+    series: [(RowFigure, &str, bool); 4],
 ) -> Vec<Line> {
     let mut lines = Vec::new();
     for g in &settings.grades {
-        for (key, what, dashed) in series {
-            lines.push(Line {
-                label: format!("{} {what}", g.label),
-                points: row_points(
-                    rows,
-                    |r| r["grade"] == g.label.as_str() && in_cell(r),
-                    x_key,
-                    key,
-                ),
-                color: color(lines.len()),
-                dashed,
-                markers: true,
-            });
+        for (y, what, dashed) in series {
+            let points = finite_points(
+                rows.iter()
+                    .filter(|r| r.grade == g.label && in_cell(r))
+                    .map(|r| (x(r), y(r))),
+            );
+            let label = format!("{} {what}", g.label);
+            let line = if dashed {
+                Line::dashed(label, points, color(lines.len()))
+            } else {
+                Line::solid(label, points, color(lines.len()))
+            };
+            lines.push(line.with_markers());
         }
     }
     lines
 }
 
 /// Human table.
-pub fn table(summary: &Value) -> String {
+pub fn table(summary: &Summary) -> String {
     let mut out = String::from(
         "Alignment by gyrocompassing, without / with 0°/180° turntable indexing (paper 003)\n\
          RMS over seeds; heading errors in degrees; closed form −b_E/(Ω cos φ) from the true mean bias\n\n",
@@ -522,45 +647,32 @@ pub fn table(summary: &Value) -> String {
         "φ IMU",
         "φ IMU idx"
     ));
-    let rows = summary["rows"].as_array().cloned().unwrap_or_default();
-    for (i, r) in rows.iter().enumerate() {
-        let p = |k: &str, prec: usize, sci: bool| {
-            fmt_num(summary, &format!("/rows/{i}/{k}"), prec, sci)
-        };
-        let lvl_u = rms([
-            r["unindexed_roll_rms_deg"].as_f64().unwrap_or(f64::NAN),
-            r["unindexed_pitch_rms_deg"].as_f64().unwrap_or(f64::NAN),
-        ]
-        .into_iter())
+    for r in &summary.rows {
+        let lvl_u = rms([r.unindexed_roll_rms_deg, r.unindexed_pitch_rms_deg].into_iter())
             * std::f64::consts::SQRT_2;
-        let lvl_i = rms([
-            r["indexed_roll_rms_deg"].as_f64().unwrap_or(f64::NAN),
-            r["indexed_pitch_rms_deg"].as_f64().unwrap_or(f64::NAN),
-        ]
-        .into_iter())
+        let lvl_i = rms([r.indexed_roll_rms_deg, r.indexed_pitch_rms_deg].into_iter())
             * std::f64::consts::SQRT_2;
         out.push_str(&format!(
             "{:<11} {:>7} {:>6} | {:>9} {:>9} {:>9} | {:>9} {:>9} | {:>8.1e} {:>8.1e} | {:>9} {:>9} {:>9}\n",
-            r["grade"].as_str().unwrap_or("?"),
-            p("latitude_deg", 3, false),
-            p("alignment_time_s", 0, false),
-            p("unindexed_heading_rms_deg", 2, true),
-            p("closed_form_bias_heading_rms_deg", 2, true),
-            p("unindexed_minus_effective_closed_form_rms_deg", 1, true),
-            p("indexed_heading_rms_deg", 2, true),
-            p("indexed_predicted_heading_sigma_deg", 2, true),
+            r.grade,
+            fmt_f64(r.latitude_deg, 3, false),
+            fmt_f64(r.alignment_time_s, 0, false),
+            fmt_f64(r.unindexed_heading_rms_deg, 2, true),
+            fmt_f64(r.closed_form_bias_heading_rms_deg, 2, true),
+            fmt_f64(r.unindexed_minus_effective_closed_form_rms_deg, 1, true),
+            fmt_f64(r.indexed_heading_rms_deg, 2, true),
+            fmt_f64(r.indexed_predicted_heading_sigma_deg, 2, true),
             lvl_u,
             lvl_i,
-            p("latitude_gnss_error_rms_deg", 1, true),
-            p("latitude_imu_unindexed_error_rms_deg", 2, true),
-            p("latitude_imu_indexed_error_rms_deg", 2, true),
+            fmt_f64(r.latitude_gnss_error_rms_deg, 1, true),
+            fmt_f64(r.latitude_imu_unindexed_error_rms_deg, 2, true),
+            fmt_f64(r.latitude_imu_indexed_error_rms_deg, 2, true),
         ));
     }
     out.push_str(&format!(
         "\nlargest indexed/unindexed heading RMS ratio: {}\n",
-        fmt_num(
-            summary,
-            "/indexed_over_unindexed_heading_rms_ratio_max",
+        fmt_f64(
+            summary.indexed_over_unindexed_heading_rms_ratio_max,
             3,
             false
         )
@@ -617,17 +729,17 @@ mod tests {
         let mis = scn.imu.gyro.misalignment_arcsec / 206_264.8;
         let arw = scn.imu.gyro.arw_deg_per_rt_h.to_radians() / 60.0;
         let omega = WGS84.omega_ie_rad_s;
-        for run in s["runs"].as_array().unwrap() {
-            let lat = run["latitude_deg"].as_f64().unwrap().to_radians();
-            let g = |k: &str| run[k].as_f64().unwrap().to_radians();
+        assert!(!s.runs.is_empty());
+        for run in &s.runs {
+            let lat = run.latitude_deg.to_radians();
             let (un, idx) = (
-                g("unindexed_heading_error_deg"),
-                g("indexed_heading_error_deg"),
+                run.unindexed_heading_error_deg.to_radians(),
+                run.indexed_heading_error_deg.to_radians(),
             );
             let (cb, ce, tc) = (
-                g("closed_form_bias_heading_deg"),
-                g("closed_form_effective_heading_deg"),
-                g("tilt_coupling_bound_deg"),
+                run.closed_form_bias_heading_deg.to_radians(),
+                run.closed_form_effective_heading_deg.to_radians(),
+                run.tilt_coupling_bound_deg.to_radians(),
             );
             assert!(
                 (un - ce).abs() < 1.5 * tc + 1e-6,

@@ -4,43 +4,41 @@
 //! each experiment's name to its summary. `docs/RESULTS.md` in the repository is this file,
 //! generated with `--out docs`.
 
-use super::{ExperimentError, create_out_dir, names, run_by_name, table_by_name, write_summary};
+use super::{ExperimentError, create_out_dir, describe, names, run_by_name, write_summary};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::Path;
 use std::time::Instant;
 
-/// One line about what each experiment reproduces (the heading text of its section).
-fn describe(name: &str) -> &'static str {
-    match name {
-        "integrators" => {
-            "Paper 002: convergence order of the strapdown integrators (Euler, Heun, RK4)"
-        }
-        "schuler" => {
-            "Paper 002: Schuler period and vertical-channel divergence of free inertial navigation"
-        }
-        "gravity" => "Paper 002: J2 gravity against normal gravity and a point mass",
-        "tight-coupling" => {
-            "Paper 003 / issue 5: tight vs loose vs free inertial with 0–≥4 satellites"
-        }
-        "gnss-denied-astro" => {
-            "Paper 000 / issue 5: 10 h astro-inertial without GNSS against its error floor"
-        }
-        "consistency" => "Issue 5: Monte Carlo NEES of the filter against the chi-square band",
-        "inertial-budget" => {
-            "Issue 5: error budget of 600 s free inertial after GNSS (each IMU error source alone)"
-        }
-        "astro-calibration" => "Paper 000: star-tracker / IMU boresight calibration",
-        "alignment" => "Paper 003: gyrocompassing with and without turntable indexing",
-        "baseline-attitude" => "Paper 003: dual-baseline GNSS attitude",
-        "redundancy" => "Paper 004: structural redundancy, skewed vs orthogonal, fault isolation",
-        _ => "",
+/// The name of this pseudo-experiment on the command line.
+pub const NAME: &str = "all";
+
+/// Every experiment's summary by name (an experiment that failed is absent); `summary.json`
+/// of `all` is this map.
+#[derive(Debug, Clone, Default, Serialize)]
+#[serde(transparent)]
+pub struct Summary(pub BTreeMap<String, super::Summary>);
+
+impl<'de> Deserialize<'de> for Summary {
+    /// Each entry is read as the summary of the experiment its key names.
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        BTreeMap::<String, serde_json::Value>::deserialize(d)?
+            .into_iter()
+            .map(|(name, json)| {
+                let summary =
+                    super::Summary::from_value(&name, json).map_err(serde::de::Error::custom)?;
+                Ok((name, summary))
+            })
+            .collect::<Result<_, D::Error>>()
+            .map(Summary)
     }
 }
 
 /// Run every experiment into `out_dir/NAME` and write `out_dir/RESULTS.md` and
 /// `out_dir/summary.json`. An experiment that fails is reported in RESULTS.md with its error and
 /// the others still run; the call fails at the end if any did.
-pub fn run(out_dir: &Path, progress: bool) -> Result<serde_json::Value, ExperimentError> {
+pub fn run(out_dir: &Path, progress: bool) -> Result<Summary, ExperimentError> {
     create_out_dir(out_dir)?;
     let mut md = String::from(
         "# Sextant — experiment results\n\n\
@@ -49,7 +47,7 @@ pub fn run(out_dir: &Path, progress: bool) -> Result<serde_json::Value, Experime
          label as such). Each section is one `sextant experiment NAME`; its `summary.json` and \
          plots are in the `NAME/` directory next to this file.\n\n",
     );
-    let mut all = serde_json::Map::new();
+    let mut all = Summary::default();
     let mut failed = Vec::new();
     for name in names() {
         let dir = out_dir.join(name);
@@ -62,11 +60,9 @@ pub fn run(out_dir: &Path, progress: bool) -> Result<serde_json::Value, Experime
         if !what.is_empty() {
             let _ = writeln!(md, "{what}.\n");
         }
-        match run_by_name(name, &dir, progress).and_then(|s| {
-            let t = table_by_name(name, &s)?;
-            Ok((s, t))
-        }) {
-            Ok((summary, table)) => {
+        match run_by_name(name, &dir, progress) {
+            Ok(summary) => {
+                let table = summary.table();
                 let secs = t0.elapsed().as_secs_f64();
                 let _ = writeln!(
                     md,
@@ -77,7 +73,7 @@ pub fn run(out_dir: &Path, progress: bool) -> Result<serde_json::Value, Experime
                 for png in pngs(&dir) {
                     let _ = writeln!(md, "![{name}: {png}]({name}/{png})\n");
                 }
-                all.insert((*name).to_string(), summary);
+                all.0.insert((*name).to_string(), summary);
             }
             Err(e) => {
                 let _ = writeln!(md, "**FAILED**: {e}\n");
@@ -85,7 +81,7 @@ pub fn run(out_dir: &Path, progress: bool) -> Result<serde_json::Value, Experime
             }
         }
     }
-    let summary = serde_json::Value::Object(all);
+    let summary = all;
     write_summary(out_dir, &summary)?;
     let path = out_dir.join("RESULTS.md");
     std::fs::write(&path, md).map_err(|source| ExperimentError::Io { path, source })?;
@@ -112,14 +108,16 @@ fn pngs(dir: &Path) -> Vec<String> {
     v
 }
 
-/// The table of `all`: one line per experiment with the number of figures in its summary.
-pub fn table(summary: &serde_json::Value) -> String {
+/// The table of `all`: one line per experiment with the number of figures in its summary
+/// (the top-level entries of its `summary.json`).
+pub fn table(summary: &Summary) -> String {
     let mut s = String::from("experiment            figures\n");
-    if let Some(m) = summary.as_object() {
-        for (k, v) in m {
-            let n = v.as_object().map(|o| o.len()).unwrap_or(0);
-            let _ = writeln!(s, "{k:<21} {n:>7}");
-        }
+    for (k, v) in &summary.0 {
+        let n = serde_json::to_value(v)
+            .ok()
+            .and_then(|v| v.as_object().map(serde_json::Map::len))
+            .unwrap_or(0);
+        let _ = writeln!(s, "{k:<21} {n:>7}");
     }
     s.push_str("tables and plots: RESULTS.md\n");
     s

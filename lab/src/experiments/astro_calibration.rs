@@ -21,8 +21,11 @@
 //! - the paper's three stages with the celestial rotation reduced to Earth rotation only
 //!   (sidereal time, as the paper; and ERA) — what ignoring precession–nutation costs.
 
-use super::plot::{Chart, Line, color, line_chart};
-use super::{ExperimentError, create_out_dir, fmt_num, progress_bar, write_summary};
+use super::plot::{Chart, Line, color, finite_points, line_chart};
+use super::{
+    Experiment, ExperimentError, create_out_dir, fmt_f64, fmt_opt, mean_of_finite, nan_if_null,
+    progress_bar, write_summary,
+};
 use drivers_sim::imu::ImuErrorModel;
 use drivers_sim::scenario::Scenario;
 use drivers_sim::sensors::StarTrackerSim;
@@ -34,7 +37,7 @@ use fusion::boresight::{
 use fusion::time::{GpsTime, NS_PER_S};
 use nalgebra::{Matrix3, Vector2, Vector3};
 use rayon::prelude::*;
-use serde_json::{Value, json};
+use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
 /// The paper's table: per record (latitude error deg, m, calibrated deg, m, longitude error
@@ -247,37 +250,21 @@ fn fusion_wrap(a: f64) -> f64 {
 }
 
 /// The navigator's online boresight estimate over the first `online_s` of record `k`: the
-/// full filter (IMU, star tracker, GNSS; default tuning with a 1° boresight prior, since the
-/// default 0.1° would make the 0.57° misalignment a 5σ outlier for the innovation gate) fed by
-/// the simulated drivers' time-ordered stream ([`drivers_sim::offline`]); accelerometer
-/// noise and bias σ set to the stand's. Returns κ̂ and the
-/// σ the navigator reports, rad.
+/// full filter (IMU, star tracker, GNSS; the stand's configuration,
+/// [`drivers_sim::stand::boresight_filter_config`]) fed by the simulated drivers'
+/// time-ordered stream ([`drivers_sim::offline`]). Returns κ̂ and the σ the navigator
+/// reports, rad.
 fn online_estimate(
     k: usize,
     online_s: f64,
 ) -> Result<(Vector3<f64>, Vector3<f64>), ExperimentError> {
     use drivers_sim::offline::{Channel, OfflineSim, run_navigator};
-    use fusion::navigator::{Navigator, NavigatorConfig};
+    use fusion::navigator::Navigator;
     let scn = record_scenario(k)?;
     let sim = OfflineSim::with_channels(&scn, &[Channel::Imu, Channel::StarTracker, Channel::Gnss])
         .with_duration_s(online_s);
     let epoch = sim.epoch_ns();
-    let mut config = NavigatorConfig::default();
-    config.states.boresight = true;
-    config.aiding.boresight_sigma_deg = 1.0;
-    // The filter is told the stand's accelerometer grade (the default tuning is for the
-    // 50 µg navigation grade; this stand's accelerometers are 250 µg). The simulated bias at
-    // the start is the turn-on bias plus the temperature term `c·(T₀ − T_ref)` with a
-    // per-axis coefficient c of σ `temp_coeff` (drivers-sim/src/imu.rs): 10 µg/°C · 5 °C =
-    // 50 µg here, so the filter's initial σ is the root sum of squares of the two (255 µg).
-    // The later drift of the temperature term (5 µg/h) is inside the bias random walk.
-    let a = &scn.imu.accel;
-    let dtemp_c = scn.spec.imu.temperature.initial_c - scn.imu.reference_temperature_c;
-    config.imu.accel_bias_ug = a.bias_ug.hypot(a.temp_coeff_ug_per_c * dtemp_c);
-    let gy = &scn.imu.gyro;
-    config.imu.gyro_bias_deg_h = gy.bias_deg_h.hypot(gy.temp_coeff_deg_h_per_c * dtemp_c);
-    config.imu.vrw_ug_sqrt_hz = a.vrw_ug_per_rt_hz;
-    config.imu.accel_bias_rw_ug_sqrt_h = a.bias_rw_ug_per_rt_h;
+    let config = drivers_sim::stand::boresight_filter_config(&scn);
     let mut nav = Navigator::new(config).map_err(measurement)?;
     run_navigator(sim, epoch, &mut nav, |_| {}).map_err(measurement)?;
     if !nav.is_navigating() {
@@ -295,22 +282,396 @@ struct MethodResult {
     errors: FixErrors,
 }
 
-fn method_json(m: &MethodResult, kappa_true: &Vector3<f64>) -> Value {
-    let tilt_err =
-        boresight::mounting_tilt_rad(&m.kappa_rad) - boresight::mounting_tilt_rad(kappa_true);
-    json!({
-        "kappa_deg": [m.kappa_rad.x.to_degrees(), m.kappa_rad.y.to_degrees(), m.kappa_rad.z.to_degrees()],
-        "kappa_error_deg": (m.kappa_rad - kappa_true).iter().map(|v| v.to_degrees()).collect::<Vec<_>>(),
-        "mounting_tilt_error_deg": [tilt_err.x.to_degrees(), tilt_err.y.to_degrees()],
-        "lat_error_mean_abs_deg": m.errors.mean_abs_dlat_rad.to_degrees(),
-        "lat_error_mean_abs_m": m.errors.mean_abs_north_m,
-        "lon_error_mean_abs_deg": m.errors.mean_abs_dlon_rad.to_degrees(),
-        "lon_error_mean_abs_m": m.errors.mean_abs_east_m,
-        "lat_error_mean_deg": m.errors.mean_dlat_rad.to_degrees(),
-        "lon_error_mean_deg": m.errors.mean_dlon_rad.to_degrees(),
-        "horizontal_error_rms_m": m.errors.rms_horizontal_m,
-        "mean_fix_error_m": m.errors.mean_fix_error_m,
-    })
+/// One calibration method on one record: its κ and the errors of the astro fixes after the
+/// calibration window with it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MethodFigures {
+    /// κ1..κ3, deg.
+    pub kappa_deg: [f64; 3],
+    /// κ − true κ, deg.
+    pub kappa_error_deg: Vec<f64>,
+    /// Error of the mounting's tilt (x, y), deg.
+    pub mounting_tilt_error_deg: [f64; 2],
+    /// Mean |latitude error|, deg.
+    pub lat_error_mean_abs_deg: f64,
+    /// Mean |latitude error|, m.
+    pub lat_error_mean_abs_m: f64,
+    /// Mean |longitude error|, deg.
+    pub lon_error_mean_abs_deg: f64,
+    /// Mean |longitude error|, m.
+    pub lon_error_mean_abs_m: f64,
+    /// Mean latitude error, deg.
+    pub lat_error_mean_deg: f64,
+    /// Mean longitude error, deg.
+    pub lon_error_mean_deg: f64,
+    /// RMS horizontal error of a single fix, m.
+    pub horizontal_error_rms_m: f64,
+    /// Horizontal error of the mean fix, m.
+    pub mean_fix_error_m: f64,
+}
+
+impl MethodFigures {
+    fn of(m: &MethodResult, kappa_true: &Vector3<f64>) -> Self {
+        let tilt_err =
+            boresight::mounting_tilt_rad(&m.kappa_rad) - boresight::mounting_tilt_rad(kappa_true);
+        Self {
+            kappa_deg: [
+                m.kappa_rad.x.to_degrees(),
+                m.kappa_rad.y.to_degrees(),
+                m.kappa_rad.z.to_degrees(),
+            ],
+            kappa_error_deg: degrees(&(m.kappa_rad - kappa_true)),
+            mounting_tilt_error_deg: [tilt_err.x.to_degrees(), tilt_err.y.to_degrees()],
+            lat_error_mean_abs_deg: m.errors.mean_abs_dlat_rad.to_degrees(),
+            lat_error_mean_abs_m: m.errors.mean_abs_north_m,
+            lon_error_mean_abs_deg: m.errors.mean_abs_dlon_rad.to_degrees(),
+            lon_error_mean_abs_m: m.errors.mean_abs_east_m,
+            lat_error_mean_deg: m.errors.mean_dlat_rad.to_degrees(),
+            lon_error_mean_deg: m.errors.mean_dlon_rad.to_degrees(),
+            horizontal_error_rms_m: m.errors.rms_horizontal_m,
+            mean_fix_error_m: m.errors.mean_fix_error_m,
+        }
+    }
+}
+
+/// The components of `v`, deg.
+fn degrees(v: &Vector3<f64>) -> Vec<f64> {
+    v.iter().map(|v| v.to_degrees()).collect()
+}
+
+/// The 3-stage calibration with one celestial model.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ThreeStageFigures {
+    /// κ and the fix errors.
+    #[serde(flatten)]
+    pub result: MethodFigures,
+    /// Mean fix error in the window after stage 1, m.
+    pub stage1_window_error_m: f64,
+    /// Descent steps of stage 3.
+    pub stage3_iterations: usize,
+    /// Mean fix error in the window after stage 3, m.
+    pub stage3_window_error_m: f64,
+    /// Stage 3 stopped below the threshold.
+    pub stage3_reached_threshold: bool,
+}
+
+/// The 3-stage calibration per celestial model.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ByCelestialModel {
+    /// IAU 2006/2000A.
+    pub full: ThreeStageFigures,
+    /// Earth rotation only, GMST (the paper's).
+    pub gmst_only: ThreeStageFigures,
+    /// Earth rotation only, ERA.
+    pub era_only: ThreeStageFigures,
+}
+
+/// Stage 3 alone from the identity matrix.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DescentFigures {
+    /// κ and the fix errors.
+    pub result: MethodFigures,
+    /// Descent steps.
+    pub iterations: usize,
+    /// Mean fix error in the window at the start, m.
+    pub window_error_start_m: f64,
+    /// Mean fix error in the window at the end, m.
+    pub window_error_end_m: f64,
+    /// It stopped below the threshold.
+    pub reached_threshold: bool,
+}
+
+/// The least-squares estimator's own figures.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EstimatorFigures {
+    /// σ of κ1..κ3, deg.
+    pub kappa_sigma_deg: Vec<f64>,
+    /// σ of the mounting's tilt (x, y), deg.
+    pub mounting_tilt_sigma_deg: [f64; 2],
+    /// χ² per degree of freedom of the residuals.
+    pub chi2_per_dof: f64,
+    /// Gauss–Newton iterations.
+    pub iterations: usize,
+    /// Samples used.
+    pub samples: usize,
+}
+
+impl EstimatorFigures {
+    fn of(r: &boresight::LeastSquaresResult) -> Self {
+        Self {
+            kappa_sigma_deg: degrees(&r.sigma_rad()),
+            mounting_tilt_sigma_deg: [
+                r.tilt_covariance_rad2[(0, 0)].sqrt().to_degrees(),
+                r.tilt_covariance_rad2[(1, 1)].sqrt().to_degrees(),
+            ],
+            chi2_per_dof: r.chi2_per_dof,
+            iterations: r.iterations,
+            samples: r.samples,
+        }
+    }
+}
+
+/// A least-squares calibration.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LeastSquaresFigures {
+    /// κ and the fix errors.
+    pub result: MethodFigures,
+    /// The estimator's figures.
+    pub estimator: EstimatorFigures,
+}
+
+/// The navigator's online boresight estimate over the start of one record.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct OnlineRecord {
+    /// Length of the online run, s.
+    pub duration_s: f64,
+    /// κ̂, deg.
+    pub kappa_deg: Vec<f64>,
+    /// The σ the navigator reports, deg.
+    pub kappa_sigma_deg: Vec<f64>,
+    /// κ̂ − true κ, deg.
+    pub kappa_error_deg: Vec<f64>,
+    /// κ̂ − the 3-stage κ, deg.
+    pub kappa_minus_three_stage_deg: Vec<f64>,
+    /// Mounting tilt of κ̂ − that of the 3-stage κ (x, y), deg.
+    pub mounting_tilt_minus_three_stage_deg: [f64; 2],
+    /// Mounting tilt of κ̂ − the true one (x, y), deg.
+    pub mounting_tilt_error_deg: [f64; 2],
+}
+
+/// One simulated record.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RecordFigures {
+    /// The online filter's estimate (absent when not run).
+    pub online_filter: Option<OnlineRecord>,
+    /// Record number, 1-based.
+    pub record: usize,
+    /// Its seed.
+    pub seed: usize,
+    /// 1 Hz samples.
+    pub samples: usize,
+    /// Samples after the calibration window (evaluated).
+    pub evaluated_samples: usize,
+    /// True κ, deg.
+    pub kappa_true_deg: [f64; 3],
+    /// Mean error of the IMU's roll and pitch over the window, deg.
+    pub imu_vertical_error_window_deg: [f64; 2],
+    /// The same over the rest of the record, deg.
+    pub imu_vertical_error_after_window_deg: [f64; 2],
+    /// The window's vertical error as the mounting tilt it makes up for (x, y), deg.
+    pub vertical_error_absorbed_as_mounting_tilt_deg: [f64; 2],
+    /// Gyrocompass heading error, deg.
+    pub gyrocompass_heading_error_deg: f64,
+    /// Without calibration (κ = 0).
+    pub uncalibrated: MethodFigures,
+    /// The 3-stage calibration, full celestial model.
+    pub three_stage: ThreeStageFigures,
+    /// The 3-stage calibration per celestial model.
+    pub three_stage_by_celestial_model: ByCelestialModel,
+    /// Stage 3 alone from the identity.
+    pub descent_from_identity: DescentFigures,
+    /// Least squares over the window.
+    pub least_squares_window: LeastSquaresFigures,
+    /// Least squares over every sample.
+    pub least_squares_all_samples: LeastSquaresFigures,
+}
+
+/// Fix errors of a method averaged over the records (undefined ones left out).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct MeanErrors {
+    /// Mean |latitude error|, deg.
+    #[serde(deserialize_with = "nan_if_null")]
+    pub lat_error_mean_abs_deg: f64,
+    /// Mean |latitude error|, m.
+    #[serde(deserialize_with = "nan_if_null")]
+    pub lat_error_mean_abs_m: f64,
+    /// Mean |longitude error|, deg.
+    #[serde(deserialize_with = "nan_if_null")]
+    pub lon_error_mean_abs_deg: f64,
+    /// Mean |longitude error|, m.
+    #[serde(deserialize_with = "nan_if_null")]
+    pub lon_error_mean_abs_m: f64,
+    /// RMS horizontal error of a single fix, m.
+    #[serde(deserialize_with = "nan_if_null")]
+    pub horizontal_error_rms_m: f64,
+    /// Horizontal error of the mean fix, m.
+    #[serde(deserialize_with = "nan_if_null")]
+    pub mean_fix_error_m: f64,
+}
+
+impl MeanErrors {
+    /// The means over `records` of the method that `method` selects.
+    fn over(records: &[RecordFigures], method: impl Fn(&RecordFigures) -> &MethodFigures) -> Self {
+        let mean =
+            |f: fn(&MethodFigures) -> f64| mean_of_finite(records.iter().map(|r| f(method(r))));
+        Self {
+            lat_error_mean_abs_deg: mean(|m| m.lat_error_mean_abs_deg),
+            lat_error_mean_abs_m: mean(|m| m.lat_error_mean_abs_m),
+            lon_error_mean_abs_deg: mean(|m| m.lon_error_mean_abs_deg),
+            lon_error_mean_abs_m: mean(|m| m.lon_error_mean_abs_m),
+            horizontal_error_rms_m: mean(|m| m.horizontal_error_rms_m),
+            mean_fix_error_m: mean(|m| m.mean_fix_error_m),
+        }
+    }
+}
+
+impl From<&MethodFigures> for MeanErrors {
+    /// One record's figures (for a table row).
+    fn from(m: &MethodFigures) -> Self {
+        Self {
+            lat_error_mean_abs_deg: m.lat_error_mean_abs_deg,
+            lat_error_mean_abs_m: m.lat_error_mean_abs_m,
+            lon_error_mean_abs_deg: m.lon_error_mean_abs_deg,
+            lon_error_mean_abs_m: m.lon_error_mean_abs_m,
+            horizontal_error_rms_m: m.horizontal_error_rms_m,
+            mean_fix_error_m: m.mean_fix_error_m,
+        }
+    }
+}
+
+/// The means over the records per method.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Means {
+    /// Without calibration.
+    pub uncalibrated: MeanErrors,
+    /// 3-stage, full celestial model.
+    pub three_stage: MeanErrors,
+    /// 3-stage, GMST only.
+    pub three_stage_gmst_only: MeanErrors,
+    /// 3-stage, ERA only.
+    pub three_stage_era_only: MeanErrors,
+    /// Stage 3 alone from the identity.
+    pub descent_from_identity: MeanErrors,
+    /// Least squares over the window.
+    pub least_squares_window: MeanErrors,
+    /// Least squares over every sample.
+    pub least_squares_all_samples: MeanErrors,
+}
+
+/// RMS over the records of the online κ errors over the RMS of the σ the filter reports,
+/// with the χ² band of a consistent filter.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct OnlineConsistency {
+    /// RMS error / RMS σ.
+    pub error_rms_over_sigma_rms: f64,
+    /// Errors in the statistic.
+    pub samples: u32,
+    /// Its 95 % band, `[√(χ²₀.₀₂₅(n)/n), √(χ²₀.₉₇₅(n)/n)]`.
+    pub band95: [f64; 2],
+}
+
+/// The online filter over the records.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct OnlineFigures {
+    /// RMS of the κ1 errors, deg.
+    pub kappa1_error_rms_deg: f64,
+    /// Mean σ of κ1, deg.
+    pub kappa1_sigma_mean_deg: f64,
+    /// RMS of the κ2 errors, deg.
+    pub kappa2_error_rms_deg: f64,
+    /// Mean σ of κ2, deg.
+    pub kappa2_sigma_mean_deg: f64,
+    /// RMS of the κ3 errors, deg.
+    pub kappa3_error_rms_deg: f64,
+    /// Mean σ of κ3, deg.
+    pub kappa3_sigma_mean_deg: f64,
+    /// κ1 (about the vertical).
+    pub kappa1_consistency: OnlineConsistency,
+    /// κ2.
+    pub kappa2_consistency: OnlineConsistency,
+    /// κ3.
+    pub kappa3_consistency: OnlineConsistency,
+    /// κ2 and κ3 together (the mounting tilt).
+    pub kappa_tilt_consistency: OnlineConsistency,
+}
+
+/// The online filter over the records: empty when it was not run.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct OnlineSummary {
+    /// The figures, if the filter ran.
+    #[serde(flatten)]
+    pub figures: Option<OnlineFigures>,
+}
+
+/// One row of the paper's table (errors of the mean fix per record).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct PaperRow {
+    /// Latitude error, deg.
+    pub lat_error_deg: f64,
+    /// Latitude error, m.
+    pub lat_error_m: f64,
+    /// Latitude error after calibration, deg.
+    pub lat_error_calibrated_deg: f64,
+    /// Latitude error after calibration, m.
+    pub lat_error_calibrated_m: f64,
+    /// Longitude error, deg.
+    pub lon_error_deg: f64,
+    /// Longitude error, m.
+    pub lon_error_m: f64,
+    /// Longitude error after calibration, deg.
+    pub lon_error_calibrated_deg: f64,
+    /// Longitude error after calibration, m.
+    pub lon_error_calibrated_m: f64,
+}
+
+/// The settings of the run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SettingsFigures {
+    /// Records.
+    pub records: usize,
+    /// Length of each, s.
+    pub record_duration_s: f64,
+    /// Calibration window, s.
+    pub calibration_window_s: f64,
+    /// Sample rate, Hz.
+    pub sample_rate_hz: f64,
+    /// The scenario file.
+    pub scenario: String,
+    /// Stage 3's descent step, deg.
+    pub descent_step_deg: f64,
+    /// Stage 3's threshold, m.
+    pub threshold_m: f64,
+    /// What is evaluated.
+    pub evaluation: String,
+}
+
+/// The figures of `astro-calibration` (`summary.json`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Summary {
+    /// `"astro-calibration"`.
+    pub experiment: String,
+    /// The paper reproduced.
+    pub paper: String,
+    /// The settings.
+    pub settings: SettingsFigures,
+    /// Means over the records per method.
+    pub mean: Means,
+    /// Mean fix error uncalibrated / 3-stage.
+    #[serde(deserialize_with = "nan_if_null")]
+    pub improvement_factor_three_stage: f64,
+    /// The online filter over the records.
+    pub online_filter: OnlineSummary,
+    /// The paper's table: 10 records and their mean.
+    pub paper_table: Vec<PaperRow>,
+    /// The paper's mean row.
+    pub paper_mean: Option<PaperRow>,
+    /// Per record.
+    pub records: Vec<RecordFigures>,
+}
+
+/// `sextant experiment astro-calibration`.
+pub struct AstroCalibration;
+
+impl Experiment for AstroCalibration {
+    const NAME: &'static str = "astro-calibration";
+    const DESCRIPTION: &'static str = "Paper 000: star-tracker / IMU boresight calibration";
+    type Summary = Summary;
+    fn run(out_dir: &Path, progress: bool) -> Result<Summary, ExperimentError> {
+        run_with(out_dir, progress, &Settings::paper())
+    }
+    fn table(summary: &Summary) -> String {
+        table(summary)
+    }
 }
 
 /// One plotted series: its name and (time min, north m, east m) points.
@@ -318,7 +679,7 @@ type Series = (String, Vec<(f64, f64, f64)>);
 
 /// Results of one record.
 struct RecordResult {
-    summary: Value,
+    summary: RecordFigures,
     /// (t min, north m, east m) of the 3-stage calibration per celestial model, 60 s means.
     series: Vec<Series>,
 }
@@ -455,94 +816,73 @@ fn evaluate(k: usize, settings: &Settings) -> Result<RecordResult, ExperimentErr
         rec.vertical_error_window_rad.y,
         -rec.vertical_error_window_rad.x,
     );
-    let mut models_json = serde_json::Map::new();
-    for (name, r, m) in &by_model {
-        let mut v = method_json(m, kt);
-        if let Some(o) = v.as_object_mut() {
-            o.insert(
-                "stage1_window_error_m".into(),
-                json!(r.initial_errors.mean_fix_error_m),
-            );
-            o.insert("stage3_iterations".into(), json!(r.refinement.iterations));
-            o.insert("stage3_window_error_m".into(), json!(r.refinement.error_m));
-            o.insert(
-                "stage3_reached_threshold".into(),
-                json!(r.refinement.reached_threshold),
-            );
-        }
-        models_json.insert((*name).to_string(), v);
-    }
-    let sig = |r: &boresight::LeastSquaresResult| {
-        json!({
-            "kappa_sigma_deg": r.sigma_rad().iter().map(|v| v.to_degrees()).collect::<Vec<_>>(),
-            "mounting_tilt_sigma_deg": [
-                r.tilt_covariance_rad2[(0, 0)].sqrt().to_degrees(),
-                r.tilt_covariance_rad2[(1, 1)].sqrt().to_degrees(),
-            ],
-            "chi2_per_dof": r.chi2_per_dof,
-            "iterations": r.iterations,
-            "samples": r.samples,
+    let three_stage = |name: &str| -> Result<ThreeStageFigures, ExperimentError> {
+        let (_, r, m) = by_model
+            .iter()
+            .find(|(n, _, _)| *n == name)
+            .ok_or_else(|| measurement(format!("no {name} calibration")))?;
+        Ok(ThreeStageFigures {
+            result: MethodFigures::of(m, kt),
+            stage1_window_error_m: r.initial_errors.mean_fix_error_m,
+            stage3_iterations: r.refinement.iterations,
+            stage3_window_error_m: r.refinement.error_m,
+            stage3_reached_threshold: r.refinement.reached_threshold,
         })
+    };
+    let by_celestial_model = ByCelestialModel {
+        full: three_stage("full")?,
+        gmst_only: three_stage("gmst_only")?,
+        era_only: three_stage("era_only")?,
     };
     let online = if settings.online_s > 0.0 {
         let (kappa, sigma) = online_estimate(k, settings.online_s)?;
         let d_tool = boresight::mounting_tilt_rad(&kappa)
             - boresight::mounting_tilt_rad(&three_full.kappa_rad());
         let d_true = boresight::mounting_tilt_rad(&kappa) - boresight::mounting_tilt_rad(kt);
-        json!({
-            "duration_s": settings.online_s,
-            "kappa_deg": kappa.iter().map(|v| v.to_degrees()).collect::<Vec<_>>(),
-            "kappa_sigma_deg": sigma.iter().map(|v| v.to_degrees()).collect::<Vec<_>>(),
-            "kappa_error_deg": (kappa - kt).iter().map(|v| v.to_degrees()).collect::<Vec<_>>(),
-            "kappa_minus_three_stage_deg": (kappa - three_full.kappa_rad()).iter().map(|v| v.to_degrees()).collect::<Vec<_>>(),
-            "mounting_tilt_minus_three_stage_deg": [d_tool.x.to_degrees(), d_tool.y.to_degrees()],
-            "mounting_tilt_error_deg": [d_true.x.to_degrees(), d_true.y.to_degrees()],
+        Some(OnlineRecord {
+            duration_s: settings.online_s,
+            kappa_deg: degrees(&kappa),
+            kappa_sigma_deg: degrees(&sigma),
+            kappa_error_deg: degrees(&(kappa - kt)),
+            kappa_minus_three_stage_deg: degrees(&(kappa - three_full.kappa_rad())),
+            mounting_tilt_minus_three_stage_deg: [d_tool.x.to_degrees(), d_tool.y.to_degrees()],
+            mounting_tilt_error_deg: [d_true.x.to_degrees(), d_true.y.to_degrees()],
         })
     } else {
-        Value::Null
+        None
     };
-    let summary = json!({
-        "online_filter": online,
-        "record": k,
-        "seed": k,
-        "samples": s.len(),
-        "evaluated_samples": s.len() - win_end,
-        "kappa_true_deg": [kt.x.to_degrees(), kt.y.to_degrees(), kt.z.to_degrees()],
-        "imu_vertical_error_window_deg": [rec.vertical_error_window_rad.x.to_degrees(), rec.vertical_error_window_rad.y.to_degrees()],
-        "imu_vertical_error_after_window_deg": [rec.vertical_error_after_rad.x.to_degrees(), rec.vertical_error_after_rad.y.to_degrees()],
-        "vertical_error_absorbed_as_mounting_tilt_deg": [absorbed.x.to_degrees(), absorbed.y.to_degrees()],
-        "gyrocompass_heading_error_deg": rec.heading_error_rad.to_degrees(),
-        "uncalibrated": method_json(&uncal, kt),
-        "three_stage": models_json.get("full").cloned().unwrap_or(Value::Null),
-        "three_stage_by_celestial_model": Value::Object(models_json),
-        "descent_from_identity": {
-            "result": method_json(&descent_m, kt),
-            "iterations": descent.iterations,
-            "window_error_start_m": descent.start_error_m,
-            "window_error_end_m": descent.error_m,
-            "reached_threshold": descent.reached_threshold,
+    let pair = |v: &Vector2<f64>| [v.x.to_degrees(), v.y.to_degrees()];
+    let summary = RecordFigures {
+        online_filter: online,
+        record: k,
+        seed: k,
+        samples: s.len(),
+        evaluated_samples: s.len() - win_end,
+        kappa_true_deg: [kt.x.to_degrees(), kt.y.to_degrees(), kt.z.to_degrees()],
+        imu_vertical_error_window_deg: pair(&rec.vertical_error_window_rad),
+        imu_vertical_error_after_window_deg: pair(&rec.vertical_error_after_rad),
+        vertical_error_absorbed_as_mounting_tilt_deg: pair(&absorbed),
+        gyrocompass_heading_error_deg: rec.heading_error_rad.to_degrees(),
+        uncalibrated: MethodFigures::of(&uncal, kt),
+        three_stage: by_celestial_model.full.clone(),
+        three_stage_by_celestial_model: by_celestial_model,
+        descent_from_identity: DescentFigures {
+            result: MethodFigures::of(&descent_m, kt),
+            iterations: descent.iterations,
+            window_error_start_m: descent.start_error_m,
+            window_error_end_m: descent.error_m,
+            reached_threshold: descent.reached_threshold,
         },
-        "least_squares_window": { "result": method_json(&ls_win_m, kt), "estimator": sig(&ls_win) },
-        "least_squares_all_samples": { "result": method_json(&ls_all_m, kt), "estimator": sig(&ls_all) },
-    });
+        least_squares_window: LeastSquaresFigures {
+            result: MethodFigures::of(&ls_win_m, kt),
+            estimator: EstimatorFigures::of(&ls_win),
+        },
+        least_squares_all_samples: LeastSquaresFigures {
+            result: MethodFigures::of(&ls_all_m, kt),
+            estimator: EstimatorFigures::of(&ls_all),
+        },
+    };
     Ok(RecordResult { summary, series })
-}
-
-/// Run the experiment with the paper's size.
-pub fn run(out_dir: &Path, progress: bool) -> Result<Value, ExperimentError> {
-    run_with(out_dir, progress, &Settings::paper())
-}
-
-fn mean_of(records: &[Value], ptr: &str) -> f64 {
-    let v: Vec<f64> = records
-        .iter()
-        .filter_map(|r| r.pointer(ptr).and_then(Value::as_f64))
-        .collect();
-    if v.is_empty() {
-        f64::NAN
-    } else {
-        v.iter().sum::<f64>() / v.len() as f64
-    }
 }
 
 /// Run the experiment with `settings` (tests use fewer, shorter records).
@@ -550,7 +890,7 @@ pub fn run_with(
     out_dir: &Path,
     progress: bool,
     settings: &Settings,
-) -> Result<Value, ExperimentError> {
+) -> Result<Summary, ExperimentError> {
     create_out_dir(out_dir)?;
     let bar = progress_bar(
         progress,
@@ -567,164 +907,147 @@ pub fn run_with(
         .collect();
     bar.finish_and_clear();
     let results: Vec<RecordResult> = results.into_iter().collect::<Result<_, _>>()?;
-    let records: Vec<Value> = results.iter().map(|r| r.summary.clone()).collect();
-    let keys = [
-        "lat_error_mean_abs_deg",
-        "lat_error_mean_abs_m",
-        "lon_error_mean_abs_deg",
-        "lon_error_mean_abs_m",
-        "horizontal_error_rms_m",
-        "mean_fix_error_m",
-    ];
-    let mut means = serde_json::Map::new();
-    for (label, base) in [
-        ("uncalibrated", "/uncalibrated"),
-        ("three_stage", "/three_stage"),
-        (
-            "three_stage_gmst_only",
-            "/three_stage_by_celestial_model/gmst_only",
-        ),
-        (
-            "three_stage_era_only",
-            "/three_stage_by_celestial_model/era_only",
-        ),
-        ("descent_from_identity", "/descent_from_identity/result"),
-        ("least_squares_window", "/least_squares_window/result"),
-        (
-            "least_squares_all_samples",
-            "/least_squares_all_samples/result",
-        ),
-    ] {
-        let mut m = serde_json::Map::new();
-        for key in keys {
-            m.insert(
-                key.into(),
-                json!(mean_of(&records, &format!("{base}/{key}"))),
-            );
-        }
-        means.insert(label.into(), Value::Object(m));
-    }
-    let paper_rows: Vec<Value> = PAPER_TABLE
+    let records: Vec<RecordFigures> = results.iter().map(|r| r.summary.clone()).collect();
+    let means = Means {
+        uncalibrated: MeanErrors::over(&records, |r| &r.uncalibrated),
+        three_stage: MeanErrors::over(&records, |r| &r.three_stage.result),
+        three_stage_gmst_only: MeanErrors::over(&records, |r| {
+            &r.three_stage_by_celestial_model.gmst_only.result
+        }),
+        three_stage_era_only: MeanErrors::over(&records, |r| {
+            &r.three_stage_by_celestial_model.era_only.result
+        }),
+        descent_from_identity: MeanErrors::over(&records, |r| &r.descent_from_identity.result),
+        least_squares_window: MeanErrors::over(&records, |r| &r.least_squares_window.result),
+        least_squares_all_samples: MeanErrors::over(&records, |r| {
+            &r.least_squares_all_samples.result
+        }),
+    };
+    let paper_rows: Vec<PaperRow> = PAPER_TABLE
         .iter()
-        .map(|r| {
-            json!({
-                "lat_error_deg": r[0], "lat_error_m": r[1],
-                "lat_error_calibrated_deg": r[2], "lat_error_calibrated_m": r[3],
-                "lon_error_deg": r[4], "lon_error_m": r[5],
-                "lon_error_calibrated_deg": r[6], "lon_error_calibrated_m": r[7],
-            })
+        .map(|r| PaperRow {
+            lat_error_deg: r[0],
+            lat_error_m: r[1],
+            lat_error_calibrated_deg: r[2],
+            lat_error_calibrated_m: r[3],
+            lon_error_deg: r[4],
+            lon_error_m: r[5],
+            lon_error_calibrated_deg: r[6],
+            lon_error_calibrated_m: r[7],
         })
         .collect();
-    // Online filter: RMS of its κ errors against the truth beside the mean σ it reports.
-    let mut online = serde_json::Map::new();
-    for j in 0..3 {
-        let e: Vec<f64> = records
-            .iter()
-            .filter_map(|r| {
-                r.pointer(&format!("/online_filter/kappa_error_deg/{j}"))?
-                    .as_f64()
-            })
-            .collect();
-        if !e.is_empty() {
-            let rms = (e.iter().map(|v| v * v).sum::<f64>() / e.len() as f64).sqrt();
-            online.insert(format!("kappa{}_error_rms_deg", j + 1), json!(rms));
-            online.insert(
-                format!("kappa{}_sigma_mean_deg", j + 1),
-                json!(mean_of(
-                    &records,
-                    &format!("/online_filter/kappa_sigma_deg/{j}")
-                )),
-            );
-        }
-    }
-    // Consistency of the online σ over the records: for a consistent filter each κ error
-    // over its σ is N(0, 1) and independent between records (independent seeds) and
-    // between κ2, κ3 (independent north/east accelerometer biases), so
-    // n·(RMS error / RMS σ)² ≈ χ²(n) with n the number of errors; its 95 % band is
-    // [√(χ²₀.₀₂₅(n)/n), √(χ²₀.₉₇₅(n)/n)] (10 records: [0.57, 1.43] per axis, [0.69, 1.31]
-    // for κ2 and κ3 together). κ1 (about the vertical) is reported the same way.
-    let ratio = |axes: &[usize]| -> Option<Value> {
-        let (mut e2, mut s2, mut n) = (0.0, 0.0, 0u32);
-        for r in &records {
-            for &j in axes {
-                let e = r
-                    .pointer(&format!("/online_filter/kappa_error_deg/{j}"))?
-                    .as_f64()?;
-                let s = r
-                    .pointer(&format!("/online_filter/kappa_sigma_deg/{j}"))?
-                    .as_f64()?;
-                e2 += e * e;
-                s2 += s * s;
-                n += 1;
-            }
-        }
-        (n > 0).then(|| {
-            let nf = f64::from(n);
-            json!({
-                "error_rms_over_sigma_rms": (e2 / s2).sqrt(),
-                "samples": n,
-                "band95": [
-                    (fusion::ekf::chi2_quantile(n, 0.025) / nf).sqrt(),
-                    (fusion::ekf::chi2_quantile(n, 0.975) / nf).sqrt(),
-                ],
-            })
-        })
-    };
-    for (key, axes) in [
-        ("kappa1_consistency", &[0usize][..]),
-        ("kappa2_consistency", &[1][..]),
-        ("kappa3_consistency", &[2][..]),
-        ("kappa_tilt_consistency", &[1, 2][..]),
-    ] {
-        if let Some(v) = ratio(axes) {
-            online.insert(key.into(), v);
-        }
-    }
-    let uncal_h = mean_of(&records, "/uncalibrated/mean_fix_error_m");
-    let cal_h = mean_of(&records, "/three_stage/mean_fix_error_m");
-    let summary = json!({
-        "experiment": "astro-calibration",
-        "paper": "000 (astro-inertial basis alignment)",
-        "settings": {
-            "records": settings.records,
-            "record_duration_s": settings.duration_s,
-            "calibration_window_s": settings.window_s,
-            "sample_rate_hz": 1.0,
-            "scenario": "config/scenarios/astro_stand.toml",
-            "descent_step_deg": boresight::PAPER_STEP_RAD.to_degrees(),
-            "threshold_m": boresight::PAPER_THRESHOLD_M,
-            "evaluation": "astro fixes of the samples after the calibration window",
+    let uncal_h = means.uncalibrated.mean_fix_error_m;
+    let cal_h = means.three_stage.mean_fix_error_m;
+    let summary = Summary {
+        experiment: AstroCalibration::NAME.into(),
+        paper: "000 (astro-inertial basis alignment)".into(),
+        settings: SettingsFigures {
+            records: settings.records,
+            record_duration_s: settings.duration_s,
+            calibration_window_s: settings.window_s,
+            sample_rate_hz: 1.0,
+            scenario: "config/scenarios/astro_stand.toml".into(),
+            descent_step_deg: boresight::PAPER_STEP_RAD.to_degrees(),
+            threshold_m: boresight::PAPER_THRESHOLD_M,
+            evaluation: "astro fixes of the samples after the calibration window".into(),
         },
-        "mean": Value::Object(means),
-        "improvement_factor_three_stage": uncal_h / cal_h,
-        "online_filter": Value::Object(online),
-        "paper_table": paper_rows,
-        "paper_mean": paper_rows.last().cloned().unwrap_or(Value::Null),
-        "records": records,
-    });
+        mean: means,
+        improvement_factor_three_stage: uncal_h / cal_h,
+        online_filter: OnlineSummary {
+            figures: online_figures(&records),
+        },
+        paper_mean: paper_rows.last().copied(),
+        paper_table: paper_rows,
+        records,
+    };
     write_summary(out_dir, &summary)?;
     plots(out_dir, &results, &summary)?;
     Ok(summary)
 }
 
-fn plots(out_dir: &Path, results: &[RecordResult], summary: &Value) -> Result<(), ExperimentError> {
+/// The online filter over the records (`None` when it did not run on every record).
+///
+/// Consistency of the online σ over the records: for a consistent filter each κ error
+/// over its σ is N(0, 1) and independent between records (independent seeds) and
+/// between κ2, κ3 (independent north/east accelerometer biases), so
+/// n·(RMS error / RMS σ)² ≈ χ²(n) with n the number of errors; its 95 % band is
+/// [√(χ²₀.₀₂₅(n)/n), √(χ²₀.₉₇₅(n)/n)] (10 records: [0.57, 1.43] per axis, [0.69, 1.31]
+/// for κ2 and κ3 together). κ1 (about the vertical) is reported the same way.
+fn online_figures(records: &[RecordFigures]) -> Option<OnlineFigures> {
+    let online: Vec<&OnlineRecord> = records
+        .iter()
+        .map(|r| r.online_filter.as_ref())
+        .collect::<Option<_>>()?;
+    if online.is_empty() {
+        return None;
+    }
+    // Error and σ of κ_{j+1} per record, deg (undefined ones left out).
+    let finite = |v: &[f64], j: usize| v.get(j).copied().filter(|x| x.is_finite());
+    let errors = |j: usize| -> Vec<f64> {
+        online
+            .iter()
+            .filter_map(|o| finite(&o.kappa_error_deg, j))
+            .collect()
+    };
+    let rms = |j: usize| {
+        let e = errors(j);
+        (e.iter().map(|v| v * v).sum::<f64>() / e.len() as f64).sqrt()
+    };
+    let sigma_mean =
+        |j: usize| mean_of_finite(online.iter().filter_map(|o| finite(&o.kappa_sigma_deg, j)));
+    let ratio = |axes: &[usize]| -> Option<OnlineConsistency> {
+        let (mut e2, mut s2, mut n) = (0.0, 0.0, 0u32);
+        for o in &online {
+            for &j in axes {
+                let e = finite(&o.kappa_error_deg, j)?;
+                let s = finite(&o.kappa_sigma_deg, j)?;
+                e2 += e * e;
+                s2 += s * s;
+                n += 1;
+            }
+        }
+        let nf = f64::from(n);
+        Some(OnlineConsistency {
+            error_rms_over_sigma_rms: (e2 / s2).sqrt(),
+            samples: n,
+            band95: [
+                (fusion::ekf::chi2_quantile(n, 0.025) / nf).sqrt(),
+                (fusion::ekf::chi2_quantile(n, 0.975) / nf).sqrt(),
+            ],
+        })
+    };
+    Some(OnlineFigures {
+        kappa1_error_rms_deg: rms(0),
+        kappa1_sigma_mean_deg: sigma_mean(0),
+        kappa2_error_rms_deg: rms(1),
+        kappa2_sigma_mean_deg: sigma_mean(1),
+        kappa3_error_rms_deg: rms(2),
+        kappa3_sigma_mean_deg: sigma_mean(2),
+        kappa1_consistency: ratio(&[0])?,
+        kappa2_consistency: ratio(&[1])?,
+        kappa3_consistency: ratio(&[2])?,
+        kappa_tilt_consistency: ratio(&[1, 2])?,
+    })
+}
+
+fn plots(
+    out_dir: &Path,
+    results: &[RecordResult],
+    summary: &Summary,
+) -> Result<(), ExperimentError> {
     if let Some(first) = results.first() {
         let mut lines = Vec::new();
         for (i, (name, pts)) in first.series.iter().enumerate() {
-            lines.push(Line {
-                label: format!("{name}: north"),
-                points: pts.iter().map(|p| (p.0, p.1)).collect(),
-                color: color(i),
-                dashed: false,
-                markers: false,
-            });
-            lines.push(Line {
-                label: format!("{name}: east"),
-                points: pts.iter().map(|p| (p.0, p.2)).collect(),
-                color: color(i),
-                dashed: true,
-                markers: false,
-            });
+            lines.push(Line::solid(
+                format!("{name}: north"),
+                pts.iter().map(|p| (p.0, p.1)).collect(),
+                color(i),
+            ));
+            lines.push(Line::dashed(
+                format!("{name}: east"),
+                pts.iter().map(|p| (p.0, p.2)).collect(),
+                color(i),
+            ));
         }
         line_chart(
             &out_dir.join("astro_calibration_record1_error_vs_time.png"),
@@ -738,16 +1061,14 @@ fn plots(out_dir: &Path, results: &[RecordResult], summary: &Value) -> Result<()
             },
         )?;
     }
-    let recs = summary["records"].as_array().cloned().unwrap_or_default();
-    let per = |ptr: &str| -> Vec<(f64, f64)> {
-        recs.iter()
-            .enumerate()
-            .filter_map(|(i, r)| {
-                r.pointer(ptr)
-                    .and_then(Value::as_f64)
-                    .map(|v| ((i + 1) as f64, v))
-            })
-            .collect()
+    let per = |f: fn(&RecordFigures) -> f64| -> Vec<(f64, f64)> {
+        finite_points(
+            summary
+                .records
+                .iter()
+                .enumerate()
+                .map(|(i, r)| ((i + 1) as f64, f(r))),
+        )
     };
     let paper = |col: usize| -> Vec<(f64, f64)> {
         PAPER_TABLE[..10]
@@ -756,12 +1077,13 @@ fn plots(out_dir: &Path, results: &[RecordResult], summary: &Value) -> Result<()
             .map(|(i, r)| ((i + 1) as f64, r[col]))
             .collect()
     };
-    let mk = |label: &str, points: Vec<(f64, f64)>, i: usize, dashed: bool| Line {
-        label: label.into(),
-        points,
-        color: color(i),
-        dashed,
-        markers: true,
+    let mk = |label: &str, points: Vec<(f64, f64)>, i: usize, dashed: bool| {
+        let line = if dashed {
+            Line::dashed(label, points, color(i))
+        } else {
+            Line::solid(label, points, color(i))
+        };
+        line.with_markers()
     };
     line_chart(
         &out_dir.join("astro_calibration_per_record.png"),
@@ -774,31 +1096,36 @@ fn plots(out_dir: &Path, results: &[RecordResult], summary: &Value) -> Result<()
             lines: &[
                 mk(
                     "uncalibrated, latitude",
-                    per("/uncalibrated/lat_error_mean_abs_m"),
+                    per(|r| r.uncalibrated.lat_error_mean_abs_m),
                     0,
                     false,
                 ),
                 mk(
                     "uncalibrated, longitude",
-                    per("/uncalibrated/lon_error_mean_abs_m"),
+                    per(|r| r.uncalibrated.lon_error_mean_abs_m),
                     1,
                     false,
                 ),
                 mk(
                     "3-stage, latitude",
-                    per("/three_stage/lat_error_mean_abs_m"),
+                    per(|r| r.three_stage.result.lat_error_mean_abs_m),
                     2,
                     false,
                 ),
                 mk(
                     "3-stage, longitude",
-                    per("/three_stage/lon_error_mean_abs_m"),
+                    per(|r| r.three_stage.result.lon_error_mean_abs_m),
                     3,
                     false,
                 ),
                 mk(
                     "3-stage, Earth rotation only (paper), latitude",
-                    per("/three_stage_by_celestial_model/gmst_only/lat_error_mean_abs_m"),
+                    per(|r| {
+                        r.three_stage_by_celestial_model
+                            .gmst_only
+                            .result
+                            .lat_error_mean_abs_m
+                    }),
                     4,
                     false,
                 ),
@@ -814,7 +1141,8 @@ fn plots(out_dir: &Path, results: &[RecordResult], summary: &Value) -> Result<()
 /// The table: per record, latitude and longitude errors without and with the 3-stage
 /// calibration (degrees and metres), the means, the paper's means beside them, and the other
 /// estimators.
-pub fn table(summary: &Value) -> String {
+pub fn table(summary: &Summary) -> String {
+    let f = |x: f64, d: usize| fmt_f64(x, d, false);
     let mut out = String::new();
     out.push_str(
         "Paper 000 — astro position fix errors, mean |error| over each record after the 600 s window\n",
@@ -833,86 +1161,85 @@ pub fn table(summary: &Value) -> String {
         "LS φ[m]",
         "LS λ[m]"
     ));
-    let row = |r: &Value, label: String| -> String {
+    let row = |label: String, uncal: &MeanErrors, three: &MeanErrors, ls: &MeanErrors| {
         format!(
             "{:>6} | {:>8} {:>8} | {:>8} {:>6} | {:>8} {:>8} | {:>8} {:>6} | {:>6} {:>6}\n",
             label,
-            fmt_num(r, "/uncalibrated/lat_error_mean_abs_deg", 4, false),
-            fmt_num(r, "/uncalibrated/lat_error_mean_abs_m", 0, false),
-            fmt_num(r, "/three_stage/lat_error_mean_abs_deg", 5, false),
-            fmt_num(r, "/three_stage/lat_error_mean_abs_m", 0, false),
-            fmt_num(r, "/uncalibrated/lon_error_mean_abs_deg", 4, false),
-            fmt_num(r, "/uncalibrated/lon_error_mean_abs_m", 0, false),
-            fmt_num(r, "/three_stage/lon_error_mean_abs_deg", 5, false),
-            fmt_num(r, "/three_stage/lon_error_mean_abs_m", 0, false),
-            fmt_num(
-                r,
-                "/least_squares_window/result/lat_error_mean_abs_m",
-                0,
-                false
-            ),
-            fmt_num(
-                r,
-                "/least_squares_window/result/lon_error_mean_abs_m",
-                0,
-                false
-            ),
+            f(uncal.lat_error_mean_abs_deg, 4),
+            f(uncal.lat_error_mean_abs_m, 0),
+            f(three.lat_error_mean_abs_deg, 5),
+            f(three.lat_error_mean_abs_m, 0),
+            f(uncal.lon_error_mean_abs_deg, 4),
+            f(uncal.lon_error_mean_abs_m, 0),
+            f(three.lon_error_mean_abs_deg, 5),
+            f(three.lon_error_mean_abs_m, 0),
+            f(ls.lat_error_mean_abs_m, 0),
+            f(ls.lon_error_mean_abs_m, 0),
         )
     };
-    if let Some(recs) = summary["records"].as_array() {
-        for r in recs {
-            out.push_str(&row(r, fmt_num(r, "/record", 0, false)));
-        }
+    for r in &summary.records {
+        out.push_str(&row(
+            r.record.to_string(),
+            &(&r.uncalibrated).into(),
+            &(&r.three_stage.result).into(),
+            &(&r.least_squares_window.result).into(),
+        ));
     }
-    let m = &summary["mean"];
-    let mean_row = json!({
-        "uncalibrated": m["uncalibrated"],
-        "three_stage": m["three_stage"],
-        "least_squares_window": { "result": m["least_squares_window"] },
-    });
-    out.push_str(&row(&mean_row, "mean".into()));
-    let p = &summary["paper_mean"];
+    let m = &summary.mean;
+    out.push_str(&row(
+        "mean".into(),
+        &m.uncalibrated,
+        &m.three_stage,
+        &m.least_squares_window,
+    ));
+    let p = summary.paper_mean.as_ref();
+    let pf = |x: fn(&PaperRow) -> f64, d: usize| fmt_opt(p.map(x), d, false);
     out.push_str(&format!(
         "{:>6} | {:>8} {:>8} | {:>8} {:>6} | {:>8} {:>8} | {:>8} {:>6} |\n",
         "paper",
-        fmt_num(p, "/lat_error_deg", 4, false),
-        fmt_num(p, "/lat_error_m", 0, false),
-        fmt_num(p, "/lat_error_calibrated_deg", 4, false),
-        fmt_num(p, "/lat_error_calibrated_m", 0, false),
-        fmt_num(p, "/lon_error_deg", 4, false),
-        fmt_num(p, "/lon_error_m", 0, false),
-        fmt_num(p, "/lon_error_calibrated_deg", 4, false),
-        fmt_num(p, "/lon_error_calibrated_m", 0, false),
+        pf(|p| p.lat_error_deg, 4),
+        pf(|p| p.lat_error_m, 0),
+        pf(|p| p.lat_error_calibrated_deg, 4),
+        pf(|p| p.lat_error_calibrated_m, 0),
+        pf(|p| p.lon_error_deg, 4),
+        pf(|p| p.lon_error_m, 0),
+        pf(|p| p.lon_error_calibrated_deg, 4),
+        pf(|p| p.lon_error_calibrated_m, 0),
     ));
     out.push_str("\nMean horizontal error of the mean fix [m] by method (celestial model):\n");
-    for (label, key) in [
-        ("uncalibrated (full)", "uncalibrated"),
-        ("3-stage (full IAU 2006/2000A)", "three_stage"),
+    for (label, e) in [
+        ("uncalibrated (full)", &m.uncalibrated),
+        ("3-stage (full IAU 2006/2000A)", &m.three_stage),
         (
             "3-stage (Earth rotation only, GMST: the paper)",
-            "three_stage_gmst_only",
+            &m.three_stage_gmst_only,
         ),
-        ("3-stage (Earth rotation only, ERA)", "three_stage_era_only"),
+        (
+            "3-stage (Earth rotation only, ERA)",
+            &m.three_stage_era_only,
+        ),
         (
             "stage 3 only, from the identity (full)",
-            "descent_from_identity",
+            &m.descent_from_identity,
         ),
-        ("least squares, 600 s window (full)", "least_squares_window"),
+        (
+            "least squares, 600 s window (full)",
+            &m.least_squares_window,
+        ),
         (
             "least squares, all samples (full)",
-            "least_squares_all_samples",
+            &m.least_squares_all_samples,
         ),
     ] {
         out.push_str(&format!(
             "  {:<48} mean fix {:>9} m   RMS single fix {:>9} m\n",
             label,
-            fmt_num(m, &format!("/{key}/mean_fix_error_m"), 1, false),
-            fmt_num(m, &format!("/{key}/horizontal_error_rms_m"), 1, false),
+            f(e.mean_fix_error_m, 1),
+            f(e.horizontal_error_rms_m, 1),
         ));
     }
-    if let Some(recs) = summary["records"].as_array()
-        && recs.iter().any(|r| !r["online_filter"].is_null())
-    {
+    let recs = &summary.records;
+    if recs.iter().any(|r| r.online_filter.is_some()) {
         out.push_str(
             "\nOnline boresight estimate of the Kalman filter vs the calibration tool (3-stage), per record [°]:\n",
         );
@@ -932,54 +1259,56 @@ pub fn table(summary: &Value) -> String {
             "tilt Δy"
         ));
         for r in recs {
-            let f = |p: &str, d: usize| fmt_num(r, p, d, false);
+            let o = r.online_filter.as_ref();
+            let at =
+                |v: Option<&[f64]>, j: usize| fmt_opt(v.and_then(|v| v.get(j).copied()), 4, false);
+            let kappa = o.map(|o| o.kappa_deg.as_slice());
+            let sigma = o.map(|o| o.kappa_sigma_deg.as_slice());
+            let tool = Some(&r.three_stage.result.kappa_deg[..]);
+            let tilt = o.map(|o| &o.mounting_tilt_minus_three_stage_deg[..]);
             out.push_str(&format!(
                 "{:>6} | {:>8} {:>8} {:>8} | {:>8} {:>8} {:>8} | {:>8} {:>8} {:>8} | {:>8} {:>8}\n",
-                f("/record", 0),
-                f("/online_filter/kappa_deg/0", 4),
-                f("/online_filter/kappa_deg/1", 4),
-                f("/online_filter/kappa_deg/2", 4),
-                f("/online_filter/kappa_sigma_deg/0", 4),
-                f("/online_filter/kappa_sigma_deg/1", 4),
-                f("/online_filter/kappa_sigma_deg/2", 4),
-                f("/three_stage/kappa_deg/0", 4),
-                f("/three_stage/kappa_deg/1", 4),
-                f("/three_stage/kappa_deg/2", 4),
-                f("/online_filter/mounting_tilt_minus_three_stage_deg/0", 4),
-                f("/online_filter/mounting_tilt_minus_three_stage_deg/1", 4),
+                r.record,
+                at(kappa, 0),
+                at(kappa, 1),
+                at(kappa, 2),
+                at(sigma, 0),
+                at(sigma, 1),
+                at(sigma, 2),
+                at(tool, 0),
+                at(tool, 1),
+                at(tool, 2),
+                at(tilt, 0),
+                at(tilt, 1),
             ));
         }
+        let kt = &recs[0].kappa_true_deg;
         out.push_str(&format!(
             "  true κ [°]: {} {} {}\n",
-            fmt_num(&recs[0], "/kappa_true_deg/0", 4, false),
-            fmt_num(&recs[0], "/kappa_true_deg/1", 4, false),
-            fmt_num(&recs[0], "/kappa_true_deg/2", 4, false),
+            f(kt[0], 4),
+            f(kt[1], 4),
+            f(kt[2], 4),
         ));
-        for (label, key) in [
-            ("κ1", "kappa1_consistency"),
-            ("κ2", "kappa2_consistency"),
-            ("κ3", "kappa3_consistency"),
-            ("κ2+κ3", "kappa_tilt_consistency"),
+        let online = summary.online_filter.figures.as_ref();
+        for (label, c) in [
+            ("κ1", online.map(|o| o.kappa1_consistency)),
+            ("κ2", online.map(|o| o.kappa2_consistency)),
+            ("κ3", online.map(|o| o.kappa3_consistency)),
+            ("κ2+κ3", online.map(|o| o.kappa_tilt_consistency)),
         ] {
-            let base = format!("/online_filter/{key}");
             out.push_str(&format!(
                 "  filter {:<6} RMS error / RMS σ over {:>2} errors: {} (χ² 95 % band {} – {})\n",
                 label,
-                fmt_num(summary, &format!("{base}/samples"), 0, false),
-                fmt_num(
-                    summary,
-                    &format!("{base}/error_rms_over_sigma_rms"),
-                    2,
-                    false
-                ),
-                fmt_num(summary, &format!("{base}/band95/0"), 2, false),
-                fmt_num(summary, &format!("{base}/band95/1"), 2, false),
+                fmt_opt(c.map(|c| f64::from(c.samples)), 0, false),
+                fmt_opt(c.map(|c| c.error_rms_over_sigma_rms), 2, false),
+                fmt_opt(c.map(|c| c.band95[0]), 2, false),
+                fmt_opt(c.map(|c| c.band95[1]), 2, false),
             ));
         }
     }
     out.push_str(&format!(
         "  improvement uncalibrated / 3-stage: {}×\n",
-        fmt_num(summary, "/improvement_factor_three_stage", 1, false)
+        f(summary.improvement_factor_three_stage, 1)
     ));
     out
 }
@@ -1005,33 +1334,27 @@ mod tests {
         };
         let t0 = std::time::Instant::now();
         let s = run_with(&dir, false, &settings).expect("run");
-        let d = s["mean"]["descent_from_identity"]["mean_fix_error_m"]
-            .as_f64()
-            .expect("d");
+        let d = s.mean.descent_from_identity.mean_fix_error_m;
         // The descent alone stops just under the 1852 m threshold in the window; after it the
         // error is that plus the vertical's drift: between a few hundred m and ≈ 2.5 km.
         assert!(d > 300.0 && d < 2500.0, "descent from identity {d} m");
         eprintln!("{}\n{:.1} s", table(&s), t0.elapsed().as_secs_f64());
-        let uncal = s["mean"]["uncalibrated"]["mean_fix_error_m"]
-            .as_f64()
-            .expect("u");
-        let cal = s["mean"]["three_stage"]["mean_fix_error_m"]
-            .as_f64()
-            .expect("c");
-        let ls = s["mean"]["least_squares_window"]["mean_fix_error_m"]
-            .as_f64()
-            .expect("l");
+        let uncal = s.mean.uncalibrated.mean_fix_error_m;
+        let cal = s.mean.three_stage.mean_fix_error_m;
+        let ls = s.mean.least_squares_window.mean_fix_error_m;
         assert!(
             uncal > 50_000.0 && uncal < 80_000.0,
             "uncalibrated {uncal} m"
         );
         assert!(cal * 10.0 < uncal, "3-stage {cal} m vs {uncal} m");
         assert!(ls * 10.0 < uncal, "LS {ls} m vs {uncal} m");
-        for r in s["records"].as_array().expect("records") {
-            for key in ["least_squares_window", "least_squares_all_samples"] {
-                let it = r[key]["estimator"]["iterations"]
-                    .as_u64()
-                    .expect("iterations");
+        assert_eq!(s.records.len(), 3);
+        for r in &s.records {
+            for (key, ls) in [
+                ("least_squares_window", &r.least_squares_window),
+                ("least_squares_all_samples", &r.least_squares_all_samples),
+            ] {
+                let it = ls.estimator.iterations;
                 assert!(
                     it < 20,
                     "{key}: Gauss–Newton did not converge ({it} iterations)"
@@ -1040,11 +1363,9 @@ mod tests {
         }
         // The filter's mounting tilt agrees with the tool's: both see the same stars and the
         // same accelerometer-bias tilt of the vertical; bound 0.01° (the filter's own σ).
-        for r in s["records"].as_array().expect("records") {
-            for j in 0..2 {
-                let d = r["online_filter"]["mounting_tilt_minus_three_stage_deg"][j]
-                    .as_f64()
-                    .expect("online");
+        for r in &s.records {
+            let online = r.online_filter.as_ref().expect("online");
+            for d in online.mounting_tilt_minus_three_stage_deg {
                 assert!(d.abs() < 0.01, "filter − tool tilt {d}°");
             }
         }

@@ -18,14 +18,17 @@
 //! the RMS of the predicted σ, and the normalised error `Σ(ε/σ)²/N` per axis (χ²(N)/N: 1 ±
 //! 4√(2/N) at 4σ); log-log slopes of RMS error against `λσ_φ/d` along both sweeps (theory: 1).
 
-use super::plot::{Chart, Line, color, line_chart};
-use super::{ExperimentError, create_out_dir, fmt_num, linear_fit, progress_bar, write_summary};
+use super::plot::{Chart, Line, color, finite_points, line_chart};
+use super::{
+    Experiment, ExperimentError, create_out_dir, fmt_f64, fmt_opt, linear_fit, progress_bar,
+    write_summary,
+};
 use drivers_sim::scenario::Scenario;
 use drivers_sim::sources::GnssSource;
 use drivers_sim::truth::{TruthGenerator, wrap_pi};
 use fusion::baseline_attitude::{BaselineConfig, PhaseObservations, solve};
 use rayon::prelude::*;
-use serde_json::{Value, json};
+use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
 const DEG: f64 = 180.0 / std::f64::consts::PI;
@@ -139,41 +142,183 @@ fn run_config(
     })
 }
 
-/// Run with the default settings.
-pub fn run(out_dir: &Path, progress: bool) -> Result<Value, ExperimentError> {
-    run_with(out_dir, progress, &Settings::default())
+/// One baseline configuration: RMS errors over the epochs against the predicted σ, deg.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Row {
+    /// Baseline length d (both baselines), m.
+    pub baseline_length_m: f64,
+    /// Carrier-phase noise σ_φ, cycles.
+    pub phase_sigma_cycles: f64,
+    /// λσ_φ/d, rad.
+    pub lambda_sigma_over_d_rad: f64,
+    /// Epochs with a solution.
+    pub epochs: usize,
+    /// Roll RMS error.
+    pub roll_rms_deg: f64,
+    /// Pitch RMS error.
+    pub pitch_rms_deg: f64,
+    /// Heading RMS error.
+    pub heading_rms_deg: f64,
+    /// Roll σ predicted by the solver's covariance (RMS over the epochs).
+    pub roll_predicted_deg: f64,
+    /// Pitch σ predicted.
+    pub pitch_predicted_deg: f64,
+    /// Heading σ predicted.
+    pub heading_predicted_deg: f64,
+    /// Roll Σ(ε/σ)²/N (χ²(N)/N for a consistent solver).
+    pub roll_normalised_sq: f64,
+    /// Pitch Σ(ε/σ)²/N.
+    pub pitch_normalised_sq: f64,
+    /// Heading Σ(ε/σ)²/N.
+    pub heading_normalised_sq: f64,
+    /// Predicted heading σ over λσ_φ/d.
+    pub heading_geometry_factor: f64,
 }
 
-fn row(c: &Config) -> Value {
+impl Row {
+    /// (axis, RMS error, predicted σ, Σ(ε/σ)²/N) for heading, pitch and roll.
+    fn by_axis(&self) -> [(&'static str, f64, f64, f64); 3] {
+        [
+            (
+                "heading",
+                self.heading_rms_deg,
+                self.heading_predicted_deg,
+                self.heading_normalised_sq,
+            ),
+            (
+                "pitch",
+                self.pitch_rms_deg,
+                self.pitch_predicted_deg,
+                self.pitch_normalised_sq,
+            ),
+            (
+                "roll",
+                self.roll_rms_deg,
+                self.roll_predicted_deg,
+                self.roll_normalised_sq,
+            ),
+        ]
+    }
+}
+
+/// Log-log slopes of the RMS errors and predicted σ against λσ_φ/d over each sweep (theory 1);
+/// absent when a sweep has fewer than two distinct points.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+#[allow(missing_docs)]
+pub struct Slopes {
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub length_sweep_heading_rms_loglog_slope: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub length_sweep_heading_predicted_loglog_slope: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub length_sweep_pitch_rms_loglog_slope: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub length_sweep_pitch_predicted_loglog_slope: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub length_sweep_roll_rms_loglog_slope: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub length_sweep_roll_predicted_loglog_slope: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sigma_sweep_heading_rms_loglog_slope: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sigma_sweep_heading_predicted_loglog_slope: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sigma_sweep_pitch_rms_loglog_slope: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sigma_sweep_pitch_predicted_loglog_slope: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sigma_sweep_roll_rms_loglog_slope: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sigma_sweep_roll_predicted_loglog_slope: Option<f64>,
+}
+
+impl Slopes {
+    fn of(by_length: &[Row], by_sigma: &[Row]) -> Self {
+        Self {
+            length_sweep_heading_rms_loglog_slope: slope(by_length, |r| r.heading_rms_deg),
+            length_sweep_heading_predicted_loglog_slope: slope(by_length, |r| {
+                r.heading_predicted_deg
+            }),
+            length_sweep_pitch_rms_loglog_slope: slope(by_length, |r| r.pitch_rms_deg),
+            length_sweep_pitch_predicted_loglog_slope: slope(by_length, |r| r.pitch_predicted_deg),
+            length_sweep_roll_rms_loglog_slope: slope(by_length, |r| r.roll_rms_deg),
+            length_sweep_roll_predicted_loglog_slope: slope(by_length, |r| r.roll_predicted_deg),
+            sigma_sweep_heading_rms_loglog_slope: slope(by_sigma, |r| r.heading_rms_deg),
+            sigma_sweep_heading_predicted_loglog_slope: slope(by_sigma, |r| {
+                r.heading_predicted_deg
+            }),
+            sigma_sweep_pitch_rms_loglog_slope: slope(by_sigma, |r| r.pitch_rms_deg),
+            sigma_sweep_pitch_predicted_loglog_slope: slope(by_sigma, |r| r.pitch_predicted_deg),
+            sigma_sweep_roll_rms_loglog_slope: slope(by_sigma, |r| r.roll_rms_deg),
+            sigma_sweep_roll_predicted_loglog_slope: slope(by_sigma, |r| r.roll_predicted_deg),
+        }
+    }
+}
+
+/// The figures of `baseline-attitude` (`summary.json`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Summary {
+    /// `"baseline-attitude"`.
+    pub experiment: String,
+    /// The paper reproduced, `"003"`.
+    pub paper: String,
+    /// The scenario file.
+    pub scenario: String,
+    /// Epochs simulated per configuration.
+    pub epochs_per_configuration: usize,
+    /// Baseline lengths at the reference phase noise.
+    pub length_sweep: Vec<Row>,
+    /// Phase noises at the reference baseline length.
+    pub sigma_sweep: Vec<Row>,
+    /// Log-log slopes against λσ_φ/d.
+    pub slopes: Slopes,
+    /// Largest |measured RMS / predicted σ − 1| over the configurations and axes.
+    pub max_abs_measured_over_predicted_minus_one: f64,
+}
+
+/// `sextant experiment baseline-attitude`.
+pub struct BaselineAttitude;
+
+impl Experiment for BaselineAttitude {
+    const NAME: &'static str = "baseline-attitude";
+    const DESCRIPTION: &'static str = "Paper 003: dual-baseline GNSS attitude";
+    type Summary = Summary;
+    fn run(out_dir: &Path, progress: bool) -> Result<Summary, ExperimentError> {
+        run_with(out_dir, progress, &Settings::default())
+    }
+    fn table(summary: &Summary) -> String {
+        table(summary)
+    }
+}
+
+fn row(c: &Config) -> Row {
     let unit = c.wavelength_m * c.sigma_cycles / c.length_m;
-    json!({
-        "baseline_length_m": c.length_m,
-        "phase_sigma_cycles": c.sigma_cycles,
-        "lambda_sigma_over_d_rad": unit,
-        "epochs": c.epochs,
-        "roll_rms_deg": c.rms_rad[0] * DEG,
-        "pitch_rms_deg": c.rms_rad[1] * DEG,
-        "heading_rms_deg": c.rms_rad[2] * DEG,
-        "roll_predicted_deg": c.predicted_rms_rad[0] * DEG,
-        "pitch_predicted_deg": c.predicted_rms_rad[1] * DEG,
-        "heading_predicted_deg": c.predicted_rms_rad[2] * DEG,
-        "roll_normalised_sq": c.normalised_sq[0],
-        "pitch_normalised_sq": c.normalised_sq[1],
-        "heading_normalised_sq": c.normalised_sq[2],
-        "heading_geometry_factor": c.predicted_rms_rad[2] / unit,
-    })
+    Row {
+        baseline_length_m: c.length_m,
+        phase_sigma_cycles: c.sigma_cycles,
+        lambda_sigma_over_d_rad: unit,
+        epochs: c.epochs,
+        roll_rms_deg: c.rms_rad[0] * DEG,
+        pitch_rms_deg: c.rms_rad[1] * DEG,
+        heading_rms_deg: c.rms_rad[2] * DEG,
+        roll_predicted_deg: c.predicted_rms_rad[0] * DEG,
+        pitch_predicted_deg: c.predicted_rms_rad[1] * DEG,
+        heading_predicted_deg: c.predicted_rms_rad[2] * DEG,
+        roll_normalised_sq: c.normalised_sq[0],
+        pitch_normalised_sq: c.normalised_sq[1],
+        heading_normalised_sq: c.normalised_sq[2],
+        heading_geometry_factor: c.predicted_rms_rad[2] / unit,
+    }
 }
 
-/// Log-log slope of `key` against λσ/d over `rows`.
-fn slope(rows: &[Value], key: &str) -> Option<f64> {
+/// Log-log slope of `y` against λσ/d over `rows` (undefined figures left out).
+fn slope(rows: &[Row], y: impl Fn(&Row) -> f64) -> Option<f64> {
+    let finite_ln = |v: f64| v.is_finite().then(|| v.ln());
     let x: Vec<f64> = rows
         .iter()
-        .filter_map(|r| r["lambda_sigma_over_d_rad"].as_f64().map(f64::ln))
+        .filter_map(|r| finite_ln(r.lambda_sigma_over_d_rad))
         .collect();
-    let y: Vec<f64> = rows
-        .iter()
-        .filter_map(|r| r[key].as_f64().map(f64::ln))
-        .collect();
+    let y: Vec<f64> = rows.iter().filter_map(|r| finite_ln(y(r))).collect();
     linear_fit(&x, &y).map(|(s, _)| s)
 }
 
@@ -182,7 +327,7 @@ pub fn run_with(
     out_dir: &Path,
     progress: bool,
     settings: &Settings,
-) -> Result<Value, ExperimentError> {
+) -> Result<Summary, ExperimentError> {
     create_out_dir(out_dir)?;
     let base = Scenario::load(&scenario_path()).map_err(measurement)?;
     let mut jobs: Vec<(bool, f64, f64)> = settings
@@ -218,69 +363,52 @@ pub fn run_with(
             by_sigma.push(row(&c));
         }
     }
-    let mut slopes = serde_json::Map::new();
-    for (name, rows) in [("length", &by_length), ("sigma", &by_sigma)] {
-        for axis in ["heading", "pitch", "roll"] {
-            if let Some(s) = slope(rows, &format!("{axis}_rms_deg")) {
-                slopes.insert(format!("{name}_sweep_{axis}_rms_loglog_slope"), json!(s));
-            }
-            if let Some(s) = slope(rows, &format!("{axis}_predicted_deg")) {
-                slopes.insert(
-                    format!("{name}_sweep_{axis}_predicted_loglog_slope"),
-                    json!(s),
-                );
-            }
-        }
-    }
-    let all: Vec<&Value> = by_length.iter().chain(&by_sigma).collect();
-    let worst_ratio = all
+    let worst_ratio = by_length
         .iter()
-        .flat_map(|r| {
-            ["heading", "pitch", "roll"].map(|a| {
-                let m = r[format!("{a}_rms_deg")].as_f64().unwrap_or(f64::NAN);
-                let p = r[format!("{a}_predicted_deg")].as_f64().unwrap_or(f64::NAN);
-                (m / p - 1.0).abs()
-            })
-        })
+        .chain(&by_sigma)
+        .flat_map(|r| r.by_axis().map(|(_, m, p, _)| (m / p - 1.0).abs()))
         .fold(0.0, f64::max);
-    let summary = json!({
-        "experiment": "baseline-attitude",
-        "paper": "003",
-        "scenario": "config/scenarios/vehicle.toml",
-        "epochs_per_configuration": settings.epochs,
-        "length_sweep": by_length,
-        "sigma_sweep": by_sigma,
-        "slopes": slopes,
-        "max_abs_measured_over_predicted_minus_one": worst_ratio,
-    });
+    let summary = Summary {
+        experiment: BaselineAttitude::NAME.into(),
+        paper: "003".into(),
+        scenario: "config/scenarios/vehicle.toml".into(),
+        epochs_per_configuration: settings.epochs,
+        slopes: Slopes::of(&by_length, &by_sigma),
+        length_sweep: by_length,
+        sigma_sweep: by_sigma,
+        max_abs_measured_over_predicted_minus_one: worst_ratio,
+    };
     write_summary(out_dir, &summary)?;
     let mut lines = Vec::new();
-    for (i, (label, rows)) in [("length sweep", &by_length), ("σ_φ sweep", &by_sigma)]
-        .iter()
-        .enumerate()
+    for (i, (label, rows)) in [
+        ("length sweep", &summary.length_sweep),
+        ("σ_φ sweep", &summary.sigma_sweep),
+    ]
+    .iter()
+    .enumerate()
     {
-        for (j, axis) in ["heading", "pitch"].iter().enumerate() {
-            let pts = |key: &str| -> Vec<(f64, f64)> {
-                rows.iter()
-                    .filter_map(|r| {
-                        Some((r["lambda_sigma_over_d_rad"].as_f64()?, r[key].as_f64()?))
-                    })
-                    .collect()
+        for j in 0..2 {
+            // by_axis() order: heading, pitch.
+            let axis = ["heading", "pitch"][j];
+            let pts = |k: usize| -> Vec<(f64, f64)> {
+                finite_points(rows.iter().map(|r| {
+                    let a = r.by_axis()[j];
+                    (r.lambda_sigma_over_d_rad, if k == 0 { a.1 } else { a.2 })
+                }))
             };
-            lines.push(Line {
-                label: format!("{label} {axis} measured"),
-                points: pts(&format!("{axis}_rms_deg")),
-                color: color(2 * (2 * i + j)),
-                dashed: false,
-                markers: true,
-            });
-            lines.push(Line {
-                label: format!("{label} {axis} predicted σ"),
-                points: pts(&format!("{axis}_predicted_deg")),
-                color: color(2 * (2 * i + j) + 1),
-                dashed: true,
-                markers: false,
-            });
+            lines.push(
+                Line::solid(
+                    format!("{label} {axis} measured"),
+                    pts(0),
+                    color(2 * (2 * i + j)),
+                )
+                .with_markers(),
+            );
+            lines.push(Line::dashed(
+                format!("{label} {axis} predicted σ"),
+                pts(1),
+                color(2 * (2 * i + j) + 1),
+            ));
         }
     }
     line_chart(
@@ -298,7 +426,7 @@ pub fn run_with(
 }
 
 /// Human table.
-pub fn table(summary: &Value) -> String {
+pub fn table(summary: &Summary) -> String {
     let mut out = String::from(
         "Dual-baseline GNSS attitude (paper 003): RMS error vs predicted σ, degrees\n\n",
     );
@@ -317,41 +445,36 @@ pub fn table(summary: &Value) -> String {
         "pred",
         "z²"
     ));
-    for sweep in ["length_sweep", "sigma_sweep"] {
-        let n = summary[sweep].as_array().map_or(0, |a| a.len());
-        for i in 0..n {
-            let p = |k: &str, prec: usize, sci: bool| {
-                fmt_num(summary, &format!("/{sweep}/{i}/{k}"), prec, sci)
-            };
-            out.push_str(&format!(
-                "{:>6} {:>8} {:>10} | {:>9} {:>9} {:>6} | {:>9} {:>9} {:>6} | {:>9} {:>9} {:>6}\n",
-                p("baseline_length_m", 2, false),
-                p("phase_sigma_cycles", 3, false),
-                p("lambda_sigma_over_d_rad", 2, true),
-                p("heading_rms_deg", 2, true),
-                p("heading_predicted_deg", 2, true),
-                p("heading_normalised_sq", 2, false),
-                p("pitch_rms_deg", 2, true),
-                p("pitch_predicted_deg", 2, true),
-                p("pitch_normalised_sq", 2, false),
-                p("roll_rms_deg", 2, true),
-                p("roll_predicted_deg", 2, true),
-                p("roll_normalised_sq", 2, false),
-            ));
+    for sweep in [&summary.length_sweep, &summary.sigma_sweep] {
+        for r in sweep {
+            let mut line = format!(
+                "{:>6} {:>8} {:>10}",
+                fmt_f64(r.baseline_length_m, 2, false),
+                fmt_f64(r.phase_sigma_cycles, 3, false),
+                fmt_f64(r.lambda_sigma_over_d_rad, 2, true),
+            );
+            for (_, rms, predicted, z) in r.by_axis() {
+                line += &format!(
+                    " | {:>9} {:>9} {:>6}",
+                    fmt_f64(rms, 2, true),
+                    fmt_f64(predicted, 2, true),
+                    fmt_f64(z, 2, false),
+                );
+            }
+            out.push_str(&line);
+            out.push('\n');
         }
         out.push('\n');
     }
     out.push_str(&format!(
         "log-log slope of heading RMS vs λσ/d: length sweep {}, σ sweep {} (theory 1)\n",
-        fmt_num(
-            summary,
-            "/slopes/length_sweep_heading_rms_loglog_slope",
+        fmt_opt(
+            summary.slopes.length_sweep_heading_rms_loglog_slope,
             3,
             false
         ),
-        fmt_num(
-            summary,
-            "/slopes/sigma_sweep_heading_rms_loglog_slope",
+        fmt_opt(
+            summary.slopes.sigma_sweep_heading_rms_loglog_slope,
             3,
             false
         ),
@@ -383,11 +506,14 @@ mod tests {
         let s = run_with(&dir, false, &settings).expect("run");
         assert!(table(&s).contains("heading"));
         assert!(dir.join("attitude_vs_lambda_sigma_over_d.png").exists());
-        for sweep in ["length_sweep", "sigma_sweep"] {
-            for r in s[sweep].as_array().unwrap() {
-                let n = r["epochs"].as_f64().unwrap();
-                for axis in ["heading", "pitch", "roll"] {
-                    let z = r[format!("{axis}_normalised_sq")].as_f64().unwrap();
+        for (sweep, rows) in [
+            ("length_sweep", &s.length_sweep),
+            ("sigma_sweep", &s.sigma_sweep),
+        ] {
+            assert!(!rows.is_empty(), "{sweep}");
+            for r in rows {
+                let n = r.epochs as f64;
+                for (axis, _, _, z) in r.by_axis() {
                     assert!(
                         (z - 1.0).abs() < 4.0 * (2.0 / n).sqrt(),
                         "{sweep} {axis}: Σz²/N = {z}"
@@ -395,11 +521,12 @@ mod tests {
                 }
             }
         }
-        let sl = |k: &str| s["slopes"][k].as_f64().unwrap();
-        assert!((sl("length_sweep_heading_predicted_loglog_slope") - 1.0).abs() < 0.01);
-        assert!((sl("sigma_sweep_heading_predicted_loglog_slope") - 1.0).abs() < 0.01);
-        assert!((sl("length_sweep_heading_rms_loglog_slope") - 1.0).abs() < 0.2);
-        assert!((sl("length_sweep_pitch_rms_loglog_slope") - 1.0).abs() < 0.2);
+        let sl = |x: Option<f64>| x.expect("slope");
+        let slopes = &s.slopes;
+        assert!((sl(slopes.length_sweep_heading_predicted_loglog_slope) - 1.0).abs() < 0.01);
+        assert!((sl(slopes.sigma_sweep_heading_predicted_loglog_slope) - 1.0).abs() < 0.01);
+        assert!((sl(slopes.length_sweep_heading_rms_loglog_slope) - 1.0).abs() < 0.2);
+        assert!((sl(slopes.length_sweep_pitch_rms_loglog_slope) - 1.0).abs() < 0.2);
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

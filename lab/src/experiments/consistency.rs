@@ -60,14 +60,16 @@
 //! (90.0 %, was 2.18), attitude 2.91 (98.0 %). The down-velocity time-RMS σ stays 0.0011 m/s
 //! (the epochs just after alignment), the error is now 4e-5 m/s RMS.
 
-use super::plot::{Chart, Line, color, line_chart};
-use super::{ExperimentError, create_out_dir, fmt_num, progress_bar, write_summary};
+use super::plot::{Chart, Line, color, line_chart, xy};
+use super::{
+    Experiment, ExperimentError, create_out_dir, fmt_f64, nan_if_null, progress_bar, write_summary,
+};
 use drivers_sim::offline::{Channel, OfflineSim, RunPoint, run_navigator};
 use drivers_sim::scenario::Scenario;
 use fusion::ekf::chi2_quantile;
 use fusion::navigator::{Navigator, NavigatorConfig};
 use rayon::prelude::*;
-use serde_json::{Value, json};
+use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
 /// Path of a scenario file shipped in `config/scenarios`.
@@ -220,9 +222,247 @@ fn one_run(
 const GROUPS: [&str; 3] = ["position", "velocity", "attitude"];
 const AXES: [&str; 3] = ["north", "east", "down"];
 
-/// Run with the defaults into `out_dir`.
-pub fn run(out_dir: &Path, progress: bool) -> Result<Value, ExperimentError> {
-    run_with(&Settings::default(), out_dir, progress)
+/// RMS over the runs of one NED axis's error against the filter's σ, both RMS over the epochs.
+pub trait AxisFigures {
+    /// From the RMS error and RMS σ in the group's unit.
+    fn new(rms_error: f64, filter_sigma_rms: f64, ratio_error_to_sigma: f64) -> Self;
+    /// (RMS error, RMS σ) in the group's unit.
+    fn rms_error_and_sigma(&self) -> (f64, f64);
+}
+
+/// One position axis, m.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct PositionAxis {
+    /// RMS error, m.
+    #[serde(deserialize_with = "nan_if_null")]
+    pub rms_error_m: f64,
+    /// RMS of the filter's σ, m.
+    #[serde(deserialize_with = "nan_if_null")]
+    pub filter_sigma_rms_m: f64,
+    /// RMS error / RMS σ (1 for a consistent filter).
+    #[serde(deserialize_with = "nan_if_null")]
+    pub ratio_error_to_sigma: f64,
+}
+
+/// One velocity axis, m/s.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct VelocityAxis {
+    /// RMS error, m/s.
+    #[serde(deserialize_with = "nan_if_null")]
+    pub rms_error_m_s: f64,
+    /// RMS of the filter's σ, m/s.
+    #[serde(deserialize_with = "nan_if_null")]
+    pub filter_sigma_rms_m_s: f64,
+    /// RMS error / RMS σ (1 for a consistent filter).
+    #[serde(deserialize_with = "nan_if_null")]
+    pub ratio_error_to_sigma: f64,
+}
+
+/// One attitude axis (error angle ψ about it), deg.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct AttitudeAxis {
+    /// RMS error, deg.
+    #[serde(deserialize_with = "nan_if_null")]
+    pub rms_error_deg: f64,
+    /// RMS of the filter's σ, deg.
+    #[serde(deserialize_with = "nan_if_null")]
+    pub filter_sigma_rms_deg: f64,
+    /// RMS error / RMS σ (1 for a consistent filter).
+    #[serde(deserialize_with = "nan_if_null")]
+    pub ratio_error_to_sigma: f64,
+}
+
+impl AxisFigures for PositionAxis {
+    fn new(rms_error: f64, filter_sigma_rms: f64, ratio_error_to_sigma: f64) -> Self {
+        Self {
+            rms_error_m: rms_error,
+            filter_sigma_rms_m: filter_sigma_rms,
+            ratio_error_to_sigma,
+        }
+    }
+    fn rms_error_and_sigma(&self) -> (f64, f64) {
+        (self.rms_error_m, self.filter_sigma_rms_m)
+    }
+}
+
+impl AxisFigures for VelocityAxis {
+    fn new(rms_error: f64, filter_sigma_rms: f64, ratio_error_to_sigma: f64) -> Self {
+        Self {
+            rms_error_m_s: rms_error,
+            filter_sigma_rms_m_s: filter_sigma_rms,
+            ratio_error_to_sigma,
+        }
+    }
+    fn rms_error_and_sigma(&self) -> (f64, f64) {
+        (self.rms_error_m_s, self.filter_sigma_rms_m_s)
+    }
+}
+
+impl AxisFigures for AttitudeAxis {
+    fn new(rms_error: f64, filter_sigma_rms: f64, ratio_error_to_sigma: f64) -> Self {
+        Self {
+            rms_error_deg: rms_error,
+            filter_sigma_rms_deg: filter_sigma_rms,
+            ratio_error_to_sigma,
+        }
+    }
+    fn rms_error_and_sigma(&self) -> (f64, f64) {
+        (self.rms_error_deg, self.filter_sigma_rms_deg)
+    }
+}
+
+/// The three NED axes of a group.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct NedAxes<A> {
+    /// North.
+    pub north: A,
+    /// East.
+    pub east: A,
+    /// Down.
+    pub down: A,
+}
+
+/// The run-averaged NEES of one 3-vector group against the band, and its axes.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Group<A> {
+    /// Time mean of the average NEES over the runs.
+    #[serde(deserialize_with = "nan_if_null")]
+    pub mean_of_average_nees: f64,
+    /// Fraction of the epochs whose average NEES is inside the 95 % band.
+    #[serde(deserialize_with = "nan_if_null")]
+    pub fraction_of_epochs_inside_band: f64,
+    /// Fraction of the epochs above it (optimistic).
+    #[serde(deserialize_with = "nan_if_null")]
+    pub fraction_of_epochs_above_band: f64,
+    /// Largest average NEES.
+    #[serde(deserialize_with = "nan_if_null")]
+    pub max_average_nees: f64,
+    /// RMS error against σ per NED axis.
+    pub axes: NedAxes<A>,
+}
+
+/// The groups: position, velocity and attitude error.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Groups {
+    /// Position, m.
+    pub position: Group<PositionAxis>,
+    /// Velocity, m/s.
+    pub velocity: Group<VelocityAxis>,
+    /// Attitude error ψ, deg.
+    pub attitude: Group<AttitudeAxis>,
+}
+
+/// The figures of `consistency` (`summary.json`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Summary {
+    /// `"consistency"`.
+    pub experiment: String,
+    /// Scenario name in `config/scenarios`.
+    pub scenario: String,
+    /// Monte Carlo runs.
+    pub runs: u64,
+    /// Epochs per run in the statistics.
+    pub epochs_per_run: usize,
+    /// First epoch, s since the scenario start.
+    pub first_epoch_s: f64,
+    /// Last epoch, s since the scenario start.
+    pub last_epoch_s: f64,
+    /// Degrees of freedom of each group's NEES (3).
+    pub nees_dof_per_group: u32,
+    /// Probability of the band (0.95).
+    pub band_probability: f64,
+    /// Lower edge of the band of the run-averaged NEES, `χ²_{3N}(0.025)/N`.
+    pub nees_band_lower: f64,
+    /// Upper edge, `χ²_{3N}(0.975)/N`.
+    pub nees_band_upper: f64,
+    /// Per group.
+    pub groups: Groups,
+    /// Wall-clock time of the runs, s.
+    pub wall_time_s: f64,
+}
+
+/// `sextant experiment consistency`.
+pub struct Consistency;
+
+impl Experiment for Consistency {
+    const NAME: &'static str = "consistency";
+    const DESCRIPTION: &'static str =
+        "Issue 5: Monte Carlo NEES of the filter against the chi-square band";
+    type Summary = Summary;
+    fn run(out_dir: &Path, progress: bool) -> Result<Summary, ExperimentError> {
+        run_with(&Settings::default(), out_dir, progress)
+    }
+    fn table(summary: &Summary) -> String {
+        table(summary)
+    }
+}
+
+/// The figures of group `g` (0 position, 1 velocity, 2 attitude) from the run-averaged NEES
+/// per epoch and the per-epoch RMS over the runs of each axis's error and σ (SI units, rad).
+fn group_figures<A: AxisFigures>(
+    g: usize,
+    avg_nees: &[f64],
+    band: (f64, f64),
+    rms_err: &[Vec<f64>; 3],
+    sig: &[Vec<f64>; 3],
+) -> Group<A> {
+    let v = avg_nees;
+    let n_ep = v.len();
+    let inside = v.iter().filter(|&&x| x >= band.0 && x <= band.1).count() as f64;
+    let above = v.iter().filter(|&&x| x > band.1).count() as f64;
+    let mean = v.iter().sum::<f64>() / v.len() as f64;
+    let axis = |a: usize| {
+        let r: f64 = (rms_err[a].iter().map(|x| x * x).sum::<f64>() / n_ep as f64).sqrt();
+        let s: f64 = (sig[a].iter().map(|x| x * x).sum::<f64>() / n_ep as f64).sqrt();
+        let scale = if g == 2 {
+            180.0 / std::f64::consts::PI
+        } else {
+            1.0
+        };
+        A::new(r * scale, s * scale, r / s)
+    };
+    Group {
+        mean_of_average_nees: mean,
+        fraction_of_epochs_inside_band: inside / v.len() as f64,
+        fraction_of_epochs_above_band: above / v.len() as f64,
+        max_average_nees: v.iter().cloned().fold(f64::NAN, f64::max),
+        axes: NedAxes {
+            north: axis(0),
+            east: axis(1),
+            down: axis(2),
+        },
+    }
+}
+
+/// A group's line of the table: mean NEES, inside fraction, above fraction, (RMS error,
+/// RMS σ) per NED axis.
+type GroupLine = (f64, f64, f64, [(f64, f64); 3]);
+
+impl<A: AxisFigures> Group<A> {
+    /// The group's line of the table.
+    fn table_figures(&self) -> GroupLine {
+        (
+            self.mean_of_average_nees,
+            self.fraction_of_epochs_inside_band,
+            self.fraction_of_epochs_above_band,
+            [
+                self.axes.north.rms_error_and_sigma(),
+                self.axes.east.rms_error_and_sigma(),
+                self.axes.down.rms_error_and_sigma(),
+            ],
+        )
+    }
+}
+
+impl Groups {
+    /// `table_figures` of each group, in [`GROUPS`] order.
+    fn table_figures(&self) -> [GroupLine; 3] {
+        [
+            self.position.table_figures(),
+            self.velocity.table_figures(),
+            self.attitude.table_figures(),
+        ]
+    }
 }
 
 /// Run with `settings` into `out_dir`; returns the summary (also in `summary.json`).
@@ -230,7 +470,7 @@ pub fn run_with(
     settings: &Settings,
     out_dir: &Path,
     progress: bool,
-) -> Result<Value, ExperimentError> {
+) -> Result<Summary, ExperimentError> {
     if settings.runs < 2 {
         return Err(ExperimentError::Measurement("need at least 2 runs".into()));
     }
@@ -288,86 +528,42 @@ pub fn run_with(
         }
     }
 
-    let mut groups = serde_json::Map::new();
-    for g in 0..3 {
-        let v = &avg_nees[g];
-        let inside = v.iter().filter(|&&x| x >= band.0 && x <= band.1).count() as f64;
-        let above = v.iter().filter(|&&x| x > band.1).count() as f64;
-        let mean = v.iter().sum::<f64>() / v.len() as f64;
-        let mut axes = serde_json::Map::new();
-        for a in 0..3 {
-            let r: f64 = (rms_err[g][a].iter().map(|x| x * x).sum::<f64>() / n_ep as f64).sqrt();
-            let s: f64 = (sig[g][a].iter().map(|x| x * x).sum::<f64>() / n_ep as f64).sqrt();
-            let unit = ["m", "m_s", "deg"][g];
-            let scale = if g == 2 {
-                180.0 / std::f64::consts::PI
-            } else {
-                1.0
-            };
-            axes.insert(
-                AXES[a].to_string(),
-                json!({
-                    format!("rms_error_{unit}"): r * scale,
-                    format!("filter_sigma_rms_{unit}"): s * scale,
-                    "ratio_error_to_sigma": r / s,
-                }),
-            );
-        }
-        groups.insert(
-            GROUPS[g].to_string(),
-            json!({
-                "mean_of_average_nees": mean,
-                "fraction_of_epochs_inside_band": inside / v.len() as f64,
-                "fraction_of_epochs_above_band": above / v.len() as f64,
-                "max_average_nees": v.iter().cloned().fold(f64::NAN, f64::max),
-                "axes": axes,
-            }),
-        );
-    }
-    let summary = json!({
-        "experiment": "consistency",
-        "scenario": settings.scenario,
-        "runs": settings.runs,
-        "epochs_per_run": n_ep,
-        "first_epoch_s": t.first(),
-        "last_epoch_s": t.last(),
-        "nees_dof_per_group": 3,
-        "band_probability": 0.95,
-        "nees_band_lower": band.0,
-        "nees_band_upper": band.1,
-        "groups": groups,
-        "wall_time_s": wall_s,
-    });
+    let summary = Summary {
+        experiment: Consistency::NAME.into(),
+        scenario: settings.scenario.clone(),
+        runs: settings.runs,
+        epochs_per_run: n_ep,
+        first_epoch_s: t[0],
+        last_epoch_s: t[n_ep - 1],
+        nees_dof_per_group: 3,
+        band_probability: 0.95,
+        nees_band_lower: band.0,
+        nees_band_upper: band.1,
+        groups: Groups {
+            position: group_figures(0, &avg_nees[0], band, &rms_err[0], &sig[0]),
+            velocity: group_figures(1, &avg_nees[1], band, &rms_err[1], &sig[1]),
+            attitude: group_figures(2, &avg_nees[2], band, &rms_err[2], &sig[2]),
+        },
+        wall_time_s: wall_s,
+    };
 
     // Plots: average NEES with the band; RMS error vs σ per axis.
-    let band_lines = |t: &[f64]| {
-        vec![
-            Line {
-                label: format!("χ²₍{k}₎ 2.5 %/N = {:.3}", band.0),
-                points: t.iter().map(|&x| (x, band.0)).collect(),
-                color: color(5),
-                dashed: true,
-                markers: false,
-            },
-            Line {
-                label: format!("χ²₍{k}₎ 97.5 %/N = {:.3}", band.1),
-                points: t.iter().map(|&x| (x, band.1)).collect(),
-                color: color(5),
-                dashed: true,
-                markers: false,
-            },
-        ]
-    };
     let mut lines: Vec<Line> = (0..3)
-        .map(|g| Line {
-            label: format!("{} NEES, mean of {} runs", GROUPS[g], settings.runs),
-            points: t.iter().zip(&avg_nees[g]).map(|(&x, &y)| (x, y)).collect(),
-            color: color(g),
-            dashed: false,
-            markers: false,
+        .map(|g| {
+            Line::solid(
+                format!("{} NEES, mean of {} runs", GROUPS[g], settings.runs),
+                xy(&t, &avg_nees[g]),
+                color(g),
+            )
         })
         .collect();
-    lines.extend(band_lines(&t));
+    for (name, edge) in [("2.5", band.0), ("97.5", band.1)] {
+        lines.push(Line::dashed(
+            format!("χ²₍{k}₎ {name} %/N = {edge:.3}"),
+            t.iter().map(|&x| (x, edge)).collect(),
+            color(5),
+        ));
+    }
     line_chart(
         &out_dir.join("nees.png"),
         &Chart {
@@ -385,30 +581,19 @@ pub fn run_with(
         } else {
             1.0
         };
+        let scaled = |v: &[f64]| t.iter().zip(v).map(|(&x, &y)| (x, y * scale)).collect();
         let mut lines = Vec::new();
         for a in 0..3 {
-            lines.push(Line {
-                label: format!("{} RMS error over runs", AXES[a]),
-                points: t
-                    .iter()
-                    .zip(&rms_err[g][a])
-                    .map(|(&x, &y)| (x, y * scale))
-                    .collect(),
-                color: color(a),
-                dashed: false,
-                markers: false,
-            });
-            lines.push(Line {
-                label: format!("{} filter σ", AXES[a]),
-                points: t
-                    .iter()
-                    .zip(&sig[g][a])
-                    .map(|(&x, &y)| (x, y * scale))
-                    .collect(),
-                color: color(a),
-                dashed: true,
-                markers: false,
-            });
+            lines.push(Line::solid(
+                format!("{} RMS error over runs", AXES[a]),
+                scaled(&rms_err[g][a]),
+                color(a),
+            ));
+            lines.push(Line::dashed(
+                format!("{} filter σ", AXES[a]),
+                scaled(&sig[g][a]),
+                color(a),
+            ));
         }
         let unit = ["m", "m/s", "deg"][g];
         line_chart(
@@ -428,54 +613,24 @@ pub fn run_with(
 }
 
 /// The table printed after the run.
-pub fn table(summary: &Value) -> String {
+pub fn table(summary: &Summary) -> String {
     let mut s = format!(
         "consistency: {} runs of {}, NEES 95 % band [{}, {}]\n",
-        fmt_num(summary, "/runs", 0, false),
-        summary["scenario"].as_str().unwrap_or("?"),
-        fmt_num(summary, "/nees_band_lower", 3, false),
-        fmt_num(summary, "/nees_band_upper", 3, false),
+        summary.runs,
+        summary.scenario,
+        fmt_f64(summary.nees_band_lower, 3, false),
+        fmt_f64(summary.nees_band_upper, 3, false),
     );
     s += "group     mean avg NEES  inside band  above band  | RMS err / σ  (N, E, D)\n";
-    for (g, unit) in GROUPS.iter().zip(["m", "m_s", "deg"]) {
-        let p = format!("/groups/{g}");
+    for (g, (mean, inside, above, axes)) in GROUPS.iter().zip(summary.groups.table_figures()) {
         s += &format!(
             "{g:9} {:>13} {:>11}% {:>10}%  | ",
-            fmt_num(summary, &format!("{p}/mean_of_average_nees"), 2, false),
-            fmt_num(
-                &json!(
-                    summary
-                        .pointer(&format!("{p}/fraction_of_epochs_inside_band"))
-                        .and_then(Value::as_f64)
-                        .map(|x| x * 100.0)
-                ),
-                "",
-                1,
-                false
-            ),
-            fmt_num(
-                &json!(
-                    summary
-                        .pointer(&format!("{p}/fraction_of_epochs_above_band"))
-                        .and_then(Value::as_f64)
-                        .map(|x| x * 100.0)
-                ),
-                "",
-                1,
-                false
-            ),
+            fmt_f64(mean, 2, false),
+            fmt_f64(inside * 100.0, 1, false),
+            fmt_f64(above * 100.0, 1, false),
         );
-        for a in AXES {
-            s += &format!(
-                "{}/{} ",
-                fmt_num(summary, &format!("{p}/axes/{a}/rms_error_{unit}"), 4, false),
-                fmt_num(
-                    summary,
-                    &format!("{p}/axes/{a}/filter_sigma_rms_{unit}"),
-                    4,
-                    false
-                ),
-            );
+        for (rms, sigma) in axes {
+            s += &format!("{}/{} ", fmt_f64(rms, 4, false), fmt_f64(sigma, 4, false));
         }
         s += "\n";
     }
@@ -526,19 +681,12 @@ mod tests {
             ..Settings::default()
         };
         let s = run_with(&settings, &dir, false).expect("run");
-        let lo = s["nees_band_lower"].as_f64().expect("band");
-        let hi = s["nees_band_upper"].as_f64().expect("band");
+        let (lo, hi) = (s.nees_band_lower, s.nees_band_upper);
         assert!(
             (lo - 1.679).abs() < 1e-3 && (hi - 4.698).abs() < 1e-3,
             "{lo} {hi}"
         );
-        for g in GROUPS {
-            let mean = s["groups"][g]["mean_of_average_nees"]
-                .as_f64()
-                .expect("mean");
-            let inside = s["groups"][g]["fraction_of_epochs_inside_band"]
-                .as_f64()
-                .expect("fraction");
+        for (g, (mean, inside, _, _)) in GROUPS.iter().zip(s.groups.table_figures()) {
             assert!(
                 mean >= lo && mean <= hi,
                 "{g}: mean NEES {mean}\n{}",

@@ -59,7 +59,10 @@
 
 use super::consistency::{filter_config, load_scenario};
 use super::plot::{Chart, Line, color, line_chart};
-use super::{ExperimentError, create_out_dir, fmt_num, progress_bar, write_summary};
+use super::{
+    Experiment, ExperimentError, create_out_dir, fmt_f64, fmt_opt, nan_if_null, progress_bar,
+    write_summary,
+};
 use drivers_sim::offline::{Channel, OfflineSim, RunPoint, run_navigator};
 use drivers_sim::scenario::Scenario;
 use drivers_sim::sources::{ImuSource, SampleSource};
@@ -67,7 +70,7 @@ use fusion::earth::{WGS84, normal_gravity};
 use fusion::ekf::gravity_gradient;
 use fusion::navigator::Navigator;
 use nalgebra::{Matrix2, Vector2, Vector3};
-use serde_json::{Value, json};
+use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 /// Settings of the experiment.
@@ -259,9 +262,110 @@ fn noise_sigma_per_axis_m(scn: &Scenario, t_s: f64, with_stars: bool) -> f64 {
     (s * t_s / (2.0 * omega_s2)).sqrt()
 }
 
-/// Run with the defaults into `out_dir`.
-pub fn run(out_dir: &Path, progress: bool) -> Result<Value, ExperimentError> {
-    run_with(&Settings::default(), out_dir, progress)
+/// The closed forms of the module comment at the end of the run.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Floor {
+    /// Mean over the run of the bias floor's magnitude `|G_hh⁻¹ δf_h|`, m.
+    pub bias_floor_mean_m: f64,
+    /// Its maximum, m.
+    pub bias_floor_max_m: f64,
+    /// Radial 1σ of the noise term with the star tracker, m.
+    pub noise_sigma_at_end_astro_m: f64,
+    /// Radial 1σ of the VRW term alone (free inertial), m.
+    pub noise_sigma_at_end_free_vrw_only_m: f64,
+    /// `2·floor_max + 3σ_noise`, m.
+    pub bound_2_floor_plus_3_sigma_m: f64,
+}
+
+/// The astro-inertial run.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct AstroRun {
+    /// Horizontal error at the end, m.
+    pub final_horizontal_error_m: f64,
+    /// Largest horizontal error, m.
+    pub max_horizontal_error_m: f64,
+    /// The filter's horizontal σ at the end, m.
+    pub final_horizontal_sigma_m: f64,
+    /// Mean north error over the whole Schuler periods, m (undefined with none).
+    #[serde(deserialize_with = "nan_if_null")]
+    pub mean_error_north_over_whole_periods_m: f64,
+    /// Mean east error over the whole Schuler periods, m.
+    #[serde(deserialize_with = "nan_if_null")]
+    pub mean_error_east_over_whole_periods_m: f64,
+    /// Mean north floor over the same epochs, m.
+    #[serde(deserialize_with = "nan_if_null")]
+    pub mean_floor_north_over_whole_periods_m: f64,
+    /// Mean east floor over the same epochs, m.
+    #[serde(deserialize_with = "nan_if_null")]
+    pub mean_floor_east_over_whole_periods_m: f64,
+    /// How far the floor moves from its mean over those epochs, m.
+    #[serde(deserialize_with = "nan_if_null")]
+    pub floor_spread_over_whole_periods_m: f64,
+    /// |mean error − mean floor|, m.
+    #[serde(deserialize_with = "nan_if_null")]
+    pub mean_error_minus_mean_floor_m: f64,
+    /// The largest error is within the bound.
+    pub within_bound: bool,
+    /// Effective accelerometer error at the end, NED, µg.
+    pub accel_effective_error_ned_at_end_ug: [f64; 3],
+    /// The truth's accelerometer bias at the end, NED, µg.
+    pub accel_bias_of_truth_ned_at_end_ug: [f64; 3],
+    /// The filter's accelerometer bias estimate at the end, NED, µg.
+    pub accel_bias_estimate_ned_at_end_ug: [f64; 3],
+}
+
+/// The free-inertial run (inertial + baro, no star tracker).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct FreeRun {
+    /// Horizontal error at the end, m.
+    pub final_horizontal_error_m: f64,
+    /// Largest horizontal error, m.
+    pub max_horizontal_error_m: f64,
+    /// The filter's horizontal σ at the end, m.
+    pub final_horizontal_sigma_m: f64,
+}
+
+/// The figures of `gnss-denied-astro` (`summary.json`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Summary {
+    /// `"gnss-denied-astro"`.
+    pub experiment: String,
+    /// Scenario name in `config/scenarios`.
+    pub scenario: String,
+    /// Simulated duration, s.
+    pub duration_s: f64,
+    /// IMU rate, Hz.
+    pub imu_rate_hz: f64,
+    /// Time navigated, s.
+    pub navigation_time_s: f64,
+    /// The Schuler period at the site, s.
+    pub schuler_period_s: f64,
+    /// Whole Schuler periods navigated.
+    pub whole_schuler_periods: f64,
+    /// The closed forms.
+    pub floor: Floor,
+    /// The astro-inertial run.
+    pub astro_inertial: AstroRun,
+    /// The free-inertial run (absent from the reduced test).
+    pub free_inertial: Option<FreeRun>,
+    /// Wall-clock time of the runs, s.
+    pub wall_time_s: f64,
+}
+
+/// `sextant experiment gnss-denied-astro`.
+pub struct GnssDeniedAstro;
+
+impl Experiment for GnssDeniedAstro {
+    const NAME: &'static str = "gnss-denied-astro";
+    const DESCRIPTION: &'static str =
+        "Paper 000 / issue 5: 10 h astro-inertial without GNSS against its error floor";
+    type Summary = Summary;
+    fn run(out_dir: &Path, progress: bool) -> Result<Summary, ExperimentError> {
+        run_with(&Settings::default(), out_dir, progress)
+    }
+    fn table(summary: &Summary) -> String {
+        table(summary)
+    }
 }
 
 /// Run with `settings` into `out_dir`; returns the summary (also in `summary.json`).
@@ -269,7 +373,7 @@ pub fn run_with(
     settings: &Settings,
     out_dir: &Path,
     progress: bool,
-) -> Result<Value, ExperimentError> {
+) -> Result<Summary, ExperimentError> {
     create_out_dir(out_dir)?;
     let mut scn = load_scenario(&settings.scenario, None)?;
     if let Some(d) = settings.duration_s {
@@ -361,44 +465,45 @@ pub fn run_with(
         )
     };
 
-    let summary = json!({
-        "experiment": "gnss-denied-astro",
-        "scenario": settings.scenario,
-        "duration_s": duration_s,
-        "imu_rate_hz": scn.spec.imu.rate_hz,
-        "navigation_time_s": nav_time,
-        "schuler_period_s": schuler_s,
-        "whole_schuler_periods": periods,
-        "floor": {
-            "bias_floor_mean_m": floor_mean,
-            "bias_floor_max_m": floor_max,
-            "noise_sigma_at_end_astro_m": noise_astro,
-            "noise_sigma_at_end_free_vrw_only_m":
-                noise_sigma_per_axis_m(&scn, nav_time, false) * 2f64.sqrt(),
-            "bound_2_floor_plus_3_sigma_m": bound,
+    let ned = |v: &Vector3<f64>| [v.x, v.y, v.z];
+    let summary = Summary {
+        experiment: GnssDeniedAstro::NAME.into(),
+        scenario: settings.scenario.clone(),
+        duration_s,
+        imu_rate_hz: scn.spec.imu.rate_hz,
+        navigation_time_s: nav_time,
+        schuler_period_s: schuler_s,
+        whole_schuler_periods: periods,
+        floor: Floor {
+            bias_floor_mean_m: floor_mean,
+            bias_floor_max_m: floor_max,
+            noise_sigma_at_end_astro_m: noise_astro,
+            noise_sigma_at_end_free_vrw_only_m: noise_sigma_per_axis_m(&scn, nav_time, false)
+                * 2f64.sqrt(),
+            bound_2_floor_plus_3_sigma_m: bound,
         },
-        "astro_inertial": {
-            "final_horizontal_error_m": a_end.err_h_m,
-            "max_horizontal_error_m": astro_max,
-            "final_horizontal_sigma_m": a_end.sigma_h_m,
-            "mean_error_north_over_whole_periods_m": mean_err.x,
-            "mean_error_east_over_whole_periods_m": mean_err.y,
-            "mean_floor_north_over_whole_periods_m": mean_floor.x,
-            "mean_floor_east_over_whole_periods_m": mean_floor.y,
-            "floor_spread_over_whole_periods_m": floor_spread,
-            "mean_error_minus_mean_floor_m": (mean_err - mean_floor).norm(),
-            "within_bound": astro_max <= bound,
-            "accel_effective_error_ned_at_end_ug": [a_end.bias_true_ned_ug.x, a_end.bias_true_ned_ug.y, a_end.bias_true_ned_ug.z],
-            "accel_bias_of_truth_ned_at_end_ug": [a_end.bias_truth_ned_ug.x, a_end.bias_truth_ned_ug.y, a_end.bias_truth_ned_ug.z],
-            "accel_bias_estimate_ned_at_end_ug": [a_end.bias_est_ned_ug.x, a_end.bias_est_ned_ug.y, a_end.bias_est_ned_ug.z],
+        astro_inertial: AstroRun {
+            final_horizontal_error_m: a_end.err_h_m,
+            max_horizontal_error_m: astro_max,
+            final_horizontal_sigma_m: a_end.sigma_h_m,
+            mean_error_north_over_whole_periods_m: mean_err.x,
+            mean_error_east_over_whole_periods_m: mean_err.y,
+            mean_floor_north_over_whole_periods_m: mean_floor.x,
+            mean_floor_east_over_whole_periods_m: mean_floor.y,
+            floor_spread_over_whole_periods_m: floor_spread,
+            mean_error_minus_mean_floor_m: (mean_err - mean_floor).norm(),
+            within_bound: astro_max <= bound,
+            accel_effective_error_ned_at_end_ug: ned(&a_end.bias_true_ned_ug),
+            accel_bias_of_truth_ned_at_end_ug: ned(&a_end.bias_truth_ned_ug),
+            accel_bias_estimate_ned_at_end_ug: ned(&a_end.bias_est_ned_ug),
         },
-        "free_inertial": f_end.map(|f_end| json!({
-            "final_horizontal_error_m": f_end.err_h_m,
-            "max_horizontal_error_m": free.iter().map(|s| s.err_h_m).fold(0.0, f64::max),
-            "final_horizontal_sigma_m": f_end.sigma_h_m,
-        })),
-        "wall_time_s": wall_s,
-    });
+        free_inertial: f_end.map(|f_end| FreeRun {
+            final_horizontal_error_m: f_end.err_h_m,
+            max_horizontal_error_m: free.iter().map(|s| s.err_h_m).fold(0.0, f64::max),
+            final_horizontal_sigma_m: f_end.sigma_h_m,
+        }),
+        wall_time_s: wall_s,
+    };
 
     // Plots (every 10th epoch: at 1 Hz truth, 3600 points per line over 10 h).
     let hours = |v: &[Sample], f: &dyn Fn(&Sample) -> f64| -> Vec<(f64, f64)> {
@@ -408,44 +513,34 @@ pub fn run_with(
             .collect()
     };
     let lines = vec![
-        Line {
-            label: "free inertial: horizontal error".into(),
-            points: hours(&free, &|s| s.err_h_m),
-            color: color(1),
-            dashed: false,
-            markers: false,
-        },
-        Line {
-            label: "astro-inertial: horizontal error".into(),
-            points: hours(&astro, &|s| s.err_h_m),
-            color: color(0),
-            dashed: false,
-            markers: false,
-        },
-        Line {
-            label: "bias floor R·|δb_h|/g (closed form)".into(),
-            points: hours(&astro, &|s| s.floor_ne_m.norm()),
-            color: color(2),
-            dashed: true,
-            markers: false,
-        },
-        Line {
-            label: "bound 2·floor + 3σ_noise".into(),
-            points: hours(&astro, &|s| {
+        Line::solid(
+            "free inertial: horizontal error",
+            hours(&free, &|s| s.err_h_m),
+            color(1),
+        ),
+        Line::solid(
+            "astro-inertial: horizontal error",
+            hours(&astro, &|s| s.err_h_m),
+            color(0),
+        ),
+        Line::dashed(
+            "bias floor R·|δb_h|/g (closed form)",
+            hours(&astro, &|s| s.floor_ne_m.norm()),
+            color(2),
+        ),
+        Line::dashed(
+            "bound 2·floor + 3σ_noise",
+            hours(&astro, &|s| {
                 2.0 * floor_max
                     + 3.0 * noise_sigma_per_axis_m(&scn, s.t_s - astro[0].t_s, true) * 2f64.sqrt()
             }),
-            color: color(3),
-            dashed: true,
-            markers: false,
-        },
-        Line {
-            label: "astro-inertial: filter horizontal σ".into(),
-            points: hours(&astro, &|s| s.sigma_h_m),
-            color: color(4),
-            dashed: true,
-            markers: false,
-        },
+            color(3),
+        ),
+        Line::dashed(
+            "astro-inertial: filter horizontal σ",
+            hours(&astro, &|s| s.sigma_h_m),
+            color(4),
+        ),
     ];
     line_chart(
         &out_dir.join("horizontal_error.png"),
@@ -459,34 +554,18 @@ pub fn run_with(
         },
     )?;
     let comp = vec![
-        Line {
-            label: "astro north error".into(),
-            points: hours(&astro, &|s| s.err_ne_m.x),
-            color: color(0),
-            dashed: false,
-            markers: false,
-        },
-        Line {
-            label: "astro east error".into(),
-            points: hours(&astro, &|s| s.err_ne_m.y),
-            color: color(1),
-            dashed: false,
-            markers: false,
-        },
-        Line {
-            label: "floor north".into(),
-            points: hours(&astro, &|s| s.floor_ne_m.x),
-            color: color(0),
-            dashed: true,
-            markers: false,
-        },
-        Line {
-            label: "floor east".into(),
-            points: hours(&astro, &|s| s.floor_ne_m.y),
-            color: color(1),
-            dashed: true,
-            markers: false,
-        },
+        Line::solid(
+            "astro north error",
+            hours(&astro, &|s| s.err_ne_m.x),
+            color(0),
+        ),
+        Line::solid(
+            "astro east error",
+            hours(&astro, &|s| s.err_ne_m.y),
+            color(1),
+        ),
+        Line::dashed("floor north", hours(&astro, &|s| s.floor_ne_m.x), color(0)),
+        Line::dashed("floor east", hours(&astro, &|s| s.floor_ne_m.y), color(1)),
     ];
     line_chart(
         &out_dir.join("astro_error_components.png"),
@@ -504,64 +583,53 @@ pub fn run_with(
 }
 
 /// The table printed after the run.
-pub fn table(summary: &Value) -> String {
+pub fn table(summary: &Summary) -> String {
+    let f1 = |x: f64| fmt_f64(x, 1, false);
     let mut s = format!(
         "gnss-denied-astro: {} h, IMU {} Hz, {} Schuler periods of {} s\n",
-        fmt_num(
-            &json!(summary["duration_s"].as_f64().map(|x| x / 3600.0)),
-            "",
-            1,
-            false
-        ),
-        fmt_num(summary, "/imu_rate_hz", 0, false),
-        fmt_num(summary, "/whole_schuler_periods", 0, false),
-        fmt_num(summary, "/schuler_period_s", 0, false),
+        f1(summary.duration_s / 3600.0),
+        fmt_f64(summary.imu_rate_hz, 0, false),
+        fmt_f64(summary.whole_schuler_periods, 0, false),
+        fmt_f64(summary.schuler_period_s, 0, false),
     );
+    let floor = &summary.floor;
     s += &format!(
         "closed form: bias floor mean {} m (max {} m), noise σ at end {} m, bound {} m\n",
-        fmt_num(summary, "/floor/bias_floor_mean_m", 1, false),
-        fmt_num(summary, "/floor/bias_floor_max_m", 1, false),
-        fmt_num(summary, "/floor/noise_sigma_at_end_astro_m", 1, false),
-        fmt_num(summary, "/floor/bound_2_floor_plus_3_sigma_m", 1, false),
+        f1(floor.bias_floor_mean_m),
+        f1(floor.bias_floor_max_m),
+        f1(floor.noise_sigma_at_end_astro_m),
+        f1(floor.bound_2_floor_plus_3_sigma_m),
     );
     s += "run              final error, m   max error, m   filter σ at end, m\n";
-    for (k, name) in [
-        ("astro_inertial", "astro-inertial"),
-        ("free_inertial", "free inertial"),
+    let astro = &summary.astro_inertial;
+    let free = summary.free_inertial.as_ref();
+    for (name, final_m, max_m, sigma_m) in [
+        (
+            "astro-inertial",
+            Some(astro.final_horizontal_error_m),
+            Some(astro.max_horizontal_error_m),
+            Some(astro.final_horizontal_sigma_m),
+        ),
+        (
+            "free inertial",
+            free.map(|f| f.final_horizontal_error_m),
+            free.map(|f| f.max_horizontal_error_m),
+            free.map(|f| f.final_horizontal_sigma_m),
+        ),
     ] {
         s += &format!(
             "{name:16} {:>14} {:>14} {:>20}\n",
-            fmt_num(summary, &format!("/{k}/final_horizontal_error_m"), 1, false),
-            fmt_num(summary, &format!("/{k}/max_horizontal_error_m"), 1, false),
-            fmt_num(summary, &format!("/{k}/final_horizontal_sigma_m"), 1, false),
+            fmt_opt(final_m, 1, false),
+            fmt_opt(max_m, 1, false),
+            fmt_opt(sigma_m, 1, false),
         );
     }
     s += &format!(
         "astro mean error over whole periods (N, E): ({}, {}) m; floor ({}, {}) m\n",
-        fmt_num(
-            summary,
-            "/astro_inertial/mean_error_north_over_whole_periods_m",
-            1,
-            false
-        ),
-        fmt_num(
-            summary,
-            "/astro_inertial/mean_error_east_over_whole_periods_m",
-            1,
-            false
-        ),
-        fmt_num(
-            summary,
-            "/astro_inertial/mean_floor_north_over_whole_periods_m",
-            1,
-            false
-        ),
-        fmt_num(
-            summary,
-            "/astro_inertial/mean_floor_east_over_whole_periods_m",
-            1,
-            false
-        ),
+        f1(astro.mean_error_north_over_whole_periods_m),
+        f1(astro.mean_error_east_over_whole_periods_m),
+        f1(astro.mean_floor_north_over_whole_periods_m),
+        f1(astro.mean_floor_east_over_whole_periods_m),
     );
     s
 }
@@ -586,19 +654,18 @@ mod tests {
         let t0 = std::time::Instant::now();
         let s = run_with(&settings, &dir, false).expect("run");
         eprintln!("{:.1} s\n{}", t0.elapsed().as_secs_f64(), table(&s));
-        let f = |p: &str| s.pointer(p).and_then(Value::as_f64).expect(p);
-        assert_eq!(f("/whole_schuler_periods"), 1.0);
-        let bound = f("/floor/bound_2_floor_plus_3_sigma_m");
-        assert!(f("/astro_inertial/max_horizontal_error_m") <= bound);
-        let noise = f("/floor/noise_sigma_at_end_astro_m");
-        let spread = f("/astro_inertial/floor_spread_over_whole_periods_m");
-        let miss = f("/astro_inertial/mean_error_minus_mean_floor_m");
+        assert_eq!(s.whole_schuler_periods, 1.0);
+        let bound = s.floor.bound_2_floor_plus_3_sigma_m;
+        assert!(s.astro_inertial.max_horizontal_error_m <= bound);
+        let noise = s.floor.noise_sigma_at_end_astro_m;
+        let spread = s.astro_inertial.floor_spread_over_whole_periods_m;
+        let miss = s.astro_inertial.mean_error_minus_mean_floor_m;
         assert!(
             miss <= spread + 3.0 * noise,
             "{miss} > {spread} + 3·{noise}"
         );
         // The floor is the accelerometer's, not zero: R·δb/g with δb of tens of µg.
-        assert!(f("/floor/bias_floor_mean_m") > 3.0 * noise);
+        assert!(s.floor.bias_floor_mean_m > 3.0 * noise);
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

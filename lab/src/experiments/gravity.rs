@@ -21,10 +21,10 @@
 //! along the normal), which is why it is for comparison only.
 
 use super::plot::{Chart, Line, color, line_chart};
-use super::{ExperimentError, create_out_dir, fmt_num, write_summary};
+use super::{Experiment, ExperimentError, create_out_dir, fmt_f64, write_summary};
 use fusion::earth::{Geodetic, GravityModel, WGS84, c_e_n, geodetic_to_ecef, gravity_ecef};
 use nalgebra::Vector3;
-use serde_json::{Value, json};
+use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 /// One m/s² in mGal.
@@ -104,26 +104,153 @@ fn evaluate(lat_deg: f64, height_m: f64) -> Point {
     }
 }
 
-/// Maximum of |f(p)| over the grid with its location, as a JSON object.
-fn max_abs(points: &[Point], f: impl Fn(&Point) -> f64, unit_key: &str, scale: f64) -> Value {
-    let best = points
+/// The largest |figure| over the grid, where it occurs (before any unit scaling).
+#[derive(Debug, Clone, Copy)]
+struct GridMaximum {
+    /// The signed figure at the maximum of its magnitude.
+    value: f64,
+    lat_deg: f64,
+    height_m: f64,
+}
+
+/// Maximum of |f(p)| over the grid (which is never empty) with its location.
+fn max_abs(points: &[Point], f: impl Fn(&Point) -> f64) -> GridMaximum {
+    points
         .iter()
         .map(|p| (f(p), p))
-        .max_by(|a, b| a.0.abs().total_cmp(&b.0.abs()));
-    match best {
-        Some((v, p)) => json!({
-            unit_key: v.abs() * scale,
-            "signed_value": v * scale,
-            "at_latitude_deg": p.lat_deg,
-            "at_height_m": p.height_m,
-        }),
-        None => Value::Null,
+        .max_by(|a, b| a.0.abs().total_cmp(&b.0.abs()))
+        .map_or(
+            GridMaximum {
+                value: f64::NAN,
+                lat_deg: f64::NAN,
+                height_m: f64::NAN,
+            },
+            |(value, p)| GridMaximum {
+                value,
+                lat_deg: p.lat_deg,
+                height_m: p.height_m,
+            },
+        )
+}
+
+/// A maximum magnitude difference over the grid, in mGal, and where it occurs.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct MaximumMgal {
+    /// |difference|, mGal.
+    pub value_mgal: f64,
+    /// The difference with its sign, mGal.
+    pub signed_value: f64,
+    /// Geodetic latitude of the maximum, deg.
+    pub at_latitude_deg: f64,
+    /// Height of the maximum, m.
+    pub at_height_m: f64,
+}
+
+impl From<GridMaximum> for MaximumMgal {
+    fn from(m: GridMaximum) -> Self {
+        Self {
+            value_mgal: m.value.abs() * MGAL_PER_M_S2,
+            signed_value: m.value * MGAL_PER_M_S2,
+            at_latitude_deg: m.lat_deg,
+            at_height_m: m.height_m,
+        }
     }
 }
 
-/// Run with the default [`Settings`].
-pub fn run(out_dir: &Path, progress: bool) -> Result<Value, ExperimentError> {
-    run_with(out_dir, progress, &Settings::default())
+/// A maximum angle over the grid, in arcsec, and where it occurs.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct MaximumArcsec {
+    /// |angle|, arcsec.
+    pub value_arcsec: f64,
+    /// The angle with its sign (deflections: north positive), arcsec.
+    pub signed_value: f64,
+    /// Geodetic latitude of the maximum, deg.
+    pub at_latitude_deg: f64,
+    /// Height of the maximum, m.
+    pub at_height_m: f64,
+}
+
+impl From<GridMaximum> for MaximumArcsec {
+    fn from(m: GridMaximum) -> Self {
+        Self {
+            value_arcsec: m.value.abs(),
+            signed_value: m.value,
+            at_latitude_deg: m.lat_deg,
+            at_height_m: m.height_m,
+        }
+    }
+}
+
+/// The models at sea level at one latitude.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct SeaLevelRow {
+    /// Geodetic latitude, deg.
+    pub latitude_deg: f64,
+    /// Normal gravity magnitude, m/s².
+    pub normal_gravity_m_s2: f64,
+    /// |g| J2 − normal, mGal.
+    pub j2_minus_normal_mgal: f64,
+    /// |g| point mass − normal, mGal.
+    pub point_mass_minus_normal_mgal: f64,
+    /// J2 gravity's deflection from the ellipsoid normal (north +), arcsec.
+    pub j2_deflection_from_normal_arcsec: f64,
+    /// Point-mass gravity's deflection from the ellipsoid normal (north +), arcsec.
+    pub point_mass_deflection_from_normal_arcsec: f64,
+}
+
+/// The figures of `gravity` (`summary.json`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Summary {
+    /// `"gravity"`.
+    pub experiment: String,
+    /// The paper reproduced, `"002"`.
+    pub paper: String,
+    /// `"WGS-84"`.
+    pub ellipsoid: String,
+    /// Latitudes of the grid, deg.
+    pub latitude_range_deg: [f64; 2],
+    /// Latitude step, deg.
+    pub latitude_step_deg: f64,
+    /// Heights of the grid, m.
+    pub height_range_m: [f64; 2],
+    /// Height step, m.
+    pub height_step_m: f64,
+    /// Number of grid points.
+    pub grid_points: usize,
+    /// max ||g| J2 − |γ||, m/s².
+    pub max_abs_magnitude_difference_j2_minus_normal_m_s2: f64,
+    /// The same in mGal, with its location.
+    pub max_abs_magnitude_difference_j2_minus_normal_mgal: MaximumMgal,
+    /// Largest deflection of J2 gravity from the ellipsoid normal.
+    pub max_abs_deflection_j2_from_normal_arcsec: MaximumArcsec,
+    /// max ||g| point mass − |γ||, m/s².
+    pub max_abs_magnitude_difference_point_mass_minus_normal_m_s2: f64,
+    /// The same in mGal, with its location.
+    pub max_abs_magnitude_difference_point_mass_minus_normal_mgal: MaximumMgal,
+    /// Largest deflection of point-mass gravity from the ellipsoid normal.
+    pub max_abs_deflection_point_mass_from_normal_arcsec: MaximumArcsec,
+    /// max ||g| point mass − |g| J2|, mGal, with its location.
+    pub max_abs_magnitude_difference_point_mass_minus_j2_mgal: MaximumMgal,
+    /// Largest angle between the point-mass and J2 vectors.
+    pub max_angle_point_mass_vs_j2_arcsec: MaximumArcsec,
+    /// The models at sea level at latitudes 0, 15, …, 90°.
+    pub sea_level_every_15_deg: Vec<SeaLevelRow>,
+}
+
+/// `sextant experiment gravity`.
+pub struct Gravity;
+
+impl Experiment for Gravity {
+    const NAME: &'static str = "gravity";
+    const DESCRIPTION: &'static str =
+        "Paper 002: J2 gravity against normal gravity and a point mass";
+    type Summary = Summary;
+    fn run(out_dir: &Path, progress: bool) -> Result<Summary, ExperimentError> {
+        run_with(out_dir, progress, &Settings::default())
+    }
+    fn table(summary: &Summary) -> String {
+        table(summary)
+    }
 }
 
 /// Run with `settings`; writes `summary.json` and four PNG plots against latitude at heights 0,
@@ -132,7 +259,7 @@ pub fn run_with(
     out_dir: &Path,
     _progress: bool,
     settings: &Settings,
-) -> Result<Value, ExperimentError> {
+) -> Result<Summary, ExperimentError> {
     if !(settings.latitude_step_deg > 0.0
         && settings.height_step_m > 0.0
         && settings.max_height_m >= 0.0
@@ -153,46 +280,44 @@ pub fn run_with(
             points.push(evaluate(lat, h));
         }
     }
-    let at_sea_level: Vec<Value> = (0..=6)
+    let at_sea_level = (0..=6)
         .map(|k| {
             let p = evaluate(15.0 * k as f64, 0.0);
-            json!({
-                "latitude_deg": p.lat_deg,
-                "normal_gravity_m_s2": p.normal_m_s2,
-                "j2_minus_normal_mgal": p.mag_diff_j2_m_s2 * MGAL_PER_M_S2,
-                "point_mass_minus_normal_mgal": p.mag_diff_pm_m_s2 * MGAL_PER_M_S2,
-                "j2_deflection_from_normal_arcsec": p.defl_j2_arcsec,
-                "point_mass_deflection_from_normal_arcsec": p.defl_pm_arcsec,
-            })
+            SeaLevelRow {
+                latitude_deg: p.lat_deg,
+                normal_gravity_m_s2: p.normal_m_s2,
+                j2_minus_normal_mgal: p.mag_diff_j2_m_s2 * MGAL_PER_M_S2,
+                point_mass_minus_normal_mgal: p.mag_diff_pm_m_s2 * MGAL_PER_M_S2,
+                j2_deflection_from_normal_arcsec: p.defl_j2_arcsec,
+                point_mass_deflection_from_normal_arcsec: p.defl_pm_arcsec,
+            }
         })
         .collect();
-    let summary = json!({
-        "experiment": "gravity",
-        "paper": "002",
-        "ellipsoid": "WGS-84",
-        "latitude_range_deg": [0.0, 90.0],
-        "latitude_step_deg": settings.latitude_step_deg,
-        "height_range_m": [0.0, settings.max_height_m],
-        "height_step_m": settings.height_step_m,
-        "grid_points": points.len(),
-        "max_abs_magnitude_difference_j2_minus_normal_m_s2":
-            max_abs(&points, |p| p.mag_diff_j2_m_s2, "value_m_s2", 1.0)["value_m_s2"],
-        "max_abs_magnitude_difference_j2_minus_normal_mgal":
-            max_abs(&points, |p| p.mag_diff_j2_m_s2, "value_mgal", MGAL_PER_M_S2),
-        "max_abs_deflection_j2_from_normal_arcsec":
-            max_abs(&points, |p| p.defl_j2_arcsec, "value_arcsec", 1.0),
-        "max_abs_magnitude_difference_point_mass_minus_normal_m_s2":
-            max_abs(&points, |p| p.mag_diff_pm_m_s2, "value_m_s2", 1.0)["value_m_s2"],
-        "max_abs_magnitude_difference_point_mass_minus_normal_mgal":
-            max_abs(&points, |p| p.mag_diff_pm_m_s2, "value_mgal", MGAL_PER_M_S2),
-        "max_abs_deflection_point_mass_from_normal_arcsec":
-            max_abs(&points, |p| p.defl_pm_arcsec, "value_arcsec", 1.0),
-        "max_abs_magnitude_difference_point_mass_minus_j2_mgal":
-            max_abs(&points, |p| p.mag_diff_pm_j2_m_s2, "value_mgal", MGAL_PER_M_S2),
-        "max_angle_point_mass_vs_j2_arcsec":
-            max_abs(&points, |p| p.angle_pm_j2_arcsec, "value_arcsec", 1.0),
-        "sea_level_every_15_deg": at_sea_level,
-    });
+    let j2_magnitude = max_abs(&points, |p| p.mag_diff_j2_m_s2);
+    let pm_magnitude = max_abs(&points, |p| p.mag_diff_pm_m_s2);
+    let summary = Summary {
+        experiment: Gravity::NAME.into(),
+        paper: "002".into(),
+        ellipsoid: "WGS-84".into(),
+        latitude_range_deg: [0.0, 90.0],
+        latitude_step_deg: settings.latitude_step_deg,
+        height_range_m: [0.0, settings.max_height_m],
+        height_step_m: settings.height_step_m,
+        grid_points: points.len(),
+        max_abs_magnitude_difference_j2_minus_normal_m_s2: j2_magnitude.value.abs(),
+        max_abs_magnitude_difference_j2_minus_normal_mgal: j2_magnitude.into(),
+        max_abs_deflection_j2_from_normal_arcsec: max_abs(&points, |p| p.defl_j2_arcsec).into(),
+        max_abs_magnitude_difference_point_mass_minus_normal_m_s2: pm_magnitude.value.abs(),
+        max_abs_magnitude_difference_point_mass_minus_normal_mgal: pm_magnitude.into(),
+        max_abs_deflection_point_mass_from_normal_arcsec: max_abs(&points, |p| p.defl_pm_arcsec)
+            .into(),
+        max_abs_magnitude_difference_point_mass_minus_j2_mgal: max_abs(&points, |p| {
+            p.mag_diff_pm_j2_m_s2
+        })
+        .into(),
+        max_angle_point_mass_vs_j2_arcsec: max_abs(&points, |p| p.angle_pm_j2_arcsec).into(),
+        sea_level_every_15_deg: at_sea_level,
+    };
     write_summary(out_dir, &summary)?;
 
     let heights = [0.0, 10_000.0, settings.max_height_m];
@@ -200,17 +325,17 @@ pub fn run_with(
         heights
             .iter()
             .enumerate()
-            .map(|(k, &h)| Line {
-                label: format!("h = {:.0} km", h / 1000.0),
-                points: (0..=n_lat)
-                    .map(|i| {
-                        let p = evaluate((i as f64 * settings.latitude_step_deg).min(90.0), h);
-                        (p.lat_deg, f(&p))
-                    })
-                    .collect(),
-                color: color(k),
-                dashed: false,
-                markers: false,
+            .map(|(k, &h)| {
+                Line::solid(
+                    format!("h = {:.0} km", h / 1000.0),
+                    (0..=n_lat)
+                        .map(|i| {
+                            let p = evaluate((i as f64 * settings.latitude_step_deg).min(90.0), h);
+                            (p.lat_deg, f(&p))
+                        })
+                        .collect(),
+                    color(k),
+                )
             })
             .collect()
     };
@@ -257,7 +382,8 @@ pub fn run_with(
 }
 
 /// Human table: maxima over the grid and the sea-level profile.
-pub fn table(summary: &Value) -> String {
+pub fn table(summary: &Summary) -> String {
+    let s = summary;
     let mut out = String::new();
     out.push_str(
         "Gravity models over latitude 0–90°, height 0–20 km (reference: normal gravity)\n",
@@ -266,64 +392,55 @@ pub fn table(summary: &Value) -> String {
         "{:<44} {:>12} {:>9} {:>10}\n",
         "maximum |difference|", "value", "lat [°]", "h [m]"
     ));
-    for (key, unit, label) in [
+    let mgal = |m: &MaximumMgal| (m.value_mgal, m.at_latitude_deg, m.at_height_m);
+    let arcsec = |m: &MaximumArcsec| (m.value_arcsec, m.at_latitude_deg, m.at_height_m);
+    for (label, (value, lat, h)) in [
         (
-            "max_abs_magnitude_difference_j2_minus_normal_mgal",
-            "value_mgal",
             "J2 − normal, magnitude [mGal]",
+            mgal(&s.max_abs_magnitude_difference_j2_minus_normal_mgal),
         ),
         (
-            "max_abs_deflection_j2_from_normal_arcsec",
-            "value_arcsec",
             "J2 deflection from normal [arcsec]",
+            arcsec(&s.max_abs_deflection_j2_from_normal_arcsec),
         ),
         (
-            "max_abs_magnitude_difference_point_mass_minus_normal_mgal",
-            "value_mgal",
             "point mass − normal, magnitude [mGal]",
+            mgal(&s.max_abs_magnitude_difference_point_mass_minus_normal_mgal),
         ),
         (
-            "max_abs_deflection_point_mass_from_normal_arcsec",
-            "value_arcsec",
             "point-mass deflection from normal [arcsec]",
+            arcsec(&s.max_abs_deflection_point_mass_from_normal_arcsec),
         ),
         (
-            "max_abs_magnitude_difference_point_mass_minus_j2_mgal",
-            "value_mgal",
             "point mass − J2, magnitude [mGal]",
+            mgal(&s.max_abs_magnitude_difference_point_mass_minus_j2_mgal),
         ),
         (
-            "max_angle_point_mass_vs_j2_arcsec",
-            "value_arcsec",
             "angle point mass vs J2 [arcsec]",
+            arcsec(&s.max_angle_point_mass_vs_j2_arcsec),
         ),
     ] {
         out.push_str(&format!(
             "{:<44} {:>12} {:>9} {:>10}\n",
             label,
-            fmt_num(summary, &format!("/{key}/{unit}"), 3, false),
-            fmt_num(summary, &format!("/{key}/at_latitude_deg"), 1, false),
-            fmt_num(summary, &format!("/{key}/at_height_m"), 0, false),
+            fmt_f64(value, 3, false),
+            fmt_f64(lat, 1, false),
+            fmt_f64(h, 0, false),
         ));
     }
     out.push_str(&format!(
         "\n{:>8} {:>14} {:>12} {:>12} {:>12} {:>12}\n",
         "lat [°]", "γ [m/s²]", "J2−γ [mGal]", "PM−γ [mGal]", "J2 defl [\"]", "PM defl [\"]"
     ));
-    let rows = summary
-        .get("sea_level_every_15_deg")
-        .and_then(Value::as_array)
-        .cloned()
-        .unwrap_or_default();
-    for row in &rows {
+    for row in &s.sea_level_every_15_deg {
         out.push_str(&format!(
             "{:>8} {:>14} {:>12} {:>12} {:>12} {:>12}\n",
-            fmt_num(row, "/latitude_deg", 0, false),
-            fmt_num(row, "/normal_gravity_m_s2", 7, false),
-            fmt_num(row, "/j2_minus_normal_mgal", 2, false),
-            fmt_num(row, "/point_mass_minus_normal_mgal", 0, false),
-            fmt_num(row, "/j2_deflection_from_normal_arcsec", 3, false),
-            fmt_num(row, "/point_mass_deflection_from_normal_arcsec", 1, false),
+            fmt_f64(row.latitude_deg, 0, false),
+            fmt_f64(row.normal_gravity_m_s2, 7, false),
+            fmt_f64(row.j2_minus_normal_mgal, 2, false),
+            fmt_f64(row.point_mass_minus_normal_mgal, 0, false),
+            fmt_f64(row.j2_deflection_from_normal_arcsec, 3, false),
+            fmt_f64(row.point_mass_deflection_from_normal_arcsec, 1, false),
         ));
     }
     out
@@ -336,12 +453,13 @@ mod tests {
     #[test]
     fn model_differences_are_as_expected() {
         let dir = crate::experiments::test_dir("gravity");
-        let s = run(&dir, false).expect("run");
+        let s = Gravity::run(&dir, false).expect("run");
         eprintln!("{}", table(&s));
-        let f = |p: &str| s.pointer(p).and_then(Value::as_f64).unwrap_or(f64::NAN);
         // J2 against the full normal field: only the higher zonal terms differ.
-        let j2_mgal = f("/max_abs_magnitude_difference_j2_minus_normal_mgal/value_mgal");
-        let j2_defl = f("/max_abs_deflection_j2_from_normal_arcsec/value_arcsec");
+        let j2_mgal = s
+            .max_abs_magnitude_difference_j2_minus_normal_mgal
+            .value_mgal;
+        let j2_defl = s.max_abs_deflection_j2_from_normal_arcsec.value_arcsec;
         assert!(j2_mgal > 0.1 && j2_mgal < 20.0, "{j2_mgal} mGal");
         // ≈ 1″ from the higher zonal terms plus ≈ 0.17″/km · 20 km · sin 2φ of plumb-line
         // curvature that the normal model (gravity along the ellipsoid normal) leaves out.
@@ -353,9 +471,13 @@ mod tests {
         assert!(sea_level_max < 2.0, "{sea_level_max} arcsec at h = 0");
         // The point mass ignores the flattening: γ_p − GM/b² ≈ −3200 mGal at the pole,
         // γ_e − (GM/a² − ω²a) ≈ +1600 mGal at the equator.
-        let pm_mgal = f("/max_abs_magnitude_difference_point_mass_minus_normal_mgal/value_mgal");
+        let pm_mgal = s
+            .max_abs_magnitude_difference_point_mass_minus_normal_mgal
+            .value_mgal;
         assert!(pm_mgal > 2000.0 && pm_mgal < 5000.0, "{pm_mgal} mGal");
-        let pm_defl = f("/max_abs_deflection_point_mass_from_normal_arcsec/value_arcsec");
+        let pm_defl = s
+            .max_abs_deflection_point_mass_from_normal_arcsec
+            .value_arcsec;
         assert!(pm_defl > 300.0 && pm_defl < 1000.0, "{pm_defl} arcsec");
         // Symmetry: no deflection on the equator and at the pole.
         for lat in [0.0, 90.0] {
@@ -374,6 +496,9 @@ mod tests {
         ] {
             assert!(dir.join(png).is_file(), "{png}");
         }
+        // summary.json reads back as the summary.
+        let json = std::fs::read_to_string(dir.join("summary.json")).expect("summary.json");
+        assert_eq!(serde_json::from_str::<Summary>(&json).expect("parse"), s);
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -81,8 +81,10 @@
 //!   seeds 1–7 give 8–42 m (RMS 22 m against 15.9 m).
 
 use super::consistency::{filter_config, load_scenario};
-use super::plot::{Chart, Line, color, line_chart};
-use super::{ExperimentError, create_out_dir, fmt_num, progress_bar, write_summary};
+use super::plot::{Chart, Line, color, line_chart, xy};
+use super::{
+    Experiment, ExperimentError, create_out_dir, fmt_f64, nan_if_null, progress_bar, write_summary,
+};
 use drivers_sim::imu::{ImuErrorModel, IntervalErrors};
 use drivers_sim::offline::{Channel, OfflineSim, SatelliteLimit, SimMessage, compare, feed};
 use drivers_sim::scenario::period_ns;
@@ -91,7 +93,7 @@ use fusion::ekf::{Covariance, ErrorStateEkf, gravity_gradient, idx, nonorthogona
 use fusion::navigator::{Navigator, NavigatorConfig};
 use fusion::strapdown::{ImuIncrement, NavState, Strapdown};
 use nalgebra::{Matrix3, SVector, UnitQuaternion, Vector2, Vector3};
-use serde_json::{Value, json};
+use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 /// Settings of the experiment.
@@ -427,9 +429,115 @@ fn mapped_cov(
     j * sub_cov(p, cols) * j.transpose()
 }
 
-/// Run with the defaults into `out_dir`.
-pub fn run(out_dir: &Path, progress: bool) -> Result<Value, ExperimentError> {
-    run_with(&Settings::default(), out_dir, progress)
+/// One error source's horizontal error at the end of the window.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TermFigures {
+    /// Key of the source.
+    pub term: String,
+    /// What the source is.
+    pub label: String,
+    /// Linear propagation: north, m.
+    pub linear_north_m: f64,
+    /// Linear propagation: east, m.
+    pub linear_east_m: f64,
+    /// Linear propagation: horizontal, m.
+    pub linear_horizontal_m: f64,
+    /// Nonlinear strapdown run with only this source: north, m.
+    pub nonlinear_north_m: f64,
+    /// The same: east, m.
+    pub nonlinear_east_m: f64,
+    /// The same: horizontal, m.
+    pub nonlinear_horizontal_m: f64,
+    /// Expected 1σ of the horizontal term, m.
+    #[serde(deserialize_with = "nan_if_null")]
+    pub expected_sigma_horizontal_m: f64,
+    /// Where that σ comes from.
+    pub sigma_source: String,
+}
+
+/// The figures of `inertial-budget` (`summary.json`); horizontal errors at the end of the
+/// window, N/E/horizontal, m.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Summary {
+    /// `"inertial-budget"`.
+    pub experiment: String,
+    /// Scenario name in `config/scenarios`.
+    pub scenario: String,
+    /// Window start (the navigator's first epoch in it), s since the scenario epoch.
+    pub window_start_s: f64,
+    /// Window length, s.
+    pub window_length_s: f64,
+    /// Aiding before the window.
+    pub aiding_before_window: String,
+    /// Aiding in the window.
+    pub aiding_in_window: String,
+    /// Each error source alone.
+    pub terms: Vec<TermFigures>,
+    /// Sum of the linear terms: north.
+    pub sum_of_linear_terms_north_m: f64,
+    /// Sum of the linear terms: east.
+    pub sum_of_linear_terms_east_m: f64,
+    /// Sum of the linear terms: horizontal.
+    pub sum_of_linear_terms_horizontal_m: f64,
+    /// One linear run with the exact compensated increments and all initial errors.
+    pub linear_all_sources_exact_horizontal_m: f64,
+    /// The strapdown run with every source: north.
+    pub nonlinear_all_sources_north_m: f64,
+    /// The strapdown run with every source: east.
+    pub nonlinear_all_sources_east_m: f64,
+    /// The strapdown run with every source: horizontal.
+    pub nonlinear_all_sources_horizontal_m: f64,
+    /// The navigator (baro in the window): north.
+    pub navigator_measured_north_m: f64,
+    /// The navigator: east.
+    pub navigator_measured_east_m: f64,
+    /// The navigator: horizontal.
+    pub navigator_measured_horizontal_m: f64,
+    /// The navigator's horizontal 1σ.
+    #[serde(deserialize_with = "nan_if_null")]
+    pub navigator_sigma_horizontal_m: f64,
+    /// The navigator without baro in the window: north.
+    pub navigator_without_baro_in_window_north_m: f64,
+    /// The navigator without baro in the window: east.
+    pub navigator_without_baro_in_window_east_m: f64,
+    /// The navigator without baro in the window: horizontal.
+    pub navigator_without_baro_in_window_horizontal_m: f64,
+    /// Its horizontal 1σ.
+    #[serde(deserialize_with = "nan_if_null")]
+    pub navigator_without_baro_in_window_sigma_horizontal_m: f64,
+    /// Root sum of squares of the terms' expected 1σ.
+    #[serde(deserialize_with = "nan_if_null")]
+    pub budget_rss_sigma_horizontal_m: f64,
+    /// The filter's prediction from its covariance at the window start, correlations kept.
+    pub filter_model_sigma_without_noise_horizontal_m: f64,
+    /// The filter's noise densities' closed-form term.
+    pub filter_model_noise_sigma_closed_form_horizontal_m: f64,
+    /// The mechanization from the true state with true increments (the reference).
+    pub mechanization_reference_error_horizontal_m: f64,
+    /// The gyro non-orthogonality is a filter state.
+    pub gyro_nonorthogonality_estimated: bool,
+    /// Its estimate at the window start (xy, xz, yz), arcsec.
+    pub estimated_gyro_nonorthogonality_arcsec: Vec<f64>,
+    /// The simulator's drawn value (xy, xz, yz), arcsec.
+    pub drawn_gyro_nonorthogonality_arcsec: [f64; 3],
+    /// Wall-clock time, s.
+    pub wall_time_s: f64,
+}
+
+/// `sextant experiment inertial-budget`.
+pub struct InertialBudget;
+
+impl Experiment for InertialBudget {
+    const NAME: &'static str = "inertial-budget";
+    const DESCRIPTION: &'static str =
+        "Issue 5: error budget of 600 s free inertial after GNSS (each IMU error source alone)";
+    type Summary = Summary;
+    fn run(out_dir: &Path, progress: bool) -> Result<Summary, ExperimentError> {
+        run_with(&Settings::default(), out_dir, progress)
+    }
+    fn table(summary: &Summary) -> String {
+        table(summary)
+    }
 }
 
 /// Run with `settings` into `out_dir`; returns the summary (also in `summary.json`).
@@ -437,7 +545,7 @@ pub fn run_with(
     settings: &Settings,
     out_dir: &Path,
     progress: bool,
-) -> Result<Value, ExperimentError> {
+) -> Result<Summary, ExperimentError> {
     create_out_dir(out_dir)?;
     let wall = std::time::Instant::now();
     let cfg = config(settings)?;
@@ -821,24 +929,28 @@ pub fn run_with(
             (None, None) => f64::NAN,
         };
         rss_sigma2 += sigma * sigma;
-        rows.push(json!({
-            "term": t.key,
-            "label": t.label,
-            "linear_north_m": lin.x,
-            "linear_east_m": lin.y,
-            "linear_horizontal_m": lin.norm(),
-            "nonlinear_north_m": nonlin.x,
-            "nonlinear_east_m": nonlin.y,
-            "nonlinear_horizontal_m": nonlin.norm(),
-            "expected_sigma_horizontal_m": sigma,
-            "sigma_source": match (&t.cov, t.closed_sigma_m) {
-                (Some(_), _) if t.key.contains("misalignment")
+        let sigma_source = match (&t.cov, t.closed_sigma_m) {
+            (Some(_), _)
+                if t.key.contains("misalignment")
                     || (t.key.contains("nonorth") && !mis_g_estimated) =>
-                    "grade sigma (not a filter state)",
-                (Some(_), _) => "filter covariance at window start",
-                _ => "closed form, grade noise densities",
-            },
-        }));
+            {
+                "grade sigma (not a filter state)"
+            }
+            (Some(_), _) => "filter covariance at window start",
+            _ => "closed form, grade noise densities",
+        };
+        rows.push(TermFigures {
+            term: t.key.to_string(),
+            label: t.label.to_string(),
+            linear_north_m: lin.x,
+            linear_east_m: lin.y,
+            linear_horizontal_m: lin.norm(),
+            nonlinear_north_m: nonlin.x,
+            nonlinear_east_m: nonlin.y,
+            nonlinear_horizontal_m: nonlin.norm(),
+            expected_sigma_horizontal_m: sigma,
+            sigma_source: sigma_source.to_string(),
+        });
     }
     let exact_lin = pos_ne(&lin_exact);
     let all_nl = nl_all
@@ -868,102 +980,82 @@ pub fn run_with(
         r2 * s.iter().map(|x| x * x).sum::<f64>().sqrt()
     };
 
-    let summary = json!({
-        "experiment": "inertial-budget",
-        "scenario": settings.scenario,
-        "window_start_s": snap.t_s,
-        "window_length_s": settings.window_s,
-        "aiding_before_window": "GNSS loose + baro (star tracker, odometer, NHC off)",
-        "aiding_in_window": "baro only (vertical held)",
-        "terms": rows,
-        "sum_of_linear_terms_north_m": sum_lin.x,
-        "sum_of_linear_terms_east_m": sum_lin.y,
-        "sum_of_linear_terms_horizontal_m": sum_lin.norm(),
-        "linear_all_sources_exact_horizontal_m": exact_lin.norm(),
-        "nonlinear_all_sources_north_m": all_nl.x,
-        "nonlinear_all_sources_east_m": all_nl.y,
-        "nonlinear_all_sources_horizontal_m": all_nl.norm(),
-        "navigator_measured_north_m": meas_end.x,
-        "navigator_measured_east_m": meas_end.y,
-        "navigator_measured_horizontal_m": meas_end.norm(),
-        "navigator_sigma_horizontal_m": sigma_end,
-        "navigator_without_baro_in_window_north_m": free_end.x,
-        "navigator_without_baro_in_window_east_m": free_end.y,
-        "navigator_without_baro_in_window_horizontal_m": free_end.norm(),
-        "navigator_without_baro_in_window_sigma_horizontal_m": free_sigma_end,
-        "budget_rss_sigma_horizontal_m": rss_sigma2.sqrt(),
-        "filter_model_sigma_without_noise_horizontal_m": joint_sigma,
-        "filter_model_noise_sigma_closed_form_horizontal_m": filter_noise_sigma,
-        "mechanization_reference_error_horizontal_m": ref_ne.norm(),
-        "gyro_nonorthogonality_estimated": mis_g_estimated,
-        "estimated_gyro_nonorthogonality_arcsec": (ekf.gyro_misalignment_rad
+    let summary = Summary {
+        experiment: InertialBudget::NAME.into(),
+        scenario: settings.scenario.clone(),
+        window_start_s: snap.t_s,
+        window_length_s: settings.window_s,
+        aiding_before_window: "GNSS loose + baro (star tracker, odometer, NHC off)".to_string(),
+        aiding_in_window: "baro only (vertical held)".to_string(),
+        terms: rows,
+        sum_of_linear_terms_north_m: sum_lin.x,
+        sum_of_linear_terms_east_m: sum_lin.y,
+        sum_of_linear_terms_horizontal_m: sum_lin.norm(),
+        linear_all_sources_exact_horizontal_m: exact_lin.norm(),
+        nonlinear_all_sources_north_m: all_nl.x,
+        nonlinear_all_sources_east_m: all_nl.y,
+        nonlinear_all_sources_horizontal_m: all_nl.norm(),
+        navigator_measured_north_m: meas_end.x,
+        navigator_measured_east_m: meas_end.y,
+        navigator_measured_horizontal_m: meas_end.norm(),
+        navigator_sigma_horizontal_m: sigma_end,
+        navigator_without_baro_in_window_north_m: free_end.x,
+        navigator_without_baro_in_window_east_m: free_end.y,
+        navigator_without_baro_in_window_horizontal_m: free_end.norm(),
+        navigator_without_baro_in_window_sigma_horizontal_m: free_sigma_end,
+        budget_rss_sigma_horizontal_m: rss_sigma2.sqrt(),
+        filter_model_sigma_without_noise_horizontal_m: joint_sigma,
+        filter_model_noise_sigma_closed_form_horizontal_m: filter_noise_sigma,
+        mechanization_reference_error_horizontal_m: ref_ne.norm(),
+        gyro_nonorthogonality_estimated: mis_g_estimated,
+        estimated_gyro_nonorthogonality_arcsec: (ekf
+            .gyro_misalignment_rad
             .map(|x| x.to_degrees() * 3600.0))
-        .as_slice(),
-        "drawn_gyro_nonorthogonality_arcsec": [
+        .as_slice()
+        .to_vec(),
+        drawn_gyro_nonorthogonality_arcsec: [
             gc.misalignment[(0, 1)].to_degrees() * 3600.0,
             gc.misalignment[(0, 2)].to_degrees() * 3600.0,
             gc.misalignment[(1, 2)].to_degrees() * 3600.0,
         ],
-        "wall_time_s": wall.elapsed().as_secs_f64(),
-    });
+        wall_time_s: wall.elapsed().as_secs_f64(),
+    };
 
     // Plot: horizontal error in the window — navigator, all sources, the largest terms.
     let mut order: Vec<usize> = (0..terms.len()).collect();
     let fin = |i: usize| series.last().map_or(0.0, |s| s.1[i].norm());
     order.sort_by(|a, b| fin(*b).total_cmp(&fin(*a)));
+    let horizontal = |m: &Measured| -> Vec<(f64, f64)> {
+        m.t_s
+            .iter()
+            .zip(&m.err_ne_m)
+            .map(|(t, e)| (*t, e.norm()))
+            .collect()
+    };
     let mut lines = vec![
-        Line {
-            label: "navigator (measured)".into(),
-            points: measured
-                .t_s
-                .iter()
-                .zip(&measured.err_ne_m)
-                .map(|(t, e)| (*t, e.norm()))
-                .collect(),
-            color: color(0),
-            dashed: false,
-            markers: false,
-        },
-        Line {
-            label: "all sources, strapdown".into(),
-            points: series.iter().map(|s| (s.0, s.2.norm())).collect(),
-            color: color(1),
-            dashed: true,
-            markers: false,
-        },
-        Line {
-            label: "navigator, no baro in the window".into(),
-            points: free
-                .t_s
-                .iter()
-                .zip(&free.err_ne_m)
-                .map(|(t, e)| (*t, e.norm()))
-                .collect(),
-            color: color(6),
-            dashed: false,
-            markers: false,
-        },
-        Line {
-            label: "navigator 1σ".into(),
-            points: measured
-                .t_s
-                .iter()
-                .cloned()
-                .zip(measured.sigma_m.iter().cloned())
-                .collect(),
-            color: color(5),
-            dashed: true,
-            markers: false,
-        },
+        Line::solid("navigator (measured)", horizontal(&measured), color(0)),
+        Line::dashed(
+            "all sources, strapdown",
+            series.iter().map(|s| (s.0, s.2.norm())).collect(),
+            color(1),
+        ),
+        Line::solid(
+            "navigator, no baro in the window",
+            horizontal(&free),
+            color(6),
+        ),
+        Line::dashed(
+            "navigator 1σ",
+            xy(&measured.t_s, &measured.sigma_m),
+            color(5),
+        ),
     ];
     for (n, &i) in order.iter().take(4).enumerate() {
-        lines.push(Line {
-            label: terms[i].label.to_string(),
-            points: series.iter().map(|s| (s.0, s.1[i].norm())).collect(),
-            color: color(2 + n),
-            dashed: false,
-            markers: false,
-        });
+        lines.push(Line::solid(
+            terms[i].label,
+            series.iter().map(|s| (s.0, s.1[i].norm())).collect(),
+            color(2 + n),
+        ));
     }
     line_chart(
         &out_dir.join("horizontal_error_budget.png"),
@@ -981,85 +1073,55 @@ pub fn run_with(
 }
 
 /// The table printed after the run.
-pub fn table(summary: &Value) -> String {
+pub fn table(summary: &Summary) -> String {
+    let m = summary;
+    let f = |x: f64, d: usize| fmt_f64(x, d, false);
     let mut s = format!(
         "inertial-budget: {} s without GNSS from {} s; horizontal error at the end, m\n",
-        fmt_num(summary, "/window_length_s", 0, false),
-        fmt_num(summary, "/window_start_s", 0, false),
+        f(m.window_length_s, 0),
+        f(m.window_start_s, 0),
     );
     s += &format!(
         "{:<58} {:>9} {:>9} {:>11} {:>9}\n",
         "source", "linear", "strapdown", "N / E (lin)", "exp. 1σ"
     );
-    if let Some(rows) = summary["terms"].as_array() {
-        for r in rows {
-            s += &format!(
-                "{:<58} {:>9} {:>9} {:>5}/{:<5} {:>9}\n",
-                r["label"].as_str().unwrap_or("?"),
-                fmt_num(r, "/linear_horizontal_m", 2, false),
-                fmt_num(r, "/nonlinear_horizontal_m", 2, false),
-                fmt_num(r, "/linear_north_m", 0, false),
-                fmt_num(r, "/linear_east_m", 0, false),
-                fmt_num(r, "/expected_sigma_horizontal_m", 2, false),
-            );
-        }
+    for r in &m.terms {
+        s += &format!(
+            "{:<58} {:>9} {:>9} {:>5}/{:<5} {:>9}\n",
+            r.label,
+            f(r.linear_horizontal_m, 2),
+            f(r.nonlinear_horizontal_m, 2),
+            f(r.linear_north_m, 0),
+            f(r.linear_east_m, 0),
+            f(r.expected_sigma_horizontal_m, 2),
+        );
     }
     s += &format!(
         "sum of the linear terms {} m (N {} / E {}); all sources at once: linear {} m, strapdown {} m (N {} / E {})\n",
-        fmt_num(summary, "/sum_of_linear_terms_horizontal_m", 2, false),
-        fmt_num(summary, "/sum_of_linear_terms_north_m", 1, false),
-        fmt_num(summary, "/sum_of_linear_terms_east_m", 1, false),
-        fmt_num(summary, "/linear_all_sources_exact_horizontal_m", 2, false),
-        fmt_num(summary, "/nonlinear_all_sources_horizontal_m", 2, false),
-        fmt_num(summary, "/nonlinear_all_sources_north_m", 1, false),
-        fmt_num(summary, "/nonlinear_all_sources_east_m", 1, false),
+        f(m.sum_of_linear_terms_horizontal_m, 2),
+        f(m.sum_of_linear_terms_north_m, 1),
+        f(m.sum_of_linear_terms_east_m, 1),
+        f(m.linear_all_sources_exact_horizontal_m, 2),
+        f(m.nonlinear_all_sources_horizontal_m, 2),
+        f(m.nonlinear_all_sources_north_m, 1),
+        f(m.nonlinear_all_sources_east_m, 1),
     );
     s += &format!(
         "navigator without baro in the window {} m (N {} / E {}), its 1σ {} m\n",
-        fmt_num(
-            summary,
-            "/navigator_without_baro_in_window_horizontal_m",
-            2,
-            false
-        ),
-        fmt_num(
-            summary,
-            "/navigator_without_baro_in_window_north_m",
-            1,
-            false
-        ),
-        fmt_num(
-            summary,
-            "/navigator_without_baro_in_window_east_m",
-            1,
-            false
-        ),
-        fmt_num(
-            summary,
-            "/navigator_without_baro_in_window_sigma_horizontal_m",
-            2,
-            false
-        ),
+        f(m.navigator_without_baro_in_window_horizontal_m, 2),
+        f(m.navigator_without_baro_in_window_north_m, 1),
+        f(m.navigator_without_baro_in_window_east_m, 1),
+        f(m.navigator_without_baro_in_window_sigma_horizontal_m, 2),
     );
     s += &format!(
         "navigator with baro (the tight-coupling experiment's free case) {} m (N {} / E {}), its 1σ {} m; budget RSS of the 1σ column {} m; filter model w/o noise {} m, its noise {} m\n",
-        fmt_num(summary, "/navigator_measured_horizontal_m", 2, false),
-        fmt_num(summary, "/navigator_measured_north_m", 1, false),
-        fmt_num(summary, "/navigator_measured_east_m", 1, false),
-        fmt_num(summary, "/navigator_sigma_horizontal_m", 2, false),
-        fmt_num(summary, "/budget_rss_sigma_horizontal_m", 2, false),
-        fmt_num(
-            summary,
-            "/filter_model_sigma_without_noise_horizontal_m",
-            2,
-            false
-        ),
-        fmt_num(
-            summary,
-            "/filter_model_noise_sigma_closed_form_horizontal_m",
-            2,
-            false
-        ),
+        f(m.navigator_measured_horizontal_m, 2),
+        f(m.navigator_measured_north_m, 1),
+        f(m.navigator_measured_east_m, 1),
+        f(m.navigator_sigma_horizontal_m, 2),
+        f(m.budget_rss_sigma_horizontal_m, 2),
+        f(m.filter_model_sigma_without_noise_horizontal_m, 2),
+        f(m.filter_model_noise_sigma_closed_form_horizontal_m, 2),
     );
     s
 }
@@ -1089,32 +1151,20 @@ mod tests {
         };
         let s = run_with(&settings, &dir, false).expect("run");
         let t = table(&s);
-        let f = |v: &Value, p: &str| {
-            v.pointer(p)
-                .and_then(Value::as_f64)
-                .unwrap_or_else(|| panic!("{p}\n{t}"))
-        };
-        let terms = s["terms"].as_array().expect("terms");
+        let terms = &s.terms;
         assert_eq!(terms.len(), 14, "{t}");
         for r in terms {
-            let (lin, nl) = (
-                f(r, "/linear_horizontal_m"),
-                f(r, "/nonlinear_horizontal_m"),
-            );
-            let d = (f(r, "/linear_north_m") - f(r, "/nonlinear_north_m"))
-                .hypot(f(r, "/linear_east_m") - f(r, "/nonlinear_east_m"));
-            assert!(d <= 0.01 * nl + 0.05, "{}: {lin} vs {nl}\n{t}", r["term"]);
+            let (lin, nl) = (r.linear_horizontal_m, r.nonlinear_horizontal_m);
+            let d = (r.linear_north_m - r.nonlinear_north_m)
+                .hypot(r.linear_east_m - r.nonlinear_east_m);
+            assert!(d <= 0.01 * nl + 0.05, "{}: {lin} vs {nl}\n{t}", r.term);
         }
-        let sum = f(&s, "/sum_of_linear_terms_horizontal_m");
-        let exact = f(&s, "/linear_all_sources_exact_horizontal_m");
+        let sum = s.sum_of_linear_terms_horizontal_m;
+        let exact = s.linear_all_sources_exact_horizontal_m;
         assert!((sum - exact).abs() <= 1e-3 * exact + 1e-3, "{t}");
-        let d = (f(&s, "/nonlinear_all_sources_north_m")
-            - f(&s, "/navigator_without_baro_in_window_north_m"))
-        .hypot(
-            f(&s, "/nonlinear_all_sources_east_m")
-                - f(&s, "/navigator_without_baro_in_window_east_m"),
-        );
-        let nav = f(&s, "/navigator_without_baro_in_window_horizontal_m");
+        let d = (s.nonlinear_all_sources_north_m - s.navigator_without_baro_in_window_north_m)
+            .hypot(s.nonlinear_all_sources_east_m - s.navigator_without_baro_in_window_east_m);
+        let nav = s.navigator_without_baro_in_window_horizontal_m;
         assert!(d <= 0.02 * nav + 0.5, "closure {d} m\n{t}");
         eprintln!("{t}");
         // The filter's own prediction rebuilt from its covariance at t₀ (the responses to
@@ -1122,9 +1172,10 @@ mod tests {
         // σ the navigator reports without baro: they differ by the neglected Schuler
         // reduction of the noise terms (≤ 2 % at 300 s), the bias random walks (≈ 1 % of the
         // variance) and the 50 ms covariance steps: 10 %.
-        let model = f(&s, "/filter_model_sigma_without_noise_horizontal_m")
-            .hypot(f(&s, "/filter_model_noise_sigma_closed_form_horizontal_m"));
-        let sigma = f(&s, "/navigator_without_baro_in_window_sigma_horizontal_m");
+        let model = s
+            .filter_model_sigma_without_noise_horizontal_m
+            .hypot(s.filter_model_noise_sigma_closed_form_horizontal_m);
+        let sigma = s.navigator_without_baro_in_window_sigma_horizontal_m;
         assert!(
             (model - sigma).abs() <= 0.1 * sigma,
             "{model} vs {sigma}\n{t}"
@@ -1151,13 +1202,12 @@ mod tests {
                     ..Settings::default()
                 };
                 let s = run_with(&settings, &dir, false).expect("run");
-                let g = |p: &str| s.pointer(p).and_then(Value::as_f64).unwrap_or(f64::NAN);
                 eprintln!(
                     "states {states} seed {seed}: with baro {:.1} m (σ {:.1}), without {:.1} m (σ {:.1})",
-                    g("/navigator_measured_horizontal_m"),
-                    g("/navigator_sigma_horizontal_m"),
-                    g("/navigator_without_baro_in_window_horizontal_m"),
-                    g("/navigator_without_baro_in_window_sigma_horizontal_m"),
+                    s.navigator_measured_horizontal_m,
+                    s.navigator_sigma_horizontal_m,
+                    s.navigator_without_baro_in_window_horizontal_m,
+                    s.navigator_without_baro_in_window_sigma_horizontal_m,
                 );
                 let _ = std::fs::remove_dir_all(&dir);
             }

@@ -29,7 +29,9 @@
 //! neighbouring increments), i.e. more information than one increment carries.
 
 use super::plot::{Chart, Line, color, line_chart};
-use super::{ExperimentError, create_out_dir, fmt_num, linear_fit, progress_bar, write_summary};
+use super::{
+    Experiment, ExperimentError, create_out_dir, fmt_f64, linear_fit, progress_bar, write_summary,
+};
 use fusion::earth::{
     Ellipsoid, Geodetic, GravityModel, WGS84, c_e_n, geodetic_to_ecef, gravity_ecef,
 };
@@ -37,7 +39,7 @@ use fusion::strapdown::{
     ImuIncrement, Integrator, MechanizationConfig, NavState, Strapdown, q_e_n,
 };
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
-use serde_json::{Value, json};
+use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
 use std::path::Path;
 
@@ -317,36 +319,157 @@ fn ranking(errors: &[Vec<f64>]) -> (Vec<&'static str>, bool) {
     )
 }
 
-/// Summary block of one case.
-fn case_summary(
-    steps: &[f64],
-    errors: &[Vec<f64>],
-    extra_key_prefix: &str,
-) -> Result<serde_json::Map<String, Value>, ExperimentError> {
-    let mut m = serde_json::Map::new();
-    m.insert("step_sizes_s".into(), json!(steps));
-    for (i, (_, name, p)) in INTEGRATORS.iter().enumerate() {
-        let (finest, fitted) = orders(steps, &errors[i])?;
-        m.insert(
-            format!("{extra_key_prefix}{name}_observed_order"),
-            json!(finest),
-        );
-        m.insert(
-            format!("{extra_key_prefix}{name}_fitted_order_all_steps"),
-            json!(fitted),
-        );
-        m.insert(format!("{name}_theoretical_order"), json!(p));
-        m.insert(format!("{name}_final_position_error_m"), json!(errors[i]));
-    }
-    let (rank, consistent) = ranking(errors);
-    m.insert("ranking_most_accurate_first".into(), json!(rank));
-    m.insert("ranking_same_at_every_step_size".into(), json!(consistent));
-    Ok(m)
+/// The figures of one case common to both: each integrator's final position errors and
+/// observed orders, and the ranking.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CaseFigures {
+    /// The step sizes, s, coarsest first.
+    pub step_sizes_s: Vec<f64>,
+    /// Euler: observed order between the two finest steps.
+    pub euler_observed_order: f64,
+    /// Euler: least-squares slope of ln error against ln step over all steps.
+    pub euler_fitted_order_all_steps: f64,
+    /// Euler: theoretical order (1).
+    pub euler_theoretical_order: f64,
+    /// Euler: final position error norm at each step size, m.
+    pub euler_final_position_error_m: Vec<f64>,
+    /// Heun: observed order between the two finest steps.
+    pub heun_observed_order: f64,
+    /// Heun: least-squares slope of ln error against ln step over all steps.
+    pub heun_fitted_order_all_steps: f64,
+    /// Heun: theoretical order (2).
+    pub heun_theoretical_order: f64,
+    /// Heun: final position error norm at each step size, m.
+    pub heun_final_position_error_m: Vec<f64>,
+    /// RK4: observed order between the two finest steps.
+    pub rk4_observed_order: f64,
+    /// RK4: least-squares slope of ln error against ln step over all steps.
+    pub rk4_fitted_order_all_steps: f64,
+    /// RK4: theoretical order (4).
+    pub rk4_theoretical_order: f64,
+    /// RK4: final position error norm at each step size, m.
+    pub rk4_final_position_error_m: Vec<f64>,
+    /// Integrator names from most to least accurate at the finest step.
+    pub ranking_most_accurate_first: Vec<String>,
+    /// Whether the same ranking holds at every step size.
+    pub ranking_same_at_every_step_size: bool,
 }
 
-/// Run with the default [`Settings`].
-pub fn run(out_dir: &Path, progress: bool) -> Result<Value, ExperimentError> {
-    run_with(out_dir, progress, &Settings::default())
+impl CaseFigures {
+    /// The figures of the errors (m) of each integrator (rows in [`INTEGRATORS`] order) at
+    /// each of `steps` (s).
+    fn new(steps: &[f64], errors: &[Vec<f64>]) -> Result<Self, ExperimentError> {
+        let (euler_observed, euler_fitted) = orders(steps, &errors[0])?;
+        let (heun_observed, heun_fitted) = orders(steps, &errors[1])?;
+        let (rk4_observed, rk4_fitted) = orders(steps, &errors[2])?;
+        let (rank, consistent) = ranking(errors);
+        Ok(Self {
+            step_sizes_s: steps.to_vec(),
+            euler_observed_order: euler_observed,
+            euler_fitted_order_all_steps: euler_fitted,
+            euler_theoretical_order: INTEGRATORS[0].2,
+            euler_final_position_error_m: errors[0].clone(),
+            heun_observed_order: heun_observed,
+            heun_fitted_order_all_steps: heun_fitted,
+            heun_theoretical_order: INTEGRATORS[1].2,
+            heun_final_position_error_m: errors[1].clone(),
+            rk4_observed_order: rk4_observed,
+            rk4_fitted_order_all_steps: rk4_fitted,
+            rk4_theoretical_order: INTEGRATORS[2].2,
+            rk4_final_position_error_m: errors[2].clone(),
+            ranking_most_accurate_first: rank.iter().map(|n| n.to_string()).collect(),
+            ranking_same_at_every_step_size: consistent,
+        })
+    }
+
+    /// (final position errors m, observed order) per integrator, in [`INTEGRATORS`] order.
+    fn by_integrator(&self) -> [(&[f64], f64); 3] {
+        [
+            (
+                &self.euler_final_position_error_m,
+                self.euler_observed_order,
+            ),
+            (&self.heun_final_position_error_m, self.heun_observed_order),
+            (&self.rk4_final_position_error_m, self.rk4_observed_order),
+        ]
+    }
+}
+
+/// Case 1: the equatorial circular orbit under J2.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct OrbitCase {
+    /// What the case is.
+    pub description: String,
+    /// Orbit radius, m.
+    pub orbit_radius_m: f64,
+    /// Mechanized duration, s.
+    pub duration_s: f64,
+    /// Errors, orders and ranking.
+    #[serde(flatten)]
+    pub figures: CaseFigures,
+}
+
+/// Case 2: the vehicle with a time-varying specific force.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TimeVaryingForceCase {
+    /// What the case is.
+    pub description: String,
+    /// Mechanized duration, s.
+    pub duration_s: f64,
+    /// `|f^e(T) − f^e(0)|`, m/s².
+    pub specific_force_change_norm_m_s2: f64,
+    /// The mean-force position error `h²/12 |Δf|` at each step size, m.
+    pub mean_force_position_error_predicted_m: Vec<f64>,
+    /// RK4's final error over that prediction at each step size.
+    pub rk4_error_over_predicted_mean_force_error: Vec<f64>,
+    /// Errors, orders and ranking.
+    #[serde(flatten)]
+    pub figures: CaseFigures,
+}
+
+/// The figures of `integrators` (`summary.json`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Summary {
+    /// `"integrators"`.
+    pub experiment: String,
+    /// The paper reproduced, `"002"`.
+    pub paper: String,
+    /// Orbit case: Euler's observed order (theory 1).
+    pub euler_observed_order: f64,
+    /// Orbit case: Heun's observed order (theory 2).
+    pub heun_observed_order: f64,
+    /// Orbit case: RK4's observed order (theory 4).
+    pub rk4_observed_order: f64,
+    /// Orbit case: most accurate first at the finest step.
+    pub ranking: Vec<String>,
+    /// Orbit case: the same ranking at every step size.
+    pub ranking_same_at_every_step_size: bool,
+    /// Time-varying force: Euler's observed order.
+    pub time_varying_force_euler_observed_order: f64,
+    /// Time-varying force: Heun's observed order.
+    pub time_varying_force_heun_observed_order: f64,
+    /// Time-varying force: RK4's observed order (limited to 2 by the mean force).
+    pub time_varying_force_rk4_observed_order: f64,
+    /// Case 1 in full.
+    pub orbit_j2: OrbitCase,
+    /// Case 2 in full.
+    pub time_varying_force: TimeVaryingForceCase,
+}
+
+/// `sextant experiment integrators`.
+pub struct Integrators;
+
+impl Experiment for Integrators {
+    const NAME: &'static str = "integrators";
+    const DESCRIPTION: &'static str =
+        "Paper 002: convergence order of the strapdown integrators (Euler, Heun, RK4)";
+    type Summary = Summary;
+    fn run(out_dir: &Path, progress: bool) -> Result<Summary, ExperimentError> {
+        run_with(out_dir, progress, &Settings::default())
+    }
+    fn table(summary: &Summary) -> String {
+        table(summary)
+    }
 }
 
 /// Run with `settings`; writes `summary.json`, `integrators_orbit_error_vs_step.png` and
@@ -355,7 +478,7 @@ pub fn run_with(
     out_dir: &Path,
     progress: bool,
     settings: &Settings,
-) -> Result<Value, ExperimentError> {
+) -> Result<Summary, ExperimentError> {
     create_out_dir(out_dir)?;
     let n_runs =
         INTEGRATORS.len() * (settings.orbit_steps_s.len() + settings.vehicle_steps_s.len());
@@ -377,13 +500,13 @@ pub fn run_with(
     )?;
     bar.finish_and_clear();
 
-    let mut orbit_block = case_summary(&settings.orbit_steps_s, &orbit_err, "")?;
-    orbit_block.insert(
-        "description".into(),
-        json!("equatorial circular orbit under J2 gravity, free fall (zero increments), ECEF"),
-    );
-    orbit_block.insert("orbit_radius_m".into(), json!(settings.orbit_radius_m));
-    orbit_block.insert("duration_s".into(), json!(settings.orbit_duration_s));
+    let orbit_case = OrbitCase {
+        description:
+            "equatorial circular orbit under J2 gravity, free fall (zero increments), ECEF".into(),
+        orbit_radius_m: settings.orbit_radius_m,
+        duration_s: settings.orbit_duration_s,
+        figures: CaseFigures::new(&settings.orbit_steps_s, &orbit_err)?,
+    };
 
     let df = (vehicle.specific_force_e(settings.vehicle_duration_s)
         - vehicle.specific_force_e(0.0))
@@ -393,48 +516,38 @@ pub fn run_with(
         .iter()
         .map(|h| h * h / 12.0 * df)
         .collect();
-    let mut veh_block = case_summary(&settings.vehicle_steps_s, &veh_err, "")?;
-    veh_block.insert(
-        "description".into(),
-        json!(
-            "vehicle near the site with sinusoidal N/E/D excursions, body fixed in ECEF; \
-               the specific force varies within each interval but an increment carries only \
-               its mean, which limits any integrator to order 2 in position"
-        ),
-    );
-    veh_block.insert("duration_s".into(), json!(settings.vehicle_duration_s));
-    veh_block.insert("specific_force_change_norm_m_s2".into(), json!(df));
-    veh_block.insert(
-        "mean_force_position_error_predicted_m".into(),
-        json!(predicted),
-    );
     let rk4_ratio: Vec<f64> = veh_err[2]
         .iter()
         .zip(&predicted)
         .map(|(e, p)| e / p)
         .collect();
-    veh_block.insert(
-        "rk4_error_over_predicted_mean_force_error".into(),
-        json!(rk4_ratio),
-    );
+    let vehicle_case = TimeVaryingForceCase {
+        description: "vehicle near the site with sinusoidal N/E/D excursions, body fixed in ECEF; \
+               the specific force varies within each interval but an increment carries only \
+               its mean, which limits any integrator to order 2 in position"
+            .into(),
+        duration_s: settings.vehicle_duration_s,
+        specific_force_change_norm_m_s2: df,
+        mean_force_position_error_predicted_m: predicted.clone(),
+        rk4_error_over_predicted_mean_force_error: rk4_ratio,
+        figures: CaseFigures::new(&settings.vehicle_steps_s, &veh_err)?,
+    };
 
-    let get =
-        |m: &serde_json::Map<String, Value>, k: &str| m.get(k).cloned().unwrap_or(Value::Null);
-    let (rank, consistent) = ranking(&orbit_err);
-    let summary = json!({
-        "experiment": "integrators",
-        "paper": "002",
-        "euler_observed_order": get(&orbit_block, "euler_observed_order"),
-        "heun_observed_order": get(&orbit_block, "heun_observed_order"),
-        "rk4_observed_order": get(&orbit_block, "rk4_observed_order"),
-        "ranking": rank,
-        "ranking_same_at_every_step_size": consistent,
-        "time_varying_force_euler_observed_order": get(&veh_block, "euler_observed_order"),
-        "time_varying_force_heun_observed_order": get(&veh_block, "heun_observed_order"),
-        "time_varying_force_rk4_observed_order": get(&veh_block, "rk4_observed_order"),
-        "orbit_j2": Value::Object(orbit_block),
-        "time_varying_force": Value::Object(veh_block),
-    });
+    let (o, v) = (&orbit_case.figures, &vehicle_case.figures);
+    let summary = Summary {
+        experiment: Integrators::NAME.into(),
+        paper: "002".into(),
+        euler_observed_order: o.euler_observed_order,
+        heun_observed_order: o.heun_observed_order,
+        rk4_observed_order: o.rk4_observed_order,
+        ranking: o.ranking_most_accurate_first.clone(),
+        ranking_same_at_every_step_size: o.ranking_same_at_every_step_size,
+        time_varying_force_euler_observed_order: v.euler_observed_order,
+        time_varying_force_heun_observed_order: v.heun_observed_order,
+        time_varying_force_rk4_observed_order: v.rk4_observed_order,
+        orbit_j2: orbit_case,
+        time_varying_force: vehicle_case,
+    };
     write_summary(out_dir, &summary)?;
 
     plot_errors(
@@ -509,56 +622,36 @@ fn plot_errors(
 }
 
 /// Human table: errors per step size and observed orders for both cases.
-pub fn table(summary: &Value) -> String {
+pub fn table(summary: &Summary) -> String {
     let mut out = String::new();
-    for (key, title) in [
+    for (block, title) in [
         (
-            "orbit_j2",
+            &summary.orbit_j2.figures,
             "Equatorial circular orbit under J2 (exact solution)",
         ),
         (
-            "time_varying_force",
+            &summary.time_varying_force.figures,
             "Time-varying specific force (vehicle near the site)",
         ),
     ] {
-        let Some(block) = summary.get(key) else {
-            continue;
-        };
         out.push_str(&format!("{title}\n"));
         out.push_str(&format!("{:>10}", "step [s]"));
         for (_, name, _) in INTEGRATORS {
             out.push_str(&format!(" {:>14}", format!("{name} err [m]")));
         }
         out.push('\n');
-        let steps = block
-            .get("step_sizes_s")
-            .and_then(Value::as_array)
-            .cloned()
-            .unwrap_or_default();
-        for (j, h) in steps.iter().enumerate() {
-            out.push_str(&format!(
-                "{:>10}",
-                h.as_f64().map_or("–".into(), |h| format!("{h}"))
-            ));
-            for (_, name, _) in INTEGRATORS {
-                out.push_str(&format!(
-                    " {:>14}",
-                    fmt_num(
-                        block,
-                        &format!("/{name}_final_position_error_m/{j}"),
-                        3,
-                        true
-                    )
-                ));
+        let per = block.by_integrator();
+        for (j, h) in block.step_sizes_s.iter().enumerate() {
+            out.push_str(&format!("{:>10}", format!("{h}")));
+            for (errors, _) in per {
+                let e = errors.get(j).map_or("–".into(), |e| fmt_f64(*e, 3, true));
+                out.push_str(&format!(" {e:>14}"));
             }
             out.push('\n');
         }
         out.push_str(&format!("{:>10}", "order"));
-        for (_, name, _) in INTEGRATORS {
-            out.push_str(&format!(
-                " {:>14}",
-                fmt_num(block, &format!("/{name}_observed_order"), 2, false)
-            ));
+        for (_, order) in per {
+            out.push_str(&format!(" {:>14}", fmt_f64(order, 2, false)));
         }
         out.push('\n');
         out.push_str(&format!("{:>10}", "(theory)"));
@@ -566,16 +659,10 @@ pub fn table(summary: &Value) -> String {
             out.push_str(&format!(" {:>14}", format!("{p}")));
         }
         out.push('\n');
-        if let Some(r) = block
-            .get("ranking_most_accurate_first")
-            .and_then(Value::as_array)
-        {
-            let names: Vec<&str> = r.iter().filter_map(Value::as_str).collect();
-            out.push_str(&format!(
-                "ranking (most accurate first): {}\n",
-                names.join(" > ")
-            ));
-        }
+        out.push_str(&format!(
+            "ranking (most accurate first): {}\n",
+            block.ranking_most_accurate_first.join(" > ")
+        ));
         out.push('\n');
     }
     out
@@ -591,31 +678,31 @@ mod tests {
     #[test]
     fn orders_and_ranking() {
         let dir = crate::experiments::test_dir("integrators");
-        let s = run(&dir, false).expect("run");
+        let s = Integrators::run(&dir, false).expect("run");
         eprintln!("{}", table(&s));
-        let f = |k: &str| s.get(k).and_then(Value::as_f64).unwrap_or(f64::NAN);
-        assert!((f("euler_observed_order") - 1.0).abs() < 0.2, "{s}");
-        assert!((f("heun_observed_order") - 2.0).abs() < 0.2, "{s}");
-        assert!((f("rk4_observed_order") - 4.0).abs() < 0.2, "{s}");
-        assert_eq!(s["ranking"], json!(["rk4", "heun", "euler"]));
-        assert_eq!(s["ranking_same_at_every_step_size"], json!(true));
+        assert!((s.euler_observed_order - 1.0).abs() < 0.2, "{s:?}");
+        assert!((s.heun_observed_order - 2.0).abs() < 0.2, "{s:?}");
+        assert!((s.rk4_observed_order - 4.0).abs() < 0.2, "{s:?}");
+        assert_eq!(s.ranking, ["rk4", "heun", "euler"]);
+        assert!(s.ranking_same_at_every_step_size);
         assert!(
-            (f("time_varying_force_euler_observed_order") - 1.0).abs() < 0.2,
-            "{s}"
+            (s.time_varying_force_euler_observed_order - 1.0).abs() < 0.2,
+            "{s:?}"
         );
         assert!(
-            (f("time_varying_force_heun_observed_order") - 2.0).abs() < 0.2,
-            "{s}"
+            (s.time_varying_force_heun_observed_order - 2.0).abs() < 0.2,
+            "{s:?}"
         );
         assert!(
-            (f("time_varying_force_rk4_observed_order") - 2.0).abs() < 0.2,
-            "{s}"
+            (s.time_varying_force_rk4_observed_order - 2.0).abs() < 0.2,
+            "{s:?}"
         );
-        let ratios = s["time_varying_force"]["rk4_error_over_predicted_mean_force_error"]
-            .as_array()
-            .cloned()
-            .unwrap_or_default();
-        let last = ratios.last().and_then(Value::as_f64).unwrap_or(f64::NAN);
+        let last = s
+            .time_varying_force
+            .rk4_error_over_predicted_mean_force_error
+            .last()
+            .copied()
+            .unwrap_or(f64::NAN);
         assert!((last - 1.0).abs() < 0.2, "RK4 / predicted = {last}");
         for png in [
             "integrators_orbit_error_vs_step.png",
@@ -624,6 +711,9 @@ mod tests {
         ] {
             assert!(dir.join(png).is_file(), "{png}");
         }
+        // summary.json reads back as the summary.
+        let json = std::fs::read_to_string(dir.join("summary.json")).expect("summary.json");
+        assert_eq!(serde_json::from_str::<Summary>(&json).expect("parse"), s);
         let _ = std::fs::remove_dir_all(&dir);
     }
 

@@ -27,6 +27,8 @@ pub mod redundancy;
 pub mod schuler;
 pub mod tight_coupling;
 
+use serde::de::DeserializeOwned;
+use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
 /// Why an experiment failed.
@@ -65,64 +67,132 @@ pub enum ExperimentError {
     Measurement(String),
 }
 
-/// Names of the experiments, in the order of the issue.
-pub fn names() -> &'static [&'static str] {
-    &[
-        "integrators",
-        "schuler",
-        "gravity",
-        "consistency",
-        "astro-calibration",
-        "tight-coupling",
-        "gnss-denied-astro",
-        "alignment",
-        "baseline-attitude",
-        "redundancy",
-        "inertial-budget",
-    ]
+/// One experiment of `sextant experiment NAME`: its name, what it reproduces, how it runs with
+/// its default settings and how its summary reads as a table.
+pub trait Experiment {
+    /// The name on the command line (`sextant experiment NAME`) and of its directory under
+    /// `sextant experiment all`.
+    const NAME: &'static str;
+    /// One line about what it reproduces (the heading text of its section in RESULTS.md).
+    const DESCRIPTION: &'static str;
+    /// The figures it measures, under self-explaining names with their units in the name;
+    /// written as `summary.json`.
+    type Summary: Serialize + DeserializeOwned;
+    /// Run with the default settings into `out_dir` (created if missing): `summary.json` and
+    /// PNG plots; `progress` shows progress bars on stderr for the long loops.
+    fn run(out_dir: &Path, progress: bool) -> Result<Self::Summary, ExperimentError>;
+    /// The human-readable table of `summary`.
+    fn table(summary: &Self::Summary) -> String;
 }
 
-/// Run the experiment `name` into `out_dir` (created if missing); `progress` shows progress
-/// bars on stderr for the long loops. Returns the summary also written to `summary.json`.
-pub fn run_by_name(
-    name: &str,
-    out_dir: &Path,
-    progress: bool,
-) -> Result<serde_json::Value, ExperimentError> {
-    match name {
-        "integrators" => integrators::run(out_dir, progress),
-        "schuler" => schuler::run(out_dir, progress),
-        "gravity" => gravity::run(out_dir, progress),
-        "consistency" => consistency::run(out_dir, progress),
-        "tight-coupling" => tight_coupling::run(out_dir, progress),
-        "gnss-denied-astro" => gnss_denied_astro::run(out_dir, progress),
-        "astro-calibration" => astro_calibration::run(out_dir, progress),
-        "alignment" => alignment::run(out_dir, progress),
-        "baseline-attitude" => baseline_attitude::run(out_dir, progress),
-        "redundancy" => redundancy::run(out_dir, progress),
-        "inertial-budget" => inertial_budget::run(out_dir, progress),
-        "all" => all::run(out_dir, progress),
-        _ => Err(unknown(name)),
-    }
+/// The registry: every experiment once, in the order of [`names`]. Generates [`Summary`] (one
+/// variant per experiment, plus `all`), [`names`], [`run_by_name`] and [`describe`].
+macro_rules! registry {
+    ($($module:ident :: $experiment:ident => $variant:ident),* $(,)?) => {
+        /// The typed summary of any experiment, as [`run_by_name`] returns it; it serialises as
+        /// the experiment's own summary (`summary.json`).
+        #[derive(Debug, Clone)]
+        pub enum Summary {
+            $(
+                #[doc = concat!("`", stringify!($module), "`: [`", stringify!($module), "::Summary`].")]
+                $variant($module::Summary),
+            )*
+            /// `all`: every experiment's summary by name.
+            All(all::Summary),
+        }
+
+        /// Names of the experiments, in the order of the issue.
+        pub fn names() -> &'static [&'static str] {
+            &[$(<$module::$experiment as Experiment>::NAME),*]
+        }
+
+        /// One line about what experiment `name` reproduces; empty for an unknown name.
+        pub fn describe(name: &str) -> &'static str {
+            $(
+                if name == <$module::$experiment as Experiment>::NAME {
+                    return <$module::$experiment as Experiment>::DESCRIPTION;
+                }
+            )*
+            ""
+        }
+
+        /// Run the experiment `name` (or `all`) into `out_dir` (created if missing); `progress`
+        /// shows progress bars on stderr for the long loops. Returns the summary also written
+        /// to `summary.json`.
+        pub fn run_by_name(
+            name: &str,
+            out_dir: &Path,
+            progress: bool,
+        ) -> Result<Summary, ExperimentError> {
+            $(
+                if name == <$module::$experiment as Experiment>::NAME {
+                    return <$module::$experiment as Experiment>::run(out_dir, progress)
+                        .map(Summary::$variant);
+                }
+            )*
+            if name == all::NAME {
+                return all::run(out_dir, progress).map(Summary::All);
+            }
+            Err(unknown(name))
+        }
+
+        impl Summary {
+            /// The name of the experiment this summary is of.
+            pub fn name(&self) -> &'static str {
+                match self {
+                    $(Summary::$variant(_) => <$module::$experiment as Experiment>::NAME,)*
+                    Summary::All(_) => all::NAME,
+                }
+            }
+
+            /// The human-readable table of the summary.
+            pub fn table(&self) -> String {
+                match self {
+                    $(Summary::$variant(s) => <$module::$experiment as Experiment>::table(s),)*
+                    Summary::All(s) => all::table(s),
+                }
+            }
+
+            /// The summary of experiment `name` read back from its `summary.json` document.
+            pub fn from_value(
+                name: &str,
+                json: serde_json::Value,
+            ) -> Result<Self, ExperimentError> {
+                $(
+                    if name == <$module::$experiment as Experiment>::NAME {
+                        return Ok(Summary::$variant(serde_json::from_value(json)?));
+                    }
+                )*
+                if name == all::NAME {
+                    return Ok(Summary::All(serde_json::from_value(json)?));
+                }
+                Err(unknown(name))
+            }
+        }
+
+        impl Serialize for Summary {
+            fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+                match self {
+                    $(Summary::$variant(s) => s.serialize(serializer),)*
+                    Summary::All(s) => s.serialize(serializer),
+                }
+            }
+        }
+    };
 }
 
-/// The human-readable table of experiment `name`'s summary.
-pub fn table_by_name(name: &str, summary: &serde_json::Value) -> Result<String, ExperimentError> {
-    match name {
-        "integrators" => Ok(integrators::table(summary)),
-        "schuler" => Ok(schuler::table(summary)),
-        "gravity" => Ok(gravity::table(summary)),
-        "consistency" => Ok(consistency::table(summary)),
-        "tight-coupling" => Ok(tight_coupling::table(summary)),
-        "gnss-denied-astro" => Ok(gnss_denied_astro::table(summary)),
-        "astro-calibration" => Ok(astro_calibration::table(summary)),
-        "alignment" => Ok(alignment::table(summary)),
-        "baseline-attitude" => Ok(baseline_attitude::table(summary)),
-        "redundancy" => Ok(redundancy::table(summary)),
-        "inertial-budget" => Ok(inertial_budget::table(summary)),
-        "all" => Ok(all::table(summary)),
-        _ => Err(unknown(name)),
-    }
+registry! {
+    integrators::Integrators => Integrators,
+    schuler::Schuler => Schuler,
+    gravity::Gravity => Gravity,
+    consistency::Consistency => Consistency,
+    astro_calibration::AstroCalibration => AstroCalibration,
+    tight_coupling::TightCoupling => TightCoupling,
+    gnss_denied_astro::GnssDeniedAstro => GnssDeniedAstro,
+    alignment::Alignment => Alignment,
+    baseline_attitude::BaselineAttitude => BaselineAttitude,
+    redundancy::Redundancy => Redundancy,
+    inertial_budget::InertialBudget => InertialBudget,
 }
 
 fn unknown(name: &str) -> ExperimentError {
@@ -132,13 +202,15 @@ fn unknown(name: &str) -> ExperimentError {
     }
 }
 
-/// Create `out_dir` and write `summary` as pretty JSON to `out_dir/summary.json`.
+/// Create `out_dir` and write `summary` as pretty JSON to `out_dir/summary.json`, its keys in
+/// alphabetical order at every level (the order of the file does not depend on the order of
+/// the struct's fields).
 pub(crate) fn write_summary(
     out_dir: &Path,
-    summary: &serde_json::Value,
+    summary: &impl Serialize,
 ) -> Result<(), ExperimentError> {
     let path = out_dir.join("summary.json");
-    let text = serde_json::to_string_pretty(summary)?;
+    let text = serde_json::to_string_pretty(&serde_json::to_value(summary)?)?;
     std::fs::write(&path, text + "\n").map_err(|source| ExperimentError::Io { path, source })
 }
 
@@ -176,14 +248,56 @@ pub(crate) fn progress_bar(progress: bool, len: u64, what: &str) -> indicatif::P
     bar
 }
 
-/// A number from a summary for a table: the value at JSON pointer `ptr` formatted with
-/// `prec` decimals (or `prec` significant digits in scientific notation when `sci`), `–` if
-/// absent.
+/// `x` with `prec` decimals for a table (or `prec` significant digits in scientific notation
+/// when `sci`); `–` when it is not finite (an undefined figure: `null` in `summary.json`).
+pub(crate) fn fmt_f64(x: f64, prec: usize, sci: bool) -> String {
+    match x {
+        x if !x.is_finite() => "–".to_string(),
+        x if sci => format!("{x:.prec$e}"),
+        x => format!("{x:.prec$}"),
+    }
+}
+
+/// [`fmt_f64`] of an optional figure: `–` when absent.
+pub(crate) fn fmt_opt(x: Option<f64>, prec: usize, sci: bool) -> String {
+    x.map_or_else(|| "–".to_string(), |x| fmt_f64(x, prec, sci))
+}
+
+/// A number from a JSON document for a table: the value at JSON pointer `ptr` formatted as
+/// [`fmt_f64`] does, `–` if absent.
 pub(crate) fn fmt_num(summary: &serde_json::Value, ptr: &str, prec: usize, sci: bool) -> String {
-    match summary.pointer(ptr).and_then(serde_json::Value::as_f64) {
-        Some(x) if sci => format!("{x:.prec$e}"),
-        Some(x) => format!("{x:.prec$}"),
-        None => "–".to_string(),
+    fmt_opt(
+        summary.pointer(ptr).and_then(serde_json::Value::as_f64),
+        prec,
+        sci,
+    )
+}
+
+/// Serde of a figure that may be undefined (NaN, e.g. a maximum over no value): serde_json
+/// writes a non-finite number as `null`; this reads `null` back as NaN. For
+/// `#[serde(deserialize_with = "nan_if_null")]`.
+pub(crate) fn nan_if_null<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
+}
+
+/// Serde of an optional entry whose value may be `null`: absent is `None`, `null` is
+/// `Some(None)`. For `#[serde(default, skip_serializing_if = "Option::is_none",
+/// deserialize_with = "present")]` on an `Option<Option<T>>`.
+pub(crate) fn present<'de, D, T>(d: D) -> Result<Option<T>, D::Error>
+where
+    D: serde::Deserializer<'de>,
+    T: Deserialize<'de>,
+{
+    T::deserialize(d).map(Some)
+}
+
+/// The mean of `values` that are finite (NaN when there is none).
+pub(crate) fn mean_of_finite(values: impl Iterator<Item = f64>) -> f64 {
+    let v: Vec<f64> = values.filter(|v| v.is_finite()).collect();
+    if v.is_empty() {
+        f64::NAN
+    } else {
+        v.iter().sum::<f64>() / v.len() as f64
     }
 }
 
@@ -235,7 +349,7 @@ mod tests {
             matches!(err, Some(ExperimentError::Unknown { .. })),
             "{err:?}"
         );
-        assert!(table_by_name("nope", &serde_json::json!({})).is_err());
+        assert!(Summary::from_value("nope", serde_json::json!({})).is_err());
         assert!(!dir.exists());
     }
 
@@ -253,7 +367,8 @@ mod tests {
             };
             let t0 = std::time::Instant::now();
             let summary = run_by_name(name, &dir, false).expect("run");
-            let table = table_by_name(name, &summary).expect("table");
+            assert_eq!(summary.name(), *name);
+            let table = summary.table();
             eprintln!("{name}: {:.2} s\n{table}", t0.elapsed().as_secs_f64());
             if keep.is_none() {
                 let _ = std::fs::remove_dir_all(&dir);

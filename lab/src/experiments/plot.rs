@@ -37,6 +37,50 @@ pub struct Line {
     pub markers: bool,
 }
 
+impl Line {
+    /// A solid line without markers.
+    pub fn solid(label: impl Into<String>, points: Vec<(f64, f64)>, color: RGBColor) -> Self {
+        Self {
+            label: label.into(),
+            points,
+            color,
+            dashed: false,
+            markers: false,
+        }
+    }
+
+    /// A dashed line without markers (a reference, an expectation).
+    pub fn dashed(label: impl Into<String>, points: Vec<(f64, f64)>, color: RGBColor) -> Self {
+        Self {
+            dashed: true,
+            ..Self::solid(label, points, color)
+        }
+    }
+
+    /// The same line with a circle at each point.
+    pub fn with_markers(self) -> Self {
+        Self {
+            markers: true,
+            ..self
+        }
+    }
+}
+
+/// The points of a table of results where both coordinates are finite, in order (a figure
+/// that is not finite is undefined: `null` in `summary.json`), so that the line joins the
+/// defined points instead of breaking at the undefined ones.
+pub fn finite_points(points: impl IntoIterator<Item = (f64, f64)>) -> Vec<(f64, f64)> {
+    points
+        .into_iter()
+        .filter(|(x, y)| x.is_finite() && y.is_finite())
+        .collect()
+}
+
+/// The points `(x[i], y[i])` of two equally sampled series (the shorter one's length).
+pub fn xy(x: &[f64], y: &[f64]) -> Vec<(f64, f64)> {
+    x.iter().copied().zip(y.iter().copied()).collect()
+}
+
 /// A chart: title, axis labels (with units) and scales, lines.
 #[derive(Debug, Clone)]
 pub struct Chart<'a> {
@@ -52,21 +96,6 @@ pub struct Chart<'a> {
     pub log_y: bool,
     /// The lines.
     pub lines: &'a [Line],
-}
-
-/// The points `(row[x_key], row[y_key])` of the summary rows that `keep` selects, in row
-/// order; rows where either is not a number are skipped. For plotting a table of results
-/// (`summary["rows"]`) one line per cell selection.
-pub fn row_points(
-    rows: &[serde_json::Value],
-    keep: impl Fn(&serde_json::Value) -> bool,
-    x_key: &str,
-    y_key: &str,
-) -> Vec<(f64, f64)> {
-    rows.iter()
-        .filter(|r| keep(r))
-        .filter_map(|r| Some((r[x_key].as_f64()?, r[y_key].as_f64()?)))
-        .collect()
 }
 
 type DynErr = Box<dyn std::error::Error>;
@@ -238,16 +267,21 @@ mod tests {
     }
 
     #[test]
-    fn row_points_select_rows_and_skip_non_numbers() {
+    fn finite_points_select_rows_and_skip_undefined_figures() {
         let rows = [
-            serde_json::json!({"g": "a", "x": 1.0, "y": 2.0}),
-            serde_json::json!({"g": "b", "x": 2.0, "y": 3.0}),
-            serde_json::json!({"g": "a", "x": 3.0, "y": null}),
-            serde_json::json!({"g": "a", "x": 4.0, "y": 5}),
+            ("a", 1.0, 2.0),
+            ("b", 2.0, 3.0),
+            ("a", 3.0, f64::NAN),
+            ("a", 4.0, 5.0),
+            ("a", f64::INFINITY, 6.0),
         ];
         assert_eq!(
-            row_points(&rows, |r| r["g"] == "a", "x", "y"),
+            finite_points(rows.iter().filter(|r| r.0 == "a").map(|r| (r.1, r.2))),
             vec![(1.0, 2.0), (4.0, 5.0)]
+        );
+        assert_eq!(
+            xy(&[1.0, 2.0, 3.0], &[4.0, 5.0]),
+            vec![(1.0, 4.0), (2.0, 5.0)]
         );
     }
 

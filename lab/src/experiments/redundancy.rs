@@ -40,8 +40,8 @@
 
 use super::plot::{Chart, Line, color, line_chart};
 use super::{
-    ExperimentError, create_out_dir, fmt_num, measurement, progress_bar, scenario_file,
-    write_summary,
+    Experiment, ExperimentError, create_out_dir, fmt_f64, measurement, nan_if_null, progress_bar,
+    scenario_file, write_summary,
 };
 use drivers_sim::imu::ChannelErrorModel;
 use drivers_sim::scenario::{
@@ -61,7 +61,7 @@ use nalgebra::{Rotation3, UnitQuaternion, Vector3};
 use rand::Rng;
 use rand_distr::StandardNormal;
 use rayon::prelude::*;
-use serde_json::{Value, json};
+use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
 /// The paper's Table 1 (2σ over a 5-hour flight): (name, redundant, orthogonal, unit).
@@ -472,13 +472,151 @@ fn failure_cases(onset_s: f64) -> Vec<(&'static str, ChannelFailure)> {
     ]
 }
 
-/// Run the full experiment.
-pub fn run(out_dir: &Path, progress: bool) -> Result<Value, ExperimentError> {
-    run_with(out_dir, progress, &Settings::full())
+/// One parameter of the paper's table: the paper's figures beside the measured 2σ of each
+/// layout (maximum over the flight and at its end), in `unit`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TableRow {
+    /// The parameter.
+    pub parameter: String,
+    /// Its unit.
+    pub unit: String,
+    /// The paper's redundant (skewed) figure.
+    pub paper_redundant: f64,
+    /// The paper's orthogonal figure.
+    pub paper_orthogonal: f64,
+    /// Their ratio.
+    pub paper_ratio: f64,
+    /// Orthogonal triad: maximum 2σ over the flight.
+    pub orthogonal_2sigma_max: f64,
+    /// 4-channel pyramid, α = 28.7°: maximum 2σ.
+    pub pyramid_28_7_2sigma_max: f64,
+    /// 4-channel pyramid, α = 35.26° (isotropic): maximum 2σ.
+    pub pyramid_35_26_2sigma_max: f64,
+    /// Orthogonal triad: 2σ at the end.
+    pub orthogonal_2sigma_end: f64,
+    /// Pyramid 28.7°: 2σ at the end.
+    pub pyramid_28_7_2sigma_end: f64,
+    /// Pyramid 35.26°: 2σ at the end.
+    pub pyramid_35_26_2sigma_end: f64,
+    /// Pyramid 28.7° / orthogonal, maximum 2σ.
+    pub ratio_pyramid_28_7: f64,
+    /// Pyramid 35.26° / orthogonal, maximum 2σ.
+    pub ratio_pyramid_35_26: f64,
+}
+
+/// One injected failure type on the 5-channel layout.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FailureRow {
+    /// The failure.
+    pub failure: String,
+    /// Runs (seeds).
+    pub runs: usize,
+    /// Fraction of the runs where a fault was detected after the onset.
+    pub detection_rate: f64,
+    /// Fraction where the failed channel was isolated and excluded after the onset.
+    pub isolation_rate: f64,
+    /// Runs with a detection before the onset (false alarms).
+    pub detections_before_onset: u32,
+    /// Mean time from the onset to the detection, s.
+    pub time_to_detect_mean_s: f64,
+    /// Longest, s (undefined without a detection).
+    #[serde(deserialize_with = "nan_if_null")]
+    pub time_to_detect_max_s: f64,
+    /// Mean time from the onset to the isolation, s.
+    pub time_to_isolate_mean_s: f64,
+    /// Longest, s (undefined without an isolation).
+    #[serde(deserialize_with = "nan_if_null")]
+    pub time_to_isolate_max_s: f64,
+    /// RMS over the runs of the horizontal error at the end, with exclusion, m.
+    pub horizontal_error_end_rms_with_exclusion_m: f64,
+    /// The same without exclusion, m.
+    pub horizontal_error_end_rms_without_exclusion_m: f64,
+}
+
+/// The fault detection and isolation study (5 channels).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Fdi {
+    /// The layout.
+    pub layout: String,
+    /// Test block, s.
+    pub block_s: f64,
+    /// False-alarm probability per block of the χ² test.
+    pub false_alarm_probability_per_block: f64,
+    /// Consecutive blocks naming the same channel before it is excluded.
+    pub persistence_blocks: u32,
+    /// Onset of the failures, s.
+    pub failure_onset_s: f64,
+    /// Length of each failure run, s.
+    pub window_s: f64,
+    /// The failed channel.
+    pub failed_channel: u32,
+    /// Per failure type.
+    pub failures: Vec<FailureRow>,
+    /// Detections in the fault-free runs.
+    pub fault_free_false_alarms: u32,
+    /// Blocks tested in the fault-free runs.
+    pub fault_free_blocks_tested: u64,
+    /// RMS of the fault-free runs' horizontal error at the end, m.
+    pub fault_free_horizontal_error_end_rms_m: f64,
+}
+
+/// The figures of `redundancy` (`summary.json`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Summary {
+    /// `"redundancy"`.
+    pub experiment: String,
+    /// The paper reproduced.
+    pub paper: String,
+    /// The scenario file.
+    pub scenario: String,
+    /// Simulated flight, s.
+    pub flight_s: f64,
+    /// IMU rate, Hz.
+    pub imu_rate_hz: usize,
+    /// Monte Carlo runs per layout.
+    pub runs_per_layout: usize,
+    /// How the flights are navigated.
+    pub navigation: String,
+    /// Highest height above the site, m.
+    pub cruise_height_above_site_m: f64,
+    /// Expected σ ratio pyramid 28.7° / orthogonal from (HᵀH)⁻¹, x/y axes.
+    pub expected_sigma_ratio_xy_alpha_28_7: f64,
+    /// The same, z axis.
+    pub expected_sigma_ratio_z_alpha_28_7: f64,
+    /// The same for the isotropic pyramid, every axis.
+    pub expected_sigma_ratio_isotropic: f64,
+    /// The paper's table.
+    pub table: Vec<TableRow>,
+    /// Detections in the fault-free flights, pyramid 28.7°.
+    pub false_alarms_4ch_alpha_28_7: u32,
+    /// Detections in the fault-free flights, pyramid 35.26°.
+    pub false_alarms_4ch_alpha_35_26: u32,
+    /// Blocks tested, pyramid 28.7°.
+    pub test_blocks_4ch_alpha_28_7: u64,
+    /// False alarms of both 4-channel layouts per flight hour.
+    pub false_alarm_rate_4ch_per_hour: f64,
+    /// Fault detection and isolation with 5 channels.
+    pub fdi: Fdi,
+}
+
+/// `sextant experiment redundancy`.
+pub struct Redundancy;
+
+impl Experiment for Redundancy {
+    const NAME: &'static str = "redundancy";
+    const DESCRIPTION: &'static str =
+        "Paper 004: structural redundancy, skewed vs orthogonal, fault isolation";
+    type Summary = Summary;
+    fn run(out_dir: &Path, progress: bool) -> Result<Summary, ExperimentError> {
+        run_with(out_dir, progress, &Settings::full())
+    }
+    fn table(summary: &Summary) -> String {
+        table(summary)
+    }
 }
 
 /// Run with the given sizes (the tests use a reduced one).
-pub fn run_with(out_dir: &Path, progress: bool, s: &Settings) -> Result<Value, ExperimentError> {
+pub fn run_with(out_dir: &Path, progress: bool, s: &Settings) -> Result<Summary, ExperimentError> {
     create_out_dir(out_dir)?;
     let scn = Scenario::load(&scenario_path()).map_err(measurement)?;
     let horizon = s.duration_s.max(s.failure_window_s);
@@ -614,19 +752,19 @@ pub fn run_with(out_dir: &Path, progress: bool, s: &Settings) -> Result<Value, E
         let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt();
         let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
         let maxv = |v: &[f64]| v.iter().copied().fold(f64::NAN, f64::max);
-        failure_rows.push(json!({
-            "failure": name,
-            "runs": s.failure_runs,
-            "detection_rate": detected as f64 / s.failure_runs as f64,
-            "isolation_rate": isolated as f64 / s.failure_runs as f64,
-            "detections_before_onset": false_before,
-            "time_to_detect_mean_s": mean(&t_det),
-            "time_to_detect_max_s": maxv(&t_det),
-            "time_to_isolate_mean_s": mean(&t_iso),
-            "time_to_isolate_max_s": maxv(&t_iso),
-            "horizontal_error_end_rms_with_exclusion_m": rms(&err_ex),
-            "horizontal_error_end_rms_without_exclusion_m": rms(&err_no),
-        }));
+        failure_rows.push(FailureRow {
+            failure: name.to_string(),
+            runs: s.failure_runs,
+            detection_rate: detected as f64 / s.failure_runs as f64,
+            isolation_rate: isolated as f64 / s.failure_runs as f64,
+            detections_before_onset: false_before,
+            time_to_detect_mean_s: mean(&t_det),
+            time_to_detect_max_s: maxv(&t_det),
+            time_to_isolate_mean_s: mean(&t_iso),
+            time_to_isolate_max_s: maxv(&t_iso),
+            horizontal_error_end_rms_with_exclusion_m: rms(&err_ex),
+            horizontal_error_end_rms_without_exclusion_m: rms(&err_no),
+        });
     }
     let clean: Vec<f64> = (1..=s.failure_runs as u64)
         .filter_map(|seed| fmap.get(&(cases.len(), seed, true)))
@@ -648,54 +786,55 @@ pub fn run_with(out_dir: &Path, progress: bool, s: &Settings) -> Result<Value, E
         let o = m[0][i];
         let p = m[1][i];
         let iso = m[2][i];
-        rows.push(json!({
-            "parameter": name,
-            "unit": unit,
-            "paper_redundant": red_p,
-            "paper_orthogonal": orth_p,
-            "paper_ratio": red_p / orth_p,
-            "orthogonal_2sigma_max": o.0,
-            "pyramid_28_7_2sigma_max": p.0,
-            "pyramid_35_26_2sigma_max": iso.0,
-            "orthogonal_2sigma_end": o.1,
-            "pyramid_28_7_2sigma_end": p.1,
-            "pyramid_35_26_2sigma_end": iso.1,
-            "ratio_pyramid_28_7": p.0 / o.0,
-            "ratio_pyramid_35_26": iso.0 / o.0,
-        }));
+        rows.push(TableRow {
+            parameter: name.to_string(),
+            unit: unit.to_string(),
+            paper_redundant: *red_p,
+            paper_orthogonal: *orth_p,
+            paper_ratio: red_p / orth_p,
+            orthogonal_2sigma_max: o.0,
+            pyramid_28_7_2sigma_max: p.0,
+            pyramid_35_26_2sigma_max: iso.0,
+            orthogonal_2sigma_end: o.1,
+            pyramid_28_7_2sigma_end: p.1,
+            pyramid_35_26_2sigma_end: iso.1,
+            ratio_pyramid_28_7: p.0 / o.0,
+            ratio_pyramid_35_26: iso.0 / o.0,
+        });
     }
     let alpha = 28.7_f64.to_radians();
-    let summary = json!({
-        "experiment": "redundancy",
-        "paper": "004 structural redundancy (MEMS, UAV)",
-        "scenario": "config/scenarios/uav.toml",
-        "flight_s": s.duration_s,
-        "imu_rate_hz": truth.rate_hz,
-        "runs_per_layout": s.runs,
-        "navigation": "free inertial from the true state at the end of a 120 s ground hold (per-channel bias calibration against the known site), baro-inertial third-order vertical loop (tau 30 s); no GNSS",
-        "cruise_height_above_site_m": cruise_height_m,
-        "expected_sigma_ratio_xy_alpha_28_7": (1.0 / (2.0 * alpha.cos().powi(2))).sqrt(),
-        "expected_sigma_ratio_z_alpha_28_7": (1.0 / (4.0 * alpha.sin().powi(2))).sqrt(),
-        "expected_sigma_ratio_isotropic": 0.75f64.sqrt(),
-        "table": rows,
-        "false_alarms_4ch_alpha_28_7": fa[1].0,
-        "false_alarms_4ch_alpha_35_26": fa[2].0,
-        "test_blocks_4ch_alpha_28_7": fa[1].1,
-        "false_alarm_rate_4ch_per_hour": (fa[1].0 + fa[2].0) as f64 / (2.0 * s.runs as f64 * flight_h),
-        "fdi": {
-            "layout": cone.name,
-            "block_s": 1.0,
-            "false_alarm_probability_per_block": 1e-4,
-            "persistence_blocks": 3,
-            "failure_onset_s": onset,
-            "window_s": s.failure_window_s,
-            "failed_channel": 1,
-            "failures": failure_rows,
-            "fault_free_false_alarms": clean_fa,
-            "fault_free_blocks_tested": clean_blocks,
-            "fault_free_horizontal_error_end_rms_m": clean_rms,
+    let summary = Summary {
+        experiment: Redundancy::NAME.into(),
+        paper: "004 structural redundancy (MEMS, UAV)".into(),
+        scenario: "config/scenarios/uav.toml".into(),
+        flight_s: s.duration_s,
+        imu_rate_hz: truth.rate_hz,
+        runs_per_layout: s.runs,
+        navigation: "free inertial from the true state at the end of a 120 s ground hold (per-channel bias calibration against the known site), baro-inertial third-order vertical loop (tau 30 s); no GNSS".into(),
+        cruise_height_above_site_m: cruise_height_m,
+        expected_sigma_ratio_xy_alpha_28_7: (1.0 / (2.0 * alpha.cos().powi(2))).sqrt(),
+        expected_sigma_ratio_z_alpha_28_7: (1.0 / (4.0 * alpha.sin().powi(2))).sqrt(),
+        expected_sigma_ratio_isotropic: 0.75f64.sqrt(),
+        table: rows,
+        false_alarms_4ch_alpha_28_7: fa[1].0,
+        false_alarms_4ch_alpha_35_26: fa[2].0,
+        test_blocks_4ch_alpha_28_7: fa[1].1,
+        false_alarm_rate_4ch_per_hour: (fa[1].0 + fa[2].0) as f64
+            / (2.0 * s.runs as f64 * flight_h),
+        fdi: Fdi {
+            layout: cone.name.into(),
+            block_s: 1.0,
+            false_alarm_probability_per_block: 1e-4,
+            persistence_blocks: 3,
+            failure_onset_s: onset,
+            window_s: s.failure_window_s,
+            failed_channel: 1,
+            failures: failure_rows,
+            fault_free_false_alarms: clean_fa,
+            fault_free_blocks_tested: clean_blocks,
+            fault_free_horizontal_error_end_rms_m: clean_rms,
         },
-    });
+    };
     write_summary(out_dir, &summary)?;
     plots(out_dir, &per_layout, &lays, cruise_height_m)?;
     Ok(summary)
@@ -745,15 +884,15 @@ fn plots(
             .iter()
             .zip(lays)
             .enumerate()
-            .map(|(i, (runs, l))| Line {
-                label: l.name.to_string(),
-                points: envelope(runs, f)
-                    .into_iter()
-                    .map(|(t, v)| (t / 3600.0, v))
-                    .collect(),
-                color: color(i),
-                dashed: false,
-                markers: false,
+            .map(|(i, (runs, l))| {
+                Line::solid(
+                    l.name,
+                    envelope(runs, f)
+                        .into_iter()
+                        .map(|(t, v)| (t / 3600.0, v))
+                        .collect(),
+                    color(i),
+                )
             })
             .collect();
         line_chart(
@@ -772,13 +911,15 @@ fn plots(
 }
 
 /// The table of a summary.
-pub fn table(s: &Value) -> String {
+pub fn table(s: &Summary) -> String {
+    let f = |x: f64, d: usize| fmt_f64(x, d, false);
+    let e = |x: f64| fmt_f64(x, 3, true);
     let mut t = String::new();
     t.push_str(&format!(
         "Paper 004: UAV flight {} s, {} runs per layout, IMU {} Hz; max over the flight of 2σ\n",
-        fmt_num(s, "/flight_s", 0, false),
-        fmt_num(s, "/runs_per_layout", 0, false),
-        fmt_num(s, "/imu_rate_hz", 0, false),
+        f(s.flight_s, 0),
+        s.runs_per_layout,
+        s.imu_rate_hz,
     ));
     t.push_str(&format!(
         "{:<22} {:>9} {:>9} {:>6} | {:>11} {:>11} {:>11} {:>6} {:>6}\n",
@@ -792,40 +933,35 @@ pub fn table(s: &Value) -> String {
         "r28.7",
         "r35.3"
     ));
-    if let Some(rows) = s.get("table").and_then(Value::as_array) {
-        for (i, r) in rows.iter().enumerate() {
-            let p = format!("/table/{i}");
-            t.push_str(&format!(
-                "{:<22} {:>9} {:>9} {:>6} | {:>11} {:>11} {:>11} {:>6} {:>6}  [{}]\n",
-                r.get("parameter").and_then(Value::as_str).unwrap_or("?"),
-                fmt_num(s, &format!("{p}/paper_redundant"), 2, false),
-                fmt_num(s, &format!("{p}/paper_orthogonal"), 2, false),
-                fmt_num(s, &format!("{p}/paper_ratio"), 2, false),
-                fmt_num(s, &format!("{p}/orthogonal_2sigma_max"), 3, true),
-                fmt_num(s, &format!("{p}/pyramid_28_7_2sigma_max"), 3, true),
-                fmt_num(s, &format!("{p}/pyramid_35_26_2sigma_max"), 3, true),
-                fmt_num(s, &format!("{p}/ratio_pyramid_28_7"), 2, false),
-                fmt_num(s, &format!("{p}/ratio_pyramid_35_26"), 2, false),
-                r.get("unit").and_then(Value::as_str).unwrap_or(""),
-            ));
-        }
+    for r in &s.table {
+        t.push_str(&format!(
+            "{:<22} {:>9} {:>9} {:>6} | {:>11} {:>11} {:>11} {:>6} {:>6}  [{}]\n",
+            r.parameter,
+            f(r.paper_redundant, 2),
+            f(r.paper_orthogonal, 2),
+            f(r.paper_ratio, 2),
+            e(r.orthogonal_2sigma_max),
+            e(r.pyramid_28_7_2sigma_max),
+            e(r.pyramid_35_26_2sigma_max),
+            f(r.ratio_pyramid_28_7, 2),
+            f(r.ratio_pyramid_35_26, 2),
+            r.unit,
+        ));
     }
     t.push_str(&format!(
         "expected σ ratio from (HᵀH)⁻¹: x/y {} z {} (α 28.7°), {} (isotropic)\n",
-        fmt_num(s, "/expected_sigma_ratio_xy_alpha_28_7", 3, false),
-        fmt_num(s, "/expected_sigma_ratio_z_alpha_28_7", 3, false),
-        fmt_num(s, "/expected_sigma_ratio_isotropic", 3, false),
+        f(s.expected_sigma_ratio_xy_alpha_28_7, 3),
+        f(s.expected_sigma_ratio_z_alpha_28_7, 3),
+        f(s.expected_sigma_ratio_isotropic, 3),
     ));
     t.push_str(&format!(
         "false alarms, 4 channels, fault-free flights: {} per hour\n",
-        fmt_num(s, "/false_alarm_rate_4ch_per_hour", 3, false)
+        f(s.false_alarm_rate_4ch_per_hour, 3)
     ));
     t.push_str(&format!(
         "\nFDI, {} (failed channel 1 at {} s):\n{:<32} {:>6} {:>6} {:>9} {:>9} {:>12} {:>12}\n",
-        s.pointer("/fdi/layout")
-            .and_then(Value::as_str)
-            .unwrap_or("?"),
-        fmt_num(s, "/fdi/failure_onset_s", 0, false),
+        s.fdi.layout,
+        f(s.fdi.failure_onset_s, 0),
         "failure",
         "detect",
         "isol.",
@@ -834,36 +970,23 @@ pub fn table(s: &Value) -> String {
         "horiz excl m",
         "horiz no-ex m"
     ));
-    if let Some(rows) = s.pointer("/fdi/failures").and_then(Value::as_array) {
-        for (i, r) in rows.iter().enumerate() {
-            let p = format!("/fdi/failures/{i}");
-            t.push_str(&format!(
-                "{:<32} {:>6} {:>6} {:>9} {:>9} {:>12} {:>12}\n",
-                r.get("failure").and_then(Value::as_str).unwrap_or("?"),
-                fmt_num(s, &format!("{p}/detection_rate"), 2, false),
-                fmt_num(s, &format!("{p}/isolation_rate"), 2, false),
-                fmt_num(s, &format!("{p}/time_to_detect_max_s"), 1, false),
-                fmt_num(s, &format!("{p}/time_to_isolate_max_s"), 1, false),
-                fmt_num(
-                    s,
-                    &format!("{p}/horizontal_error_end_rms_with_exclusion_m"),
-                    1,
-                    false
-                ),
-                fmt_num(
-                    s,
-                    &format!("{p}/horizontal_error_end_rms_without_exclusion_m"),
-                    1,
-                    false
-                ),
-            ));
-        }
+    for r in &s.fdi.failures {
+        t.push_str(&format!(
+            "{:<32} {:>6} {:>6} {:>9} {:>9} {:>12} {:>12}\n",
+            r.failure,
+            f(r.detection_rate, 2),
+            f(r.isolation_rate, 2),
+            f(r.time_to_detect_max_s, 1),
+            f(r.time_to_isolate_max_s, 1),
+            f(r.horizontal_error_end_rms_with_exclusion_m, 1),
+            f(r.horizontal_error_end_rms_without_exclusion_m, 1),
+        ));
     }
     t.push_str(&format!(
         "fault-free 5-channel runs: {} false alarms in {} blocks; horizontal error at the end {} m\n",
-        fmt_num(s, "/fdi/fault_free_false_alarms", 0, false),
-        fmt_num(s, "/fdi/fault_free_blocks_tested", 0, false),
-        fmt_num(s, "/fdi/fault_free_horizontal_error_end_rms_m", 1, false),
+        s.fdi.fault_free_false_alarms,
+        s.fdi.fault_free_blocks_tested,
+        f(s.fdi.fault_free_horizontal_error_end_rms_m, 1),
     ));
     t
 }
@@ -912,20 +1035,21 @@ mod tests {
         let summary = run_with(&dir, false, &s).expect("experiment");
         eprintln!("{}", table(&summary));
         eprintln!("reduced experiment: {:.1} s", t0.elapsed().as_secs_f64());
+        let failures = &summary.fdi.failures;
         for (i, bound_s) in [(1, 8.0), (2, 180.0), (3, 15.0), (4, 8.0)] {
-            let r = &summary["fdi"]["failures"][i];
-            assert_eq!(r["isolation_rate"].as_f64(), Some(1.0), "{r}");
-            let t = r["time_to_isolate_max_s"].as_f64().unwrap_or(f64::NAN);
-            assert!(t <= bound_s, "{r}");
+            let r = &failures[i];
+            assert_eq!(r.isolation_rate, 1.0, "{r:?}");
+            assert!(r.time_to_isolate_max_s <= bound_s, "{r:?}");
         }
-        for i in 0..5 {
-            let r = &summary["fdi"]["failures"][i];
-            assert_eq!(r["detections_before_onset"].as_u64(), Some(0), "{r}");
+        for r in &failures[..5] {
+            assert_eq!(r.detections_before_onset, 0, "{r:?}");
         }
-        assert_eq!(summary["fdi"]["fault_free_false_alarms"].as_u64(), Some(0));
-        let rp = &summary["table"][2];
-        for key in ["ratio_pyramid_28_7", "ratio_pyramid_35_26"] {
-            let r = rp[key].as_f64().unwrap_or(f64::NAN);
+        assert_eq!(summary.fdi.fault_free_false_alarms, 0);
+        let rp = &summary.table[2];
+        for (key, r) in [
+            ("ratio_pyramid_28_7", rp.ratio_pyramid_28_7),
+            ("ratio_pyramid_35_26", rp.ratio_pyramid_35_26),
+        ] {
             assert!((0.45..=1.15).contains(&r), "{key} = {r}");
         }
         let _ = std::fs::remove_dir_all(&dir);

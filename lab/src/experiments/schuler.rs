@@ -32,8 +32,10 @@
 //! change. Holding height and vertical velocity at their true values after every step is what
 //! a perfect baro/altimeter aiding does; the horizontal dynamics are untouched.
 
-use super::plot::{Chart, Line, color, line_chart};
-use super::{ExperimentError, create_out_dir, fmt_num, linear_fit, progress_bar, write_summary};
+use super::plot::{Chart, Line, color, line_chart, xy};
+use super::{
+    Experiment, ExperimentError, create_out_dir, fmt_f64, linear_fit, progress_bar, write_summary,
+};
 use fusion::attitude::q_n_b_from_rpy;
 use fusion::earth::{
     Geodetic, GravityModel, WGS84, c_e_n, ecef_to_geodetic, geodetic_to_ecef, gravity_ecef,
@@ -43,7 +45,7 @@ use fusion::strapdown::{
     Integrator, MechanizationConfig, NavState, Strapdown, stationary_increment,
 };
 use nalgebra::{DMatrix, DVector, UnitQuaternion, Vector3};
-use serde_json::{Value, json};
+use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
 use std::path::Path;
 
@@ -266,9 +268,107 @@ fn fit_frequency(t: &[f64], y: &[f64], omega0: f64, foucault: f64) -> f64 {
     0.5 * (a + b)
 }
 
-/// Run with the default [`Settings`].
-pub fn run(out_dir: &Path, progress: bool) -> Result<Value, ExperimentError> {
-    run_with(out_dir, progress, &Settings::default())
+/// The figures of `schuler` (`summary.json`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Summary {
+    /// `"schuler"`.
+    pub experiment: String,
+    /// The paper reproduced, `"002"`.
+    pub paper: String,
+    /// Site latitude, deg.
+    pub site_latitude_deg: f64,
+    /// Site longitude, deg.
+    pub site_longitude_deg: f64,
+    /// Site height, m.
+    pub site_height_m: f64,
+    /// `"rk4"`.
+    pub integrator: String,
+    /// `"j2"`.
+    pub gravity_model: String,
+    /// IMU rate, Hz.
+    pub imu_rate_hz: f64,
+    /// Duration of the horizontal runs, s.
+    pub horizontal_duration_s: f64,
+    /// Height and vertical velocity held at their true values in runs 1–2.
+    pub vertical_channel_held_in_horizontal_runs: bool,
+    /// Schuler period from the zero crossings of run 1's north error, s.
+    pub schuler_period_measured_s: f64,
+    /// The same, min.
+    pub schuler_period_measured_min: f64,
+    /// How the period is measured.
+    pub schuler_period_measurement: String,
+    /// `2π √(R/g)`, s.
+    pub schuler_period_expected_s: f64,
+    /// The same, min.
+    pub schuler_period_expected_min: f64,
+    /// Measured / expected − 1.
+    pub schuler_period_relative_error: f64,
+    /// `2π/ν'` with `ν'² = g/R + Ω_z²`, s.
+    pub schuler_period_foucault_corrected_expected_s: f64,
+    /// Measured / Foucault-corrected − 1.
+    pub schuler_period_relative_error_vs_foucault_corrected: f64,
+    /// R of the expectation: Gaussian mean radius plus height, m.
+    pub schuler_expected_radius_m: f64,
+    /// g of the expectation: normal gravity at the site, m/s².
+    pub schuler_expected_gravity_m_s2: f64,
+    /// `Ω_z = ω_ie sin φ`, rad/s.
+    pub foucault_rate_rad_s: f64,
+    /// Run 1's initial north velocity error, m/s.
+    pub velocity_run_initial_north_velocity_error_m_s: f64,
+    /// Run 1's zero crossings of the north error, s.
+    pub velocity_run_north_zero_crossings_s: Vec<f64>,
+    /// Run 1's period from the least-squares fit, s.
+    pub velocity_run_fit_period_s: f64,
+    /// Run 1's largest |north error|, m.
+    pub velocity_run_max_north_error_m: f64,
+    /// Run 1's largest |east error|, m.
+    pub velocity_run_max_east_error_m: f64,
+    /// `v₀/ν'`, m.
+    pub velocity_run_expected_amplitude_m: f64,
+    /// Run 2's initial tilt about north, rad.
+    pub tilt_run_initial_tilt_about_north_rad: f64,
+    /// Run 2's period from the least-squares fit of the east error, s.
+    pub tilt_run_fit_period_s: f64,
+    /// Run 2's fitted / expected period − 1.
+    pub tilt_run_fit_period_relative_error: f64,
+    /// Run 2's largest |east error|, m.
+    pub tilt_run_max_east_error_m: f64,
+    /// `2 R ε`, m.
+    pub tilt_run_expected_max_east_error_m: f64,
+    /// Run 3's initial height error, m.
+    pub vertical_initial_height_error_m: f64,
+    /// Run 3's duration, s.
+    pub vertical_duration_s: f64,
+    /// Run 3's height error at the end, m.
+    pub vertical_final_height_error_m: f64,
+    /// Time constant of the free vertical channel from the ln fit, s.
+    pub vertical_time_constant_measured_s: f64,
+    /// How the time constant is measured.
+    pub vertical_time_constant_measurement: String,
+    /// `t / acosh(δh/δh₀)` at the end, s.
+    pub vertical_time_constant_acosh_at_end_s: f64,
+    /// `√(r/2g)`, s.
+    pub vertical_time_constant_expected_s: f64,
+    /// Measured / expected − 1.
+    pub vertical_time_constant_relative_error: f64,
+    /// `1/√(−∂|g|/∂h)` of the model, s.
+    pub vertical_time_constant_gravity_gradient_model_s: f64,
+}
+
+/// `sextant experiment schuler`.
+pub struct Schuler;
+
+impl Experiment for Schuler {
+    const NAME: &'static str = "schuler";
+    const DESCRIPTION: &'static str =
+        "Paper 002: Schuler period and vertical-channel divergence of free inertial navigation";
+    type Summary = Summary;
+    fn run(out_dir: &Path, progress: bool) -> Result<Summary, ExperimentError> {
+        run_with(out_dir, progress, &Settings::default())
+    }
+    fn table(summary: &Summary) -> String {
+        table(summary)
+    }
 }
 
 /// Run with `settings`; writes `summary.json`, `schuler_velocity_error_run_ne_error.png`,
@@ -277,7 +377,7 @@ pub fn run_with(
     out_dir: &Path,
     progress: bool,
     settings: &Settings,
-) -> Result<Value, ExperimentError> {
+) -> Result<Summary, ExperimentError> {
     create_out_dir(out_dir)?;
     let ell = WGS84;
     let g0 = site();
@@ -367,49 +467,51 @@ pub fn run_with(
     let tau_expected = (truth_r.norm() / (2.0 * g_mag(0.0))).sqrt();
     let tau_gradient = 1.0 / (-(g_mag(10.0) - g_mag(-10.0)) / 20.0).sqrt();
 
-    let summary = json!({
-        "experiment": "schuler",
-        "paper": "002",
-        "site_latitude_deg": g0.lat_rad.to_degrees(),
-        "site_longitude_deg": g0.lon_rad.to_degrees(),
-        "site_height_m": g0.height_m,
-        "integrator": "rk4",
-        "gravity_model": "j2",
-        "imu_rate_hz": 1.0 / settings.dt_s,
-        "horizontal_duration_s": settings.horizontal_duration_s,
-        "vertical_channel_held_in_horizontal_runs": true,
-        "schuler_period_measured_s": t_cross,
-        "schuler_period_measured_min": t_cross / 60.0,
-        "schuler_period_measurement": "zero crossings of the north error, 0.1 m/s north velocity error run",
-        "schuler_period_expected_s": t_expected,
-        "schuler_period_expected_min": t_expected / 60.0,
-        "schuler_period_relative_error": t_cross / t_expected - 1.0,
-        "schuler_period_foucault_corrected_expected_s": t_foucault,
-        "schuler_period_relative_error_vs_foucault_corrected": t_cross / t_foucault - 1.0,
-        "schuler_expected_radius_m": radius,
-        "schuler_expected_gravity_m_s2": gamma,
-        "foucault_rate_rad_s": omega_z,
-        "velocity_run_initial_north_velocity_error_m_s": settings.velocity_error_north_m_s,
-        "velocity_run_north_zero_crossings_s": c,
-        "velocity_run_fit_period_s": vel_fit,
-        "velocity_run_max_north_error_m": max_abs(&vel.north_m),
-        "velocity_run_max_east_error_m": max_abs(&vel.east_m),
-        "velocity_run_expected_amplitude_m": settings.velocity_error_north_m_s / nu_f,
-        "tilt_run_initial_tilt_about_north_rad": settings.tilt_rad,
-        "tilt_run_fit_period_s": tilt_fit,
-        "tilt_run_fit_period_relative_error": tilt_fit / t_expected - 1.0,
-        "tilt_run_max_east_error_m": max_abs(&tilt.east_m),
-        "tilt_run_expected_max_east_error_m": 2.0 * settings.tilt_rad * gamma / nu2,
-        "vertical_initial_height_error_m": settings.height_error_m,
-        "vertical_duration_s": settings.vertical_duration_s,
-        "vertical_final_height_error_m": dh_end,
-        "vertical_time_constant_measured_s": tau_fit,
-        "vertical_time_constant_measurement": "least-squares slope of ln(height error) over the second half of the run",
-        "vertical_time_constant_acosh_at_end_s": tau_acosh,
-        "vertical_time_constant_expected_s": tau_expected,
-        "vertical_time_constant_relative_error": tau_fit / tau_expected - 1.0,
-        "vertical_time_constant_gravity_gradient_model_s": tau_gradient,
-    });
+    let summary = Summary {
+        experiment: Schuler::NAME.into(),
+        paper: "002".into(),
+        site_latitude_deg: g0.lat_rad.to_degrees(),
+        site_longitude_deg: g0.lon_rad.to_degrees(),
+        site_height_m: g0.height_m,
+        integrator: "rk4".into(),
+        gravity_model: "j2".into(),
+        imu_rate_hz: 1.0 / settings.dt_s,
+        horizontal_duration_s: settings.horizontal_duration_s,
+        vertical_channel_held_in_horizontal_runs: true,
+        schuler_period_measured_s: t_cross,
+        schuler_period_measured_min: t_cross / 60.0,
+        schuler_period_measurement:
+            "zero crossings of the north error, 0.1 m/s north velocity error run".into(),
+        schuler_period_expected_s: t_expected,
+        schuler_period_expected_min: t_expected / 60.0,
+        schuler_period_relative_error: t_cross / t_expected - 1.0,
+        schuler_period_foucault_corrected_expected_s: t_foucault,
+        schuler_period_relative_error_vs_foucault_corrected: t_cross / t_foucault - 1.0,
+        schuler_expected_radius_m: radius,
+        schuler_expected_gravity_m_s2: gamma,
+        foucault_rate_rad_s: omega_z,
+        velocity_run_initial_north_velocity_error_m_s: settings.velocity_error_north_m_s,
+        velocity_run_north_zero_crossings_s: c.clone(),
+        velocity_run_fit_period_s: vel_fit,
+        velocity_run_max_north_error_m: max_abs(&vel.north_m),
+        velocity_run_max_east_error_m: max_abs(&vel.east_m),
+        velocity_run_expected_amplitude_m: settings.velocity_error_north_m_s / nu_f,
+        tilt_run_initial_tilt_about_north_rad: settings.tilt_rad,
+        tilt_run_fit_period_s: tilt_fit,
+        tilt_run_fit_period_relative_error: tilt_fit / t_expected - 1.0,
+        tilt_run_max_east_error_m: max_abs(&tilt.east_m),
+        tilt_run_expected_max_east_error_m: 2.0 * settings.tilt_rad * gamma / nu2,
+        vertical_initial_height_error_m: settings.height_error_m,
+        vertical_duration_s: settings.vertical_duration_s,
+        vertical_final_height_error_m: dh_end,
+        vertical_time_constant_measured_s: tau_fit,
+        vertical_time_constant_measurement:
+            "least-squares slope of ln(height error) over the second half of the run".into(),
+        vertical_time_constant_acosh_at_end_s: tau_acosh,
+        vertical_time_constant_expected_s: tau_expected,
+        vertical_time_constant_relative_error: tau_fit / tau_expected - 1.0,
+        vertical_time_constant_gravity_gradient_model_s: tau_gradient,
+    };
     write_summary(out_dir, &summary)?;
 
     // Plots.
@@ -421,80 +523,45 @@ pub fn run_with(
         .iter()
         .map(|&t| (t / 60.0, v0 / nu_f * (nu_f * t).sin() * (omega_z * t).cos()))
         .collect();
-    line_chart(
-        &out_dir.join("schuler_velocity_error_run_ne_error.png"),
-        &Chart {
-            title: "Free inertial, 0.1 m/s north velocity error: position error",
-            x_label: "time [min]",
-            y_label: "position error [m]",
-            log_x: false,
-            log_y: false,
-            lines: &[
-                Line {
-                    label: "north".into(),
-                    points: tm
-                        .iter()
-                        .copied()
-                        .zip(vel.north_m.iter().copied())
-                        .collect(),
-                    color: color(0),
-                    dashed: false,
-                    markers: false,
-                },
-                Line {
-                    label: "east".into(),
-                    points: tm.iter().copied().zip(vel.east_m.iter().copied()).collect(),
-                    color: color(1),
-                    dashed: false,
-                    markers: false,
-                },
-                Line {
-                    label: "north, linear theory v0/ν' sin(ν't) cos(Ω_z t)".into(),
-                    points: theory,
-                    color: color(2),
-                    dashed: true,
-                    markers: false,
-                },
-            ],
-        },
+    let ne_chart = |file: &str, title: &str, run: &Series, tm: &[f64], extra: Vec<Line>| {
+        let mut lines = vec![
+            Line::solid("north", xy(tm, &run.north_m), color(0)),
+            Line::solid("east", xy(tm, &run.east_m), color(1)),
+        ];
+        lines.extend(extra);
+        line_chart(
+            &out_dir.join(file),
+            &Chart {
+                title,
+                x_label: "time [min]",
+                y_label: "position error [m]",
+                log_x: false,
+                log_y: false,
+                lines: &lines,
+            },
+        )
+    };
+    ne_chart(
+        "schuler_velocity_error_run_ne_error.png",
+        "Free inertial, 0.1 m/s north velocity error: position error",
+        &vel,
+        &tm,
+        vec![Line::dashed(
+            "north, linear theory v0/ν' sin(ν't) cos(Ω_z t)",
+            theory,
+            color(2),
+        )],
     )?;
-    let tm = minutes(&tilt.t_s);
-    line_chart(
-        &out_dir.join("schuler_tilt_run_ne_error.png"),
-        &Chart {
-            title: "Free inertial, 1e-4 rad tilt about north: position error",
-            x_label: "time [min]",
-            y_label: "position error [m]",
-            log_x: false,
-            log_y: false,
-            lines: &[
-                Line {
-                    label: "north".into(),
-                    points: tm
-                        .iter()
-                        .copied()
-                        .zip(tilt.north_m.iter().copied())
-                        .collect(),
-                    color: color(0),
-                    dashed: false,
-                    markers: false,
-                },
-                Line {
-                    label: "east".into(),
-                    points: tm
-                        .iter()
-                        .copied()
-                        .zip(tilt.east_m.iter().copied())
-                        .collect(),
-                    color: color(1),
-                    dashed: false,
-                    markers: false,
-                },
-            ],
-        },
+    ne_chart(
+        "schuler_tilt_run_ne_error.png",
+        "Free inertial, 1e-4 rad tilt about north: position error",
+        &tilt,
+        &minutes(&tilt.t_s),
+        Vec::new(),
     )?;
     let tm = minutes(&vert.t_s);
     let dh0 = settings.height_error_m;
+    let abs_height: Vec<f64> = vert.height_m.iter().map(|h| h.abs()).collect();
     line_chart(
         &out_dir.join("schuler_free_vertical_height_error_log.png"),
         &Chart {
@@ -504,28 +571,15 @@ pub fn run_with(
             log_x: false,
             log_y: true,
             lines: &[
-                Line {
-                    label: "|height error|".into(),
-                    points: tm
-                        .iter()
-                        .copied()
-                        .zip(vert.height_m.iter().map(|h| h.abs()))
-                        .collect(),
-                    color: color(0),
-                    dashed: false,
-                    markers: false,
-                },
-                Line {
-                    label: format!("δh0 cosh(t/τ), τ = √(r/2g) = {tau_expected:.1} s"),
-                    points: vert
-                        .t_s
+                Line::solid("|height error|", xy(&tm, &abs_height), color(0)),
+                Line::dashed(
+                    format!("δh0 cosh(t/τ), τ = √(r/2g) = {tau_expected:.1} s"),
+                    vert.t_s
                         .iter()
                         .map(|&t| (t / 60.0, dh0 * (t / tau_expected).cosh()))
                         .collect(),
-                    color: color(1),
-                    dashed: true,
-                    markers: false,
-                },
+                    color(1),
+                ),
             ],
         },
     )?;
@@ -533,61 +587,67 @@ pub fn run_with(
 }
 
 /// Human table: measured against expected period and time constant.
-pub fn table(summary: &Value) -> String {
-    let f = |k: &str, p: usize| fmt_num(summary, &format!("/{k}"), p, false);
-    let e = |k: &str| fmt_num(summary, &format!("/{k}"), 2, true);
+pub fn table(summary: &Summary) -> String {
+    let s = summary;
+    let f = |x: f64, p: usize| fmt_f64(x, p, false);
+    let e = |x: f64| fmt_f64(x, 2, true);
     let mut out = String::new();
     out.push_str("Schuler / vertical channel (free inertial, RK4, J2, static site)\n");
-    out.push_str(&format!(
-        "{:<46} {:>12} {:>12} {:>11}\n",
-        "figure", "measured", "expected", "rel. error"
-    ));
-    out.push_str(&format!(
-        "{:<46} {:>12} {:>12} {:>11}\n",
+    let mut row = |figure: &str, measured: String, expected: String, rel: Option<String>| {
+        let line = format!("{figure:<46} {measured:>12} {expected:>12}");
+        match rel {
+            Some(r) => out.push_str(&format!("{line} {r:>11}\n")),
+            None => out.push_str(&format!("{line}\n")),
+        }
+    };
+    row(
+        "figure",
+        "measured".into(),
+        "expected".into(),
+        Some("rel. error".into()),
+    );
+    row(
         "Schuler period, zero crossings [s]",
-        f("schuler_period_measured_s", 1),
-        f("schuler_period_expected_s", 1),
-        e("schuler_period_relative_error"),
-    ));
-    out.push_str(&format!(
-        "{:<46} {:>12} {:>12} {:>11}\n",
+        f(s.schuler_period_measured_s, 1),
+        f(s.schuler_period_expected_s, 1),
+        Some(e(s.schuler_period_relative_error)),
+    );
+    row(
         "  vs Foucault-corrected 2π/√(g/R+Ω_z²) [s]",
-        f("schuler_period_measured_s", 1),
-        f("schuler_period_foucault_corrected_expected_s", 1),
-        e("schuler_period_relative_error_vs_foucault_corrected"),
-    ));
-    out.push_str(&format!(
-        "{:<46} {:>12} {:>12} {:>11}\n",
+        f(s.schuler_period_measured_s, 1),
+        f(s.schuler_period_foucault_corrected_expected_s, 1),
+        Some(e(s.schuler_period_relative_error_vs_foucault_corrected)),
+    );
+    row(
         "Schuler period, tilt run fit [s]",
-        f("tilt_run_fit_period_s", 1),
-        f("schuler_period_expected_s", 1),
-        e("tilt_run_fit_period_relative_error"),
-    ));
-    out.push_str(&format!(
-        "{:<46} {:>12} {:>12} {:>11}\n",
+        f(s.tilt_run_fit_period_s, 1),
+        f(s.schuler_period_expected_s, 1),
+        Some(e(s.tilt_run_fit_period_relative_error)),
+    );
+    row(
         "Vertical time constant, ln fit [s]",
-        f("vertical_time_constant_measured_s", 2),
-        f("vertical_time_constant_expected_s", 2),
-        e("vertical_time_constant_relative_error"),
-    ));
-    out.push_str(&format!(
-        "{:<46} {:>12} {:>12}\n",
+        f(s.vertical_time_constant_measured_s, 2),
+        f(s.vertical_time_constant_expected_s, 2),
+        Some(e(s.vertical_time_constant_relative_error)),
+    );
+    row(
         "  acosh at end / gravity-gradient model [s]",
-        f("vertical_time_constant_acosh_at_end_s", 2),
-        f("vertical_time_constant_gravity_gradient_model_s", 2),
-    ));
-    out.push_str(&format!(
-        "{:<46} {:>12} {:>12}\n",
+        f(s.vertical_time_constant_acosh_at_end_s, 2),
+        f(s.vertical_time_constant_gravity_gradient_model_s, 2),
+        None,
+    );
+    row(
         "Max north error, velocity run [m]",
-        f("velocity_run_max_north_error_m", 2),
-        f("velocity_run_expected_amplitude_m", 2),
-    ));
-    out.push_str(&format!(
-        "{:<46} {:>12} {:>12}\n",
+        f(s.velocity_run_max_north_error_m, 2),
+        f(s.velocity_run_expected_amplitude_m, 2),
+        None,
+    );
+    row(
         "Max east error, tilt run [m]",
-        f("tilt_run_max_east_error_m", 1),
-        f("tilt_run_expected_max_east_error_m", 1),
-    ));
+        f(s.tilt_run_max_east_error_m, 1),
+        f(s.tilt_run_expected_max_east_error_m, 1),
+        None,
+    );
     out
 }
 
@@ -606,16 +666,15 @@ mod tests {
         };
         let s = run_with(&dir, false, &settings).expect("run");
         eprintln!("{}", table(&s));
-        let f = |k: &str| s.get(k).and_then(Value::as_f64).unwrap_or(f64::NAN);
-        assert!(f("schuler_period_relative_error").abs() < 0.01, "{s}");
-        assert!(f("tilt_run_fit_period_relative_error").abs() < 0.01, "{s}");
-        assert!((f("schuler_period_expected_s") / 60.0 - 84.4).abs() < 0.2);
+        assert!(s.schuler_period_relative_error.abs() < 0.01, "{s:?}");
+        assert!(s.tilt_run_fit_period_relative_error.abs() < 0.01, "{s:?}");
+        assert!((s.schuler_period_expected_s / 60.0 - 84.4).abs() < 0.2);
         assert!(
-            f("vertical_time_constant_relative_error").abs() < 0.02,
-            "{s}"
+            s.vertical_time_constant_relative_error.abs() < 0.02,
+            "{s:?}"
         );
-        let amp = f("velocity_run_expected_amplitude_m");
-        assert!(f("velocity_run_max_north_error_m") < 1.01 * amp);
+        let amp = s.velocity_run_expected_amplitude_m;
+        assert!(s.velocity_run_max_north_error_m < 1.01 * amp);
         for png in [
             "schuler_velocity_error_run_ne_error.png",
             "schuler_tilt_run_ne_error.png",

@@ -56,14 +56,17 @@
 //! `drivers-sim/tests/filter_tight.rs`.)
 
 use super::consistency::{filter_config, load_scenario};
-use super::plot::{Chart, Line, color, line_chart};
-use super::{ExperimentError, create_out_dir, fmt_num, progress_bar, write_summary};
+use super::plot::{Chart, Line, color, line_chart, xy};
+use super::{
+    Experiment, ExperimentError, create_out_dir, fmt_f64, fmt_opt, nan_if_null, present,
+    progress_bar, write_summary,
+};
 use drivers_sim::offline::SimMessage;
 use drivers_sim::offline::{Channel, OfflineSim, SatelliteLimit, run_navigator};
 use fusion::navigator::{Navigator, NavigatorConfig};
 use nalgebra::{Matrix2, Vector2, Vector3};
 use rayon::prelude::*;
-use serde_json::{Value, json};
+use serde::{Deserialize, Serialize};
 use std::cell::RefCell;
 use std::path::Path;
 
@@ -282,20 +285,6 @@ fn along_across(e: &Series, dirs: &[Option<Vector2<f64>>]) -> Option<AlongAcross
     out
 }
 
-fn observed_json(v: Option<AlongAcross>) -> Value {
-    match v {
-        Some(o) => json!({
-            "final_error_along_observed_direction_m": o.final_along_m,
-            "max_error_along_observed_direction_m": o.max_along_m,
-            "final_error_across_observed_direction_m": o.final_across_m,
-            "max_error_across_observed_direction_m": o.max_across_m,
-            "final_signed_error_along_observed_direction_m": o.final_along_signed_m,
-            "final_sigma_along_observed_direction_m": o.final_sigma_along_m,
-        }),
-        None => Value::Null,
-    }
-}
-
 /// How much worse than free inertial a consistent tight filter may end up along the
 /// observed direction `a` in ONE run.
 ///
@@ -325,7 +314,7 @@ fn not_worse_tolerance_m(tight: &AlongAcross, free: &AlongAcross) -> f64 {
 fn one_satellite_monte_carlo<'a>(
     seeds: &[u64],
     runs: impl Fn(u64) -> Option<(&'a Series, &'a Series)>,
-) -> Value {
+) -> Option<MonteCarlo> {
     let (mut zt, mut zf, mut et, mut ef, mut n, mut better) = (0.0, 0.0, 0.0, 0.0, 0usize, 0);
     for &seed in seeds {
         let Some((t, f)) = runs(seed) else {
@@ -344,20 +333,20 @@ fn one_satellite_monte_carlo<'a>(
         n += 1;
     }
     if n == 0 {
-        return Value::Null;
+        return None;
     }
     let nf = n as f64;
-    json!({
-        "runs": n,
-        "tight_mean_nees_along": zt / nf,
-        "free_mean_nees_along": zf / nf,
-        "nees_band_95": [
+    Some(MonteCarlo {
+        runs: n,
+        tight_mean_nees_along: zt / nf,
+        free_mean_nees_along: zf / nf,
+        nees_band_95: [
             fusion::ekf::chi2_quantile(n as u32, 0.025) / nf,
             fusion::ekf::chi2_quantile(n as u32, 0.975) / nf,
         ],
-        "tight_rms_error_along_m": (et / nf).sqrt(),
-        "free_rms_error_along_m": (ef / nf).sqrt(),
-        "runs_tight_not_worse_than_free": better,
+        tight_rms_error_along_m: (et / nf).sqrt(),
+        free_rms_error_along_m: (ef / nf).sqrt(),
+        runs_tight_not_worse_than_free: better,
     })
 }
 
@@ -387,34 +376,18 @@ fn along_plot(
             .collect()
     };
     let lines = vec![
-        Line {
-            label: "free inertial".into(),
-            points: signed(free, None),
-            color: color(5),
-            dashed: true,
-            markers: false,
-        },
-        Line {
-            label: format!("tight, {n} satellite(s)"),
-            points: signed(tight, None),
-            color: color(0),
-            dashed: false,
-            markers: false,
-        },
-        Line {
-            label: "tight +1σ (own covariance)".into(),
-            points: signed(tight, Some(1.0)),
-            color: color(1),
-            dashed: true,
-            markers: false,
-        },
-        Line {
-            label: "tight −1σ".into(),
-            points: signed(tight, Some(-1.0)),
-            color: color(1),
-            dashed: true,
-            markers: false,
-        },
+        Line::dashed("free inertial", signed(free, None), color(5)),
+        Line::solid(
+            format!("tight, {n} satellite(s)"),
+            signed(tight, None),
+            color(0),
+        ),
+        Line::dashed(
+            "tight +1σ (own covariance)",
+            signed(tight, Some(1.0)),
+            color(1),
+        ),
+        Line::dashed("tight −1σ", signed(tight, Some(-1.0)), color(1)),
     ];
     line_chart(
         &out_dir.join(format!("along_observed_direction_{n}_satellites.png")),
@@ -437,22 +410,189 @@ fn along_plot(
     Ok(())
 }
 
-fn stats(s: &Series) -> Value {
-    let n = s.err_m.len() as f64;
-    json!({
-        "final_horizontal_error_m": s.err_m.last(),
-        "max_horizontal_error_m": s.err_m.iter().cloned().fold(0.0, f64::max),
-        "rms_horizontal_error_m": (s.err_m.iter().map(|e| e * e).sum::<f64>() / n).sqrt(),
-        "final_horizontal_sigma_m": s.sigma_m.last(),
-        "gnss_update_nis_per_dof": s.gnss_nis_per_dof,
-        "ls_cross_checks": s.ls_checks,
-        "ls_cross_check_disagreements": s.ls_disagreements,
-    })
+/// The horizontal error of one run in the window.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct RunFigures {
+    /// At the end of the window, m.
+    #[serde(deserialize_with = "nan_if_null")]
+    pub final_horizontal_error_m: f64,
+    /// Largest in the window, m.
+    pub max_horizontal_error_m: f64,
+    /// RMS over the window, m.
+    #[serde(deserialize_with = "nan_if_null")]
+    pub rms_horizontal_error_m: f64,
+    /// The filter's horizontal σ at the end, m.
+    #[serde(deserialize_with = "nan_if_null")]
+    pub final_horizontal_sigma_m: f64,
+    /// Mean NIS per dof of the accepted GNSS updates over the whole run (≈ 1 if consistent).
+    #[serde(deserialize_with = "nan_if_null")]
+    pub gnss_update_nis_per_dof: f64,
+    /// Least-squares cross-checks of the run.
+    pub ls_cross_checks: u64,
+    /// How many of them disagreed (3-dof χ² gate).
+    pub ls_cross_check_disagreements: u64,
 }
 
-/// Run with the defaults into `out_dir`.
-pub fn run(out_dir: &Path, progress: bool) -> Result<Value, ExperimentError> {
-    run_with(&Settings::default(), out_dir, progress)
+impl RunFigures {
+    fn of(s: &Series) -> Self {
+        let n = s.err_m.len() as f64;
+        Self {
+            final_horizontal_error_m: s.err_m.last().copied().unwrap_or(f64::NAN),
+            max_horizontal_error_m: s.err_m.iter().cloned().fold(0.0, f64::max),
+            rms_horizontal_error_m: (s.err_m.iter().map(|e| e * e).sum::<f64>() / n).sqrt(),
+            final_horizontal_sigma_m: s.sigma_m.last().copied().unwrap_or(f64::NAN),
+            gnss_update_nis_per_dof: s.gnss_nis_per_dof,
+            ls_cross_checks: s.ls_checks,
+            ls_cross_check_disagreements: s.ls_disagreements,
+        }
+    }
+}
+
+/// A run's horizontal error along and across the clock-free observed direction.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ObservedDirection {
+    /// |along| at the last epoch with a direction, m.
+    pub final_error_along_observed_direction_m: f64,
+    /// Largest |along| in the window, m.
+    pub max_error_along_observed_direction_m: f64,
+    /// |across| at the last epoch with a direction, m.
+    pub final_error_across_observed_direction_m: f64,
+    /// Largest |across| in the window, m.
+    pub max_error_across_observed_direction_m: f64,
+    /// Signed error along the direction at the last epoch, m.
+    pub final_signed_error_along_observed_direction_m: f64,
+    /// The run's own 1-σ along the direction at the last epoch, m.
+    pub final_sigma_along_observed_direction_m: f64,
+}
+
+impl From<AlongAcross> for ObservedDirection {
+    fn from(o: AlongAcross) -> Self {
+        Self {
+            final_error_along_observed_direction_m: o.final_along_m,
+            max_error_along_observed_direction_m: o.max_along_m,
+            final_error_across_observed_direction_m: o.final_across_m,
+            max_error_across_observed_direction_m: o.max_across_m,
+            final_signed_error_along_observed_direction_m: o.final_along_signed_m,
+            final_sigma_along_observed_direction_m: o.final_sigma_along_m,
+        }
+    }
+}
+
+/// Tight against free along the observed direction in one run ([`not_worse_tolerance_m`]).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct NotWorse {
+    /// `3·√(σ_free² − σ_tight²)` along the direction, m.
+    pub tolerance_m: f64,
+    /// `|e_tight| ≤ |e_free| + tolerance` along the direction.
+    pub tight_not_worse_than_free: bool,
+}
+
+impl NotWorse {
+    fn of(tight: &AlongAcross, free: &AlongAcross) -> Self {
+        let tol = not_worse_tolerance_m(tight, free);
+        Self {
+            tolerance_m: tol,
+            tight_not_worse_than_free: tight.final_along_m <= free.final_along_m + tol,
+        }
+    }
+}
+
+/// One satellite count (`"0"` … `"3"`, `"all"`; `"1*"` for the control without IMU axis
+/// misalignment): free, loose and tight. An entry absent from `summary.json` was not run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Case {
+    /// Satellites tracked in the window.
+    pub satellites: String,
+    /// Free inertial in the window.
+    pub free: RunFigures,
+    /// Loose coupling.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub loose: Option<RunFigures>,
+    /// Loose is bit-identical to free (it must be with fewer than four satellites).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub loose_identical_to_free: Option<bool>,
+    /// Tight coupling.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tight: Option<RunFigures>,
+    /// Tight along / across the clock-free observed direction (`null`: no such direction).
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        deserialize_with = "present"
+    )]
+    pub tight_observed_direction: Option<Option<ObservedDirection>>,
+    /// Free inertial along / across the same direction.
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        deserialize_with = "present"
+    )]
+    pub free_observed_direction: Option<Option<ObservedDirection>>,
+    /// Tight against free along the direction.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tight_vs_free_along_observed_direction: Option<NotWorse>,
+}
+
+/// The one-satellite Monte Carlo ([`one_satellite_monte_carlo`]).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct MonteCarlo {
+    /// Seeds with both runs.
+    pub runs: usize,
+    /// Mean over the seeds of (tight error / own σ)² along the line of sight.
+    pub tight_mean_nees_along: f64,
+    /// The same for free inertial.
+    pub free_mean_nees_along: f64,
+    /// 95 % band of a mean of `runs` χ²(1) values.
+    pub nees_band_95: [f64; 2],
+    /// RMS over the seeds of the tight error along the line of sight, m.
+    pub tight_rms_error_along_m: f64,
+    /// The same for free inertial, m.
+    pub free_rms_error_along_m: f64,
+    /// Seeds where tight ≤ free along the line of sight.
+    pub runs_tight_not_worse_than_free: usize,
+}
+
+/// The figures of `tight-coupling` (`summary.json`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Summary {
+    /// `"tight-coupling"`.
+    pub experiment: String,
+    /// Scenario name in `config/scenarios`.
+    pub scenario: String,
+    /// Window start, s since the scenario epoch.
+    pub window_start_s: f64,
+    /// Window length, s.
+    pub window_length_s: f64,
+    /// The filter configuration accepts `gnss_mode = "tight"`.
+    pub tight_available: bool,
+    /// Why not, if not.
+    pub tight_unavailable_reason: Option<String>,
+    /// The aiding of every run.
+    pub aiding: String,
+    /// Per satellite count.
+    pub cases: Vec<Case>,
+    /// One satellite with the simulated IMU axis misalignment set to zero.
+    pub control_without_imu_misalignment: Option<Case>,
+    /// The one-satellite Monte Carlo over seeds.
+    pub monte_carlo_one_satellite: Option<MonteCarlo>,
+    /// Wall-clock time of the runs, s.
+    pub wall_time_s: f64,
+}
+
+/// `sextant experiment tight-coupling`.
+pub struct TightCoupling;
+
+impl Experiment for TightCoupling {
+    const NAME: &'static str = "tight-coupling";
+    const DESCRIPTION: &'static str =
+        "Paper 003 / issue 5: tight vs loose vs free inertial with 0–≥4 satellites";
+    type Summary = Summary;
+    fn run(out_dir: &Path, progress: bool) -> Result<Summary, ExperimentError> {
+        run_with(&Settings::default(), out_dir, progress)
+    }
+    fn table(summary: &Summary) -> String {
+        table(summary)
+    }
 }
 
 /// Run with `settings` into `out_dir`; returns the summary (also in `summary.json`).
@@ -460,7 +600,7 @@ pub fn run_with(
     settings: &Settings,
     out_dir: &Path,
     progress: bool,
-) -> Result<Value, ExperimentError> {
+) -> Result<Summary, ExperimentError> {
     create_out_dir(out_dir)?;
     // Tight coupling is switched on by the filter configuration; a filter without it makes
     // the tight column absent (reported), not the experiment fail.
@@ -514,116 +654,96 @@ pub fn run_with(
     };
     let find_in = |c: Coupling, n: usize, mis: bool| find_seed(c, n, mis, None);
     let find = |c: Coupling, n: usize| find_in(c, n, true);
-    let mc_json = one_satellite_monte_carlo(&settings.mc_seeds, |seed| {
+    let monte_carlo = one_satellite_monte_carlo(&settings.mc_seeds, |seed| {
         Some((
             find_seed(Coupling::Tight, 1, true, Some(seed))?,
             find_seed(Coupling::Free, 0, true, Some(seed))?,
         ))
     });
     // The control: one satellite, tight vs free, IMU without axis misalignment.
-    let control_json = match (
+    let control = match (
         find_in(Coupling::Tight, 1, false),
         find_in(Coupling::Free, 0, false),
     ) {
         (Some(t), Some(f)) => match (along_across(t, &t.dir_ne), along_across(f, &t.dir_ne)) {
-            (Some(ta), Some(fa)) => {
-                let tol = not_worse_tolerance_m(&ta, &fa);
-                json!({
-                    "satellites": "1*",
-                    "free": stats(f),
-                    "tight": stats(t),
-                    "tight_observed_direction": observed_json(Some(ta)),
-                    "free_observed_direction": observed_json(Some(fa)),
-                    "tight_vs_free_along_observed_direction": {
-                        "tolerance_m": tol,
-                        "tight_not_worse_than_free": ta.final_along_m <= fa.final_along_m + tol,
-                    },
-                })
-            }
-            _ => Value::Null,
+            (Some(ta), Some(fa)) => Some(Case {
+                satellites: "1*".into(),
+                free: RunFigures::of(f),
+                loose: None,
+                loose_identical_to_free: None,
+                tight: Some(RunFigures::of(t)),
+                tight_observed_direction: Some(Some(ta.into())),
+                free_observed_direction: Some(Some(fa.into())),
+                tight_vs_free_along_observed_direction: Some(NotWorse::of(&ta, &fa)),
+            }),
+            _ => None,
         },
-        _ => Value::Null,
+        _ => None,
     };
     let free = &results[0];
-    let mut rows = Vec::new();
+    let mut cases = Vec::new();
     for &n in &settings.satellites {
-        let mut row = serde_json::Map::new();
-        row.insert("satellites".into(), json!(sats_label(n)));
-        row.insert("free".into(), stats(free));
+        let mut case = Case {
+            satellites: sats_label(n),
+            free: RunFigures::of(free),
+            loose: None,
+            loose_identical_to_free: None,
+            tight: None,
+            tight_observed_direction: None,
+            free_observed_direction: None,
+            tight_vs_free_along_observed_direction: None,
+        };
         if let Some(s) = find(Coupling::Loose, n) {
-            row.insert("loose".into(), stats(s));
+            case.loose = Some(RunFigures::of(s));
             // Loose with fewer than four satellites gets nothing: identical to free.
             let same = s.err_m.len() == free.err_m.len()
                 && s.err_m.iter().zip(&free.err_m).all(|(a, b)| a == b);
-            row.insert("loose_identical_to_free".into(), json!(same));
+            case.loose_identical_to_free = Some(same);
         }
         if let Some(s) = find(Coupling::Tight, n) {
-            row.insert("tight".into(), stats(s));
+            case.tight = Some(RunFigures::of(s));
             // Along/across the clock-free observed direction (1–2 satellites), tight and free
             // on the same directions.
             if s.dir_ne.len() == free.err_ne_m.len() {
-                row.insert(
-                    "tight_observed_direction".into(),
-                    observed_json(along_across(s, &s.dir_ne)),
-                );
-                row.insert(
-                    "free_observed_direction".into(),
-                    observed_json(along_across(free, &s.dir_ne)),
-                );
-                if let (Some(t), Some(f)) =
-                    (along_across(s, &s.dir_ne), along_across(free, &s.dir_ne))
-                {
-                    let tol = not_worse_tolerance_m(&t, &f);
-                    row.insert(
-                        "tight_vs_free_along_observed_direction".into(),
-                        json!({
-                            "tolerance_m": tol,
-                            "tight_not_worse_than_free": t.final_along_m <= f.final_along_m + tol,
-                        }),
-                    );
+                let (t, f) = (along_across(s, &s.dir_ne), along_across(free, &s.dir_ne));
+                case.tight_observed_direction = Some(t.map(ObservedDirection::from));
+                case.free_observed_direction = Some(f.map(ObservedDirection::from));
+                if let (Some(t), Some(f)) = (t, f) {
+                    case.tight_vs_free_along_observed_direction = Some(NotWorse::of(&t, &f));
                     along_plot(out_dir, n, s, free)?;
                 }
             }
         }
-        rows.push(Value::Object(row));
+        cases.push(case);
     }
-    let summary = json!({
-        "experiment": "tight-coupling",
-        "scenario": settings.scenario,
-        "window_start_s": settings.window_start_s,
-        "window_length_s": settings.window_s,
-        "tight_available": tight_cfg.is_ok(),
-        "tight_unavailable_reason": tight_cfg.as_ref().err().map(|e| e.to_string()),
-        "aiding": "GNSS (as listed) + baro; star tracker, odometer, NHC off",
-        "cases": rows,
-        "control_without_imu_misalignment": control_json,
-        "monte_carlo_one_satellite": mc_json,
-        "wall_time_s": wall_s,
-    });
+    let summary = Summary {
+        experiment: TightCoupling::NAME.into(),
+        scenario: settings.scenario.clone(),
+        window_start_s: settings.window_start_s,
+        window_length_s: settings.window_s,
+        tight_available: tight_cfg.is_ok(),
+        tight_unavailable_reason: tight_cfg.as_ref().err().map(|e| e.to_string()),
+        aiding: "GNSS (as listed) + baro; star tracker, odometer, NHC off".into(),
+        cases,
+        control_without_imu_misalignment: control,
+        monte_carlo_one_satellite: monte_carlo,
+        wall_time_s: wall_s,
+    };
 
     // Plots: horizontal error in the window per coupling, and final error vs satellites.
     for c in [Coupling::Loose, Coupling::Tight] {
-        let mut lines = vec![Line {
-            label: "free inertial".into(),
-            points: free
-                .t_s
-                .iter()
-                .cloned()
-                .zip(free.err_m.iter().cloned())
-                .collect(),
-            color: color(5),
-            dashed: true,
-            markers: false,
-        }];
+        let mut lines = vec![Line::dashed(
+            "free inertial",
+            xy(&free.t_s, &free.err_m),
+            color(5),
+        )];
         for (i, &n) in settings.satellites.iter().enumerate() {
             if let Some(s) = find(c, n) {
-                lines.push(Line {
-                    label: format!("{} with {} satellites", c.name(), sats_label(n)),
-                    points: s.t_s.iter().cloned().zip(s.err_m.iter().cloned()).collect(),
-                    color: color(i),
-                    dashed: false,
-                    markers: false,
-                });
+                lines.push(Line::solid(
+                    format!("{} with {} satellites", c.name(), sats_label(n)),
+                    xy(&s.t_s, &s.err_m),
+                    color(i),
+                ));
             }
         }
         if lines.len() > 1 {
@@ -659,13 +779,12 @@ pub fn run_with(
             })
             .collect();
         if !pts.is_empty() {
-            lines.push(Line {
-                label: c.name().to_string(),
-                points: pts,
-                color: color(i),
-                dashed: c == Coupling::Free,
-                markers: true,
-            });
+            let line = if c == Coupling::Free {
+                Line::dashed(c.name(), pts, color(i))
+            } else {
+                Line::solid(c.name(), pts, color(i))
+            };
+            lines.push(line.with_markers());
         }
     }
     line_chart(
@@ -683,13 +802,19 @@ pub fn run_with(
     Ok(summary)
 }
 
+/// A JSON-like word for an optional flag in the table: `true`, `false` or `null`.
+fn flag(x: Option<bool>) -> String {
+    x.map_or("null".to_string(), |b| b.to_string())
+}
+
 /// The table printed after the run.
-pub fn table(summary: &Value) -> String {
+pub fn table(summary: &Summary) -> String {
+    let f2 = |x: Option<f64>| fmt_opt(x, 2, false);
     let mut s = format!(
         "tight-coupling: {} s window from {} s; final / max horizontal error, m{}\n",
-        fmt_num(summary, "/window_length_s", 0, false),
-        fmt_num(summary, "/window_start_s", 0, false),
-        if summary["tight_available"].as_bool() == Some(true) {
+        fmt_f64(summary.window_length_s, 0, false),
+        fmt_f64(summary.window_start_s, 0, false),
+        if summary.tight_available {
             ""
         } else {
             " (tight coupling not available in this filter)"
@@ -697,92 +822,72 @@ pub fn table(summary: &Value) -> String {
     );
     s += "satellites   free (final/max)     loose (final/max)    tight (final/max)   loose==free  \
           tight NIS/dof  LS disagree/checks\n";
-    if let Some(cases) = summary["cases"].as_array() {
-        for c in cases {
-            let cell = |k: &str| {
-                format!(
-                    "{:>8} / {:<8}",
-                    fmt_num(c, &format!("/{k}/final_horizontal_error_m"), 2, false),
-                    fmt_num(c, &format!("/{k}/max_horizontal_error_m"), 2, false)
-                )
-            };
-            s += &format!(
-                "{:>10}   {}  {}  {}  {:<11}  {:>6}   {}/{}\n",
-                c["satellites"].as_str().unwrap_or("?"),
-                cell("free"),
-                cell("loose"),
-                cell("tight"),
-                c["loose_identical_to_free"].to_string(),
-                fmt_num(c, "/tight/gnss_update_nis_per_dof", 2, false),
-                c["tight"]["ls_cross_check_disagreements"],
-                c["tight"]["ls_cross_checks"],
-            );
-        }
-        s += "clock-free observed direction (1: line of sight, 2: u1 - u2), final |error|, m:\n";
-        s += "satellites   tight along / across   free along / across   σ along tight / free   tolerance  tight<=free+tol\n";
-        let control = &summary["control_without_imu_misalignment"];
-        let with_control = cases.iter().chain(control.is_object().then_some(control));
-        for c in with_control {
-            if c["tight_observed_direction"].is_object() {
-                let f = |k: &str, a: &str| {
-                    fmt_num(
-                        c,
-                        &format!("/{k}/final_error_{a}_observed_direction_m"),
-                        2,
-                        false,
-                    )
-                };
-                let sig = |k: &str| {
-                    fmt_num(
-                        c,
-                        &format!("/{k}/final_sigma_along_observed_direction_m"),
-                        2,
-                        false,
-                    )
-                };
-                s += &format!(
-                    "{:>10}   {:>8} / {:<8}    {:>8} / {:<8}   {:>8} / {:<8}   {:>8}   {}\n",
-                    c["satellites"].as_str().unwrap_or("?"),
-                    f("tight_observed_direction", "along"),
-                    f("tight_observed_direction", "across"),
-                    f("free_observed_direction", "along"),
-                    f("free_observed_direction", "across"),
-                    sig("tight_observed_direction"),
-                    sig("free_observed_direction"),
-                    fmt_num(
-                        c,
-                        "/tight_vs_free_along_observed_direction/tolerance_m",
-                        2,
-                        false
-                    ),
-                    c["tight_vs_free_along_observed_direction"]["tight_not_worse_than_free"],
-                );
-            }
-        }
-        let mc = &summary["monte_carlo_one_satellite"];
-        if mc.is_object() {
-            s += &format!(
-                "one satellite, {} seeds: RMS along its line of sight tight {} m vs free {} m \
-                 (tight <= free in {} runs); mean NEES along tight {} / free {} \
-                 (95 % band {} .. {})\n",
-                mc["runs"],
-                fmt_num(mc, "/tight_rms_error_along_m", 2, false),
-                fmt_num(mc, "/free_rms_error_along_m", 2, false),
-                mc["runs_tight_not_worse_than_free"],
-                fmt_num(mc, "/tight_mean_nees_along", 2, false),
-                fmt_num(mc, "/free_mean_nees_along", 2, false),
-                fmt_num(mc, "/nees_band_95/0", 2, false),
-                fmt_num(mc, "/nees_band_95/1", 2, false),
-            );
-        }
-        if control.is_object() {
-            s += &format!(
-                "1*: one satellite with the simulated IMU axis misalignment set to zero \
-                 (horizontal final error free {} m, tight {} m)\n",
-                fmt_num(control, "/free/final_horizontal_error_m", 2, false),
-                fmt_num(control, "/tight/final_horizontal_error_m", 2, false),
-            );
-        }
+    let count = |x: Option<u64>| x.map_or("null".to_string(), |n| n.to_string());
+    for c in &summary.cases {
+        let cell = |r: Option<&RunFigures>| {
+            format!(
+                "{:>8} / {:<8}",
+                f2(r.map(|r| r.final_horizontal_error_m)),
+                f2(r.map(|r| r.max_horizontal_error_m))
+            )
+        };
+        let tight = c.tight.as_ref();
+        s += &format!(
+            "{:>10}   {}  {}  {}  {:<11}  {:>6}   {}/{}\n",
+            c.satellites,
+            cell(Some(&c.free)),
+            cell(c.loose.as_ref()),
+            cell(tight),
+            flag(c.loose_identical_to_free),
+            f2(tight.map(|t| t.gnss_update_nis_per_dof)),
+            count(tight.map(|t| t.ls_cross_check_disagreements)),
+            count(tight.map(|t| t.ls_cross_checks)),
+        );
+    }
+    s += "clock-free observed direction (1: line of sight, 2: u1 - u2), final |error|, m:\n";
+    s += "satellites   tight along / across   free along / across   σ along tight / free   tolerance  tight<=free+tol\n";
+    let control = summary.control_without_imu_misalignment.as_ref();
+    for c in summary.cases.iter().chain(control) {
+        let Some(Some(tight)) = &c.tight_observed_direction else {
+            continue;
+        };
+        let free = c.free_observed_direction.flatten();
+        let not_worse = c.tight_vs_free_along_observed_direction;
+        s += &format!(
+            "{:>10}   {:>8} / {:<8}    {:>8} / {:<8}   {:>8} / {:<8}   {:>8}   {}\n",
+            c.satellites,
+            f2(Some(tight.final_error_along_observed_direction_m)),
+            f2(Some(tight.final_error_across_observed_direction_m)),
+            f2(free.map(|f| f.final_error_along_observed_direction_m)),
+            f2(free.map(|f| f.final_error_across_observed_direction_m)),
+            f2(Some(tight.final_sigma_along_observed_direction_m)),
+            f2(free.map(|f| f.final_sigma_along_observed_direction_m)),
+            f2(not_worse.map(|n| n.tolerance_m)),
+            flag(not_worse.map(|n| n.tight_not_worse_than_free)),
+        );
+    }
+    if let Some(mc) = &summary.monte_carlo_one_satellite {
+        s += &format!(
+            "one satellite, {} seeds: RMS along its line of sight tight {} m vs free {} m \
+             (tight <= free in {} runs); mean NEES along tight {} / free {} \
+             (95 % band {} .. {})\n",
+            mc.runs,
+            fmt_f64(mc.tight_rms_error_along_m, 2, false),
+            fmt_f64(mc.free_rms_error_along_m, 2, false),
+            mc.runs_tight_not_worse_than_free,
+            fmt_f64(mc.tight_mean_nees_along, 2, false),
+            fmt_f64(mc.free_mean_nees_along, 2, false),
+            fmt_f64(mc.nees_band_95[0], 2, false),
+            fmt_f64(mc.nees_band_95[1], 2, false),
+        );
+    }
+    if let Some(control) = control {
+        s += &format!(
+            "1*: one satellite with the simulated IMU axis misalignment set to zero \
+             (horizontal final error free {} m, tight {} m)\n",
+            fmt_f64(control.free.final_horizontal_error_m, 2, false),
+            f2(control.tight.map(|t| t.final_horizontal_error_m)),
+        );
     }
     s
 }
@@ -810,36 +915,28 @@ mod tests {
         };
         let s = run_with(&settings, &dir, false).expect("run");
         let t = table(&s);
-        assert_eq!(s["tight_available"], true, "{t}");
-        let c = |i: usize, p: &str| {
-            s["cases"][i]
-                .pointer(p)
-                .and_then(Value::as_f64)
-                .unwrap_or_else(|| panic!("{p}\n{t}"))
-        };
+        assert!(s.tight_available, "{t}");
         for i in 0..2 {
-            assert_eq!(s["cases"][i]["loose_identical_to_free"], true, "{t}");
+            assert_eq!(s.cases[i].loose_identical_to_free, Some(true), "{t}");
         }
         // 3 satellites.
-        let e3 = c(1, "/tight/final_horizontal_error_m");
-        assert!(e3 <= 3.0 * c(1, "/tight/final_horizontal_sigma_m"), "{t}");
+        let tight3 = s.cases[1].tight.expect("tight, 3 satellites");
+        let e3 = tight3.final_horizontal_error_m;
+        assert!(e3 <= 3.0 * tight3.final_horizontal_sigma_m, "{t}");
         assert!(
-            c(1, "/tight/max_horizontal_error_m") < c(1, "/free/max_horizontal_error_m"),
+            tight3.max_horizontal_error_m < s.cases[1].free.max_horizontal_error_m,
             "{t}"
         );
         // 2 satellites.
-        let along = c(
-            0,
-            "/tight_observed_direction/max_error_along_observed_direction_m",
-        );
-        let across = c(
-            0,
-            "/tight_observed_direction/max_error_across_observed_direction_m",
-        );
-        let free_along = c(
-            0,
-            "/free_observed_direction/max_error_along_observed_direction_m",
-        );
+        let observed = |d: Option<Option<ObservedDirection>>| {
+            d.flatten()
+                .unwrap_or_else(|| panic!("no observed direction\n{t}"))
+        };
+        let tight2 = observed(s.cases[0].tight_observed_direction);
+        let along = tight2.max_error_along_observed_direction_m;
+        let across = tight2.max_error_across_observed_direction_m;
+        let free_along =
+            observed(s.cases[0].free_observed_direction).max_error_along_observed_direction_m;
         assert!(along < free_along && along < across, "{t}");
         assert!(dir.join("final_error_vs_satellites.png").exists());
         let _ = std::fs::remove_dir_all(&dir);
