@@ -25,10 +25,7 @@
 //!   closed forms.
 
 use super::plot::{Chart, Line, color, finite_points, line_chart};
-use super::{
-    Experiment, ExperimentError, create_out_dir, fmt_f64, measurement, progress_bar, scenario_file,
-    write_summary,
-};
+use super::{Experiment, ExperimentError, fmt_f64, measurement, progress_bar, scenario_file};
 use drivers_sim::scenario::{Scenario, Trajectory, TurntableMove};
 use drivers_sim::sources::{GnssSource, ImuSource, SampleSource};
 use drivers_sim::truth::TruthGenerator;
@@ -374,29 +371,20 @@ pub struct Summary {
     pub indexed_over_unindexed_heading_rms_ratio_max: f64,
 }
 
-/// `sextant experiment alignment`.
-pub struct Alignment;
+experiment!(
+    /// `sextant experiment alignment`.
+    Alignment,
+    "alignment",
+    "Paper 003: gyrocompassing with and without turntable indexing"
+);
 
-impl Experiment for Alignment {
-    const NAME: &'static str = "alignment";
-    const DESCRIPTION: &'static str =
-        "Paper 003: gyrocompassing with and without turntable indexing";
-    type Summary = Summary;
-    fn run(out_dir: &Path, progress: bool) -> Result<Summary, ExperimentError> {
-        run_with(out_dir, progress, &Settings::default())
-    }
-    fn table(summary: &Summary) -> String {
-        table(summary)
-    }
-}
-
-/// Run with `settings`.
-pub fn run_with(
+/// The measurement with `settings` into the existing `out_dir` (plots); returns the summary
+/// ([`Experiment::run_with`] writes it to `summary.json`).
+fn measure(
+    settings: &Settings,
     out_dir: &Path,
     progress: bool,
-    settings: &Settings,
 ) -> Result<Summary, ExperimentError> {
-    create_out_dir(out_dir)?;
     let mut jobs = Vec::new();
     for (gi, _) in settings.grades.iter().enumerate() {
         let mut cell = 0u64;
@@ -513,7 +501,6 @@ pub fn run_with(
         runs: per_run,
         indexed_over_unindexed_heading_rms_ratio_max: ratio_max,
     };
-    write_summary(out_dir, &summary)?;
     plots(out_dir, settings, &summary)?;
     Ok(summary)
 }
@@ -714,7 +701,7 @@ mod tests {
             move_s: 10.0,
         };
         let dir = crate::experiments::test_dir("alignment");
-        let s = run_with(&dir, false, &settings).expect("run");
+        let s = Alignment::run_with(&settings, &dir, false).expect("run");
         let table = table(&s);
         assert!(table.contains("test"));
         for name in [

@@ -23,8 +23,7 @@
 
 use super::plot::{Chart, Line, color, finite_points, line_chart};
 use super::{
-    Experiment, ExperimentError, create_out_dir, fmt_f64, fmt_opt, mean_of_finite, nan_if_null,
-    progress_bar, write_summary,
+    Experiment, ExperimentError, fmt_f64, fmt_opt, mean_of_finite, nan_if_null, progress_bar,
 };
 use drivers_sim::imu::ImuErrorModel;
 use drivers_sim::scenario::Scenario;
@@ -90,6 +89,13 @@ pub struct Settings {
     /// Length of the online run of the navigator (Kalman filter with boresight states) over
     /// the same record, s; 0 = no online run.
     pub online_s: f64,
+}
+
+impl Default for Settings {
+    /// The full experiment: [`Settings::paper`].
+    fn default() -> Self {
+        Self::paper()
+    }
 }
 
 impl Settings {
@@ -659,20 +665,12 @@ pub struct Summary {
     pub records: Vec<RecordFigures>,
 }
 
-/// `sextant experiment astro-calibration`.
-pub struct AstroCalibration;
-
-impl Experiment for AstroCalibration {
-    const NAME: &'static str = "astro-calibration";
-    const DESCRIPTION: &'static str = "Paper 000: star-tracker / IMU boresight calibration";
-    type Summary = Summary;
-    fn run(out_dir: &Path, progress: bool) -> Result<Summary, ExperimentError> {
-        run_with(out_dir, progress, &Settings::paper())
-    }
-    fn table(summary: &Summary) -> String {
-        table(summary)
-    }
-}
+experiment!(
+    /// `sextant experiment astro-calibration`.
+    AstroCalibration,
+    "astro-calibration",
+    "Paper 000: star-tracker / IMU boresight calibration"
+);
 
 /// One plotted series: its name and (time min, north m, east m) points.
 type Series = (String, Vec<(f64, f64, f64)>);
@@ -885,13 +883,13 @@ fn evaluate(k: usize, settings: &Settings) -> Result<RecordResult, ExperimentErr
     Ok(RecordResult { summary, series })
 }
 
-/// Run the experiment with `settings` (tests use fewer, shorter records).
-pub fn run_with(
+/// The measurement with `settings` into the existing `out_dir` (plots); returns the summary
+/// ([`Experiment::run_with`] writes it to `summary.json`).
+fn measure(
+    settings: &Settings,
     out_dir: &Path,
     progress: bool,
-    settings: &Settings,
 ) -> Result<Summary, ExperimentError> {
-    create_out_dir(out_dir)?;
     let bar = progress_bar(
         progress,
         settings.records as u64,
@@ -960,7 +958,6 @@ pub fn run_with(
         paper_table: paper_rows,
         records,
     };
-    write_summary(out_dir, &summary)?;
     plots(out_dir, &results, &summary)?;
     Ok(summary)
 }
@@ -1333,7 +1330,7 @@ mod tests {
             online_s: 400.0,
         };
         let t0 = std::time::Instant::now();
-        let s = run_with(&dir, false, &settings).expect("run");
+        let s = AstroCalibration::run_with(&settings, &dir, false).expect("run");
         let d = s.mean.descent_from_identity.mean_fix_error_m;
         // The descent alone stops just under the 1852 m threshold in the window; after it the
         // error is that plus the vertical's drift: between a few hundred m and ≈ 2.5 km.

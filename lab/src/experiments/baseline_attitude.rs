@@ -19,10 +19,7 @@
 //! 4√(2/N) at 4σ); log-log slopes of RMS error against `λσ_φ/d` along both sweeps (theory: 1).
 
 use super::plot::{Chart, Line, color, finite_points, line_chart};
-use super::{
-    Experiment, ExperimentError, create_out_dir, fmt_f64, fmt_opt, linear_fit, progress_bar,
-    write_summary,
-};
+use super::{Experiment, ExperimentError, fmt_f64, fmt_opt, linear_fit, progress_bar};
 use drivers_sim::scenario::Scenario;
 use drivers_sim::sources::GnssSource;
 use drivers_sim::truth::{TruthGenerator, wrap_pi};
@@ -276,20 +273,12 @@ pub struct Summary {
     pub max_abs_measured_over_predicted_minus_one: f64,
 }
 
-/// `sextant experiment baseline-attitude`.
-pub struct BaselineAttitude;
-
-impl Experiment for BaselineAttitude {
-    const NAME: &'static str = "baseline-attitude";
-    const DESCRIPTION: &'static str = "Paper 003: dual-baseline GNSS attitude";
-    type Summary = Summary;
-    fn run(out_dir: &Path, progress: bool) -> Result<Summary, ExperimentError> {
-        run_with(out_dir, progress, &Settings::default())
-    }
-    fn table(summary: &Summary) -> String {
-        table(summary)
-    }
-}
+experiment!(
+    /// `sextant experiment baseline-attitude`.
+    BaselineAttitude,
+    "baseline-attitude",
+    "Paper 003: dual-baseline GNSS attitude"
+);
 
 fn row(c: &Config) -> Row {
     let unit = c.wavelength_m * c.sigma_cycles / c.length_m;
@@ -322,13 +311,13 @@ fn slope(rows: &[Row], y: impl Fn(&Row) -> f64) -> Option<f64> {
     linear_fit(&x, &y).map(|(s, _)| s)
 }
 
-/// Run with `settings`.
-pub fn run_with(
+/// The measurement with `settings` into the existing `out_dir` (plots); returns the summary
+/// ([`Experiment::run_with`] writes it to `summary.json`).
+fn measure(
+    settings: &Settings,
     out_dir: &Path,
     progress: bool,
-    settings: &Settings,
 ) -> Result<Summary, ExperimentError> {
-    create_out_dir(out_dir)?;
     let base = Scenario::load(&scenario_path()).map_err(measurement)?;
     let mut jobs: Vec<(bool, f64, f64)> = settings
         .lengths_m
@@ -378,7 +367,6 @@ pub fn run_with(
         sigma_sweep: by_sigma,
         max_abs_measured_over_predicted_minus_one: worst_ratio,
     };
-    write_summary(out_dir, &summary)?;
     let mut lines = Vec::new();
     for (i, (label, rows)) in [
         ("length sweep", &summary.length_sweep),
@@ -503,7 +491,7 @@ mod tests {
             epochs: 200,
         };
         let dir = crate::experiments::test_dir("baseline-attitude");
-        let s = run_with(&dir, false, &settings).expect("run");
+        let s = BaselineAttitude::run_with(&settings, &dir, false).expect("run");
         assert!(table(&s).contains("heading"));
         assert!(dir.join("attitude_vs_lambda_sigma_over_d.png").exists());
         for (sweep, rows) in [

@@ -61,9 +61,7 @@
 //! (the epochs just after alignment), the error is now 4e-5 m/s RMS.
 
 use super::plot::{Chart, Line, color, line_chart, xy};
-use super::{
-    Experiment, ExperimentError, create_out_dir, fmt_f64, nan_if_null, progress_bar, write_summary,
-};
+use super::{Experiment, ExperimentError, fmt_f64, nan_if_null, progress_bar};
 use drivers_sim::offline::{Channel, OfflineSim, RunPoint, run_navigator};
 use drivers_sim::scenario::Scenario;
 use fusion::ekf::chi2_quantile;
@@ -381,21 +379,12 @@ pub struct Summary {
     pub wall_time_s: f64,
 }
 
-/// `sextant experiment consistency`.
-pub struct Consistency;
-
-impl Experiment for Consistency {
-    const NAME: &'static str = "consistency";
-    const DESCRIPTION: &'static str =
-        "Issue 5: Monte Carlo NEES of the filter against the chi-square band";
-    type Summary = Summary;
-    fn run(out_dir: &Path, progress: bool) -> Result<Summary, ExperimentError> {
-        run_with(&Settings::default(), out_dir, progress)
-    }
-    fn table(summary: &Summary) -> String {
-        table(summary)
-    }
-}
+experiment!(
+    /// `sextant experiment consistency`.
+    Consistency,
+    "consistency",
+    "Issue 5: Monte Carlo NEES of the filter against the chi-square band"
+);
 
 /// The figures of group `g` (0 position, 1 velocity, 2 attitude) from the run-averaged NEES
 /// per epoch and the per-epoch RMS over the runs of each axis's error and σ (SI units, rad).
@@ -465,8 +454,9 @@ impl Groups {
     }
 }
 
-/// Run with `settings` into `out_dir`; returns the summary (also in `summary.json`).
-pub fn run_with(
+/// The measurement with `settings` into the existing `out_dir` (plots); returns the summary
+/// ([`Experiment::run_with`] writes it to `summary.json`).
+fn measure(
     settings: &Settings,
     out_dir: &Path,
     progress: bool,
@@ -474,7 +464,6 @@ pub fn run_with(
     if settings.runs < 2 {
         return Err(ExperimentError::Measurement("need at least 2 runs".into()));
     }
-    create_out_dir(out_dir)?;
     let overrides: Vec<(&str, toml::Value)> = settings
         .filter_overrides
         .iter()
@@ -608,7 +597,6 @@ pub fn run_with(
             },
         )?;
     }
-    write_summary(out_dir, &summary)?;
     Ok(summary)
 }
 
@@ -680,7 +668,7 @@ mod tests {
             runs: 10,
             ..Settings::default()
         };
-        let s = run_with(&settings, &dir, false).expect("run");
+        let s = Consistency::run_with(&settings, &dir, false).expect("run");
         let (lo, hi) = (s.nees_band_lower, s.nees_band_upper);
         assert!(
             (lo - 1.679).abs() < 1e-3 && (hi - 4.698).abs() < 1e-3,
@@ -835,7 +823,7 @@ mod tests {
                 scenario_edit: Some(edit),
                 ..Settings::default()
             };
-            match run_with(&settings, &dir, false) {
+            match Consistency::run_with(&settings, &dir, false) {
                 Ok(s) => eprintln!("== {name}\n{}", table(&s)),
                 Err(e) => eprintln!("== {name}: {e}"),
             }
@@ -849,7 +837,7 @@ mod tests {
                 filter_overrides: ov,
                 ..Settings::default()
             };
-            match run_with(&settings, &dir, false) {
+            match Consistency::run_with(&settings, &dir, false) {
                 Ok(s) => eprintln!("== {name}\n{}", table(&s)),
                 Err(e) => eprintln!("== {name}: {e}"),
             }

@@ -59,10 +59,7 @@
 
 use super::consistency::{filter_config, load_scenario};
 use super::plot::{Chart, Line, color, line_chart};
-use super::{
-    Experiment, ExperimentError, create_out_dir, fmt_f64, fmt_opt, nan_if_null, progress_bar,
-    write_summary,
-};
+use super::{Experiment, ExperimentError, fmt_f64, fmt_opt, nan_if_null, progress_bar};
 use drivers_sim::offline::{Channel, OfflineSim, RunPoint, run_navigator};
 use drivers_sim::scenario::Scenario;
 use drivers_sim::sources::{ImuSource, SampleSource};
@@ -352,29 +349,20 @@ pub struct Summary {
     pub wall_time_s: f64,
 }
 
-/// `sextant experiment gnss-denied-astro`.
-pub struct GnssDeniedAstro;
+experiment!(
+    /// `sextant experiment gnss-denied-astro`.
+    GnssDeniedAstro,
+    "gnss-denied-astro",
+    "Paper 000 / issue 5: 10 h astro-inertial without GNSS against its error floor"
+);
 
-impl Experiment for GnssDeniedAstro {
-    const NAME: &'static str = "gnss-denied-astro";
-    const DESCRIPTION: &'static str =
-        "Paper 000 / issue 5: 10 h astro-inertial without GNSS against its error floor";
-    type Summary = Summary;
-    fn run(out_dir: &Path, progress: bool) -> Result<Summary, ExperimentError> {
-        run_with(&Settings::default(), out_dir, progress)
-    }
-    fn table(summary: &Summary) -> String {
-        table(summary)
-    }
-}
-
-/// Run with `settings` into `out_dir`; returns the summary (also in `summary.json`).
-pub fn run_with(
+/// The measurement with `settings` into the existing `out_dir` (plots); returns the summary
+/// ([`Experiment::run_with`] writes it to `summary.json`).
+fn measure(
     settings: &Settings,
     out_dir: &Path,
     progress: bool,
 ) -> Result<Summary, ExperimentError> {
-    create_out_dir(out_dir)?;
     let mut scn = load_scenario(&settings.scenario, None)?;
     if let Some(d) = settings.duration_s {
         scn.spec.scenario.duration_s = d;
@@ -578,7 +566,6 @@ pub fn run_with(
             lines: &comp,
         },
     )?;
-    write_summary(out_dir, &summary)?;
     Ok(summary)
 }
 
@@ -652,7 +639,7 @@ mod tests {
             ..Settings::default()
         };
         let t0 = std::time::Instant::now();
-        let s = run_with(&settings, &dir, false).expect("run");
+        let s = GnssDeniedAstro::run_with(&settings, &dir, false).expect("run");
         eprintln!("{:.1} s\n{}", t0.elapsed().as_secs_f64(), table(&s));
         assert_eq!(s.whole_schuler_periods, 1.0);
         let bound = s.floor.bound_2_floor_plus_3_sigma_m;

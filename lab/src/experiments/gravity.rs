@@ -21,7 +21,7 @@
 //! along the normal), which is why it is for comparison only.
 
 use super::plot::{Chart, Line, color, line_chart};
-use super::{Experiment, ExperimentError, create_out_dir, fmt_f64, write_summary};
+use super::{Experiment, ExperimentError, fmt_f64};
 use fusion::earth::{Geodetic, GravityModel, WGS84, c_e_n, geodetic_to_ecef, gravity_ecef};
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
@@ -237,28 +237,19 @@ pub struct Summary {
     pub sea_level_every_15_deg: Vec<SeaLevelRow>,
 }
 
-/// `sextant experiment gravity`.
-pub struct Gravity;
+experiment!(
+    /// `sextant experiment gravity`.
+    Gravity,
+    "gravity",
+    "Paper 002: J2 gravity against normal gravity and a point mass"
+);
 
-impl Experiment for Gravity {
-    const NAME: &'static str = "gravity";
-    const DESCRIPTION: &'static str =
-        "Paper 002: J2 gravity against normal gravity and a point mass";
-    type Summary = Summary;
-    fn run(out_dir: &Path, progress: bool) -> Result<Summary, ExperimentError> {
-        run_with(out_dir, progress, &Settings::default())
-    }
-    fn table(summary: &Summary) -> String {
-        table(summary)
-    }
-}
-
-/// Run with `settings`; writes `summary.json` and four PNG plots against latitude at heights 0,
-/// 10 and 20 km (magnitude differences and deflections, J2 and point mass).
-pub fn run_with(
+/// The measurement with `settings` into the existing `out_dir` (plots); returns the summary
+/// ([`Experiment::run_with`] writes it to `summary.json`).
+fn measure(
+    settings: &Settings,
     out_dir: &Path,
     _progress: bool,
-    settings: &Settings,
 ) -> Result<Summary, ExperimentError> {
     if !(settings.latitude_step_deg > 0.0
         && settings.height_step_m > 0.0
@@ -269,7 +260,6 @@ pub fn run_with(
             "invalid grid settings {settings:?}"
         )));
     }
-    create_out_dir(out_dir)?;
     let n_lat = (90.0 / settings.latitude_step_deg).round() as usize;
     let n_h = (settings.max_height_m / settings.height_step_m).round() as usize;
     let mut points = Vec::with_capacity((n_lat + 1) * (n_h + 1));
@@ -318,7 +308,6 @@ pub fn run_with(
         max_angle_point_mass_vs_j2_arcsec: max_abs(&points, |p| p.angle_pm_j2_arcsec).into(),
         sea_level_every_15_deg: at_sea_level,
     };
-    write_summary(out_dir, &summary)?;
 
     let heights = [0.0, 10_000.0, settings.max_height_m];
     let curves = |f: &PointFigure| -> Vec<Line> {

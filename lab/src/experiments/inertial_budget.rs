@@ -82,9 +82,7 @@
 
 use super::consistency::{filter_config, load_scenario};
 use super::plot::{Chart, Line, color, line_chart, xy};
-use super::{
-    Experiment, ExperimentError, create_out_dir, fmt_f64, nan_if_null, progress_bar, write_summary,
-};
+use super::{Experiment, ExperimentError, fmt_f64, nan_if_null, progress_bar};
 use drivers_sim::imu::{ImuErrorModel, IntervalErrors};
 use drivers_sim::offline::{Channel, OfflineSim, SatelliteLimit, SimMessage, compare, feed};
 use drivers_sim::scenario::period_ns;
@@ -524,29 +522,20 @@ pub struct Summary {
     pub wall_time_s: f64,
 }
 
-/// `sextant experiment inertial-budget`.
-pub struct InertialBudget;
+experiment!(
+    /// `sextant experiment inertial-budget`.
+    InertialBudget,
+    "inertial-budget",
+    "Issue 5: error budget of 600 s free inertial after GNSS (each IMU error source alone)"
+);
 
-impl Experiment for InertialBudget {
-    const NAME: &'static str = "inertial-budget";
-    const DESCRIPTION: &'static str =
-        "Issue 5: error budget of 600 s free inertial after GNSS (each IMU error source alone)";
-    type Summary = Summary;
-    fn run(out_dir: &Path, progress: bool) -> Result<Summary, ExperimentError> {
-        run_with(&Settings::default(), out_dir, progress)
-    }
-    fn table(summary: &Summary) -> String {
-        table(summary)
-    }
-}
-
-/// Run with `settings` into `out_dir`; returns the summary (also in `summary.json`).
-pub fn run_with(
+/// The measurement with `settings` into the existing `out_dir` (plots); returns the summary
+/// ([`Experiment::run_with`] writes it to `summary.json`).
+fn measure(
     settings: &Settings,
     out_dir: &Path,
     progress: bool,
 ) -> Result<Summary, ExperimentError> {
-    create_out_dir(out_dir)?;
     let wall = std::time::Instant::now();
     let cfg = config(settings)?;
     let (snap, measured) = navigator_run(settings, &cfg, true)?;
@@ -1068,7 +1057,6 @@ pub fn run_with(
             lines: &lines,
         },
     )?;
-    write_summary(out_dir, &summary)?;
     Ok(summary)
 }
 
@@ -1149,7 +1137,7 @@ mod tests {
             window_s: 300.0,
             ..Settings::default()
         };
-        let s = run_with(&settings, &dir, false).expect("run");
+        let s = InertialBudget::run_with(&settings, &dir, false).expect("run");
         let t = table(&s);
         let terms = &s.terms;
         assert_eq!(terms.len(), 14, "{t}");
@@ -1201,7 +1189,7 @@ mod tests {
                     )],
                     ..Settings::default()
                 };
-                let s = run_with(&settings, &dir, false).expect("run");
+                let s = InertialBudget::run_with(&settings, &dir, false).expect("run");
                 eprintln!(
                     "states {states} seed {seed}: with baro {:.1} m (σ {:.1}), without {:.1} m (σ {:.1})",
                     s.navigator_measured_horizontal_m,

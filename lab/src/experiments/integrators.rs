@@ -29,9 +29,7 @@
 //! neighbouring increments), i.e. more information than one increment carries.
 
 use super::plot::{Chart, Line, color, line_chart};
-use super::{
-    Experiment, ExperimentError, create_out_dir, fmt_f64, linear_fit, progress_bar, write_summary,
-};
+use super::{Experiment, ExperimentError, fmt_f64, linear_fit, progress_bar};
 use fusion::earth::{
     Ellipsoid, Geodetic, GravityModel, WGS84, c_e_n, geodetic_to_ecef, gravity_ecef,
 };
@@ -456,30 +454,20 @@ pub struct Summary {
     pub time_varying_force: TimeVaryingForceCase,
 }
 
-/// `sextant experiment integrators`.
-pub struct Integrators;
+experiment!(
+    /// `sextant experiment integrators`.
+    Integrators,
+    "integrators",
+    "Paper 002: convergence order of the strapdown integrators (Euler, Heun, RK4)"
+);
 
-impl Experiment for Integrators {
-    const NAME: &'static str = "integrators";
-    const DESCRIPTION: &'static str =
-        "Paper 002: convergence order of the strapdown integrators (Euler, Heun, RK4)";
-    type Summary = Summary;
-    fn run(out_dir: &Path, progress: bool) -> Result<Summary, ExperimentError> {
-        run_with(out_dir, progress, &Settings::default())
-    }
-    fn table(summary: &Summary) -> String {
-        table(summary)
-    }
-}
-
-/// Run with `settings`; writes `summary.json`, `integrators_orbit_error_vs_step.png` and
-/// `integrators_time_varying_force_error_vs_step.png` into `out_dir`.
-pub fn run_with(
+/// The measurement with `settings` into the existing `out_dir` (plots); returns the summary
+/// ([`Experiment::run_with`] writes it to `summary.json`).
+fn measure(
+    settings: &Settings,
     out_dir: &Path,
     progress: bool,
-    settings: &Settings,
 ) -> Result<Summary, ExperimentError> {
-    create_out_dir(out_dir)?;
     let n_runs =
         INTEGRATORS.len() * (settings.orbit_steps_s.len() + settings.vehicle_steps_s.len());
     let bar = progress_bar(progress, n_runs as u64, "integrators");
@@ -548,7 +536,6 @@ pub fn run_with(
         orbit_j2: orbit_case,
         time_varying_force: vehicle_case,
     };
-    write_summary(out_dir, &summary)?;
 
     plot_errors(
         &out_dir.join("integrators_orbit_error_vs_step.png"),

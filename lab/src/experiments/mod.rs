@@ -13,6 +13,38 @@
 //! plots into the output directory, and returns the summary so that the caller can print it
 //! with the experiment's `table`.
 
+/// Declares the experiment of the module it is invoked in: the unit struct `$ty` implementing
+/// [`Experiment`] by the module's items of the same names: `Settings` (its `Default` is the
+/// full experiment), `Summary`, `table`, and `measure(settings, out_dir, progress)`, which
+/// measures into an existing `out_dir` (its plots) and returns the summary; the generated
+/// `run_with` creates `out_dir` before and writes `summary.json` after.
+macro_rules! experiment {
+    ($(#[$doc:meta])* $ty:ident, $name:literal, $description:literal) => {
+        $(#[$doc])*
+        pub struct $ty;
+
+        impl $crate::experiments::Experiment for $ty {
+            const NAME: &'static str = $name;
+            const DESCRIPTION: &'static str = $description;
+            type Settings = Settings;
+            type Summary = Summary;
+            fn run_with(
+                settings: &Settings,
+                out_dir: &std::path::Path,
+                progress: bool,
+            ) -> Result<Summary, $crate::experiments::ExperimentError> {
+                $crate::experiments::create_out_dir(out_dir)?;
+                let summary = measure(settings, out_dir, progress)?;
+                $crate::experiments::write_summary(out_dir, &summary)?;
+                Ok(summary)
+            }
+            fn table(summary: &Summary) -> String {
+                table(summary)
+            }
+        }
+    };
+}
+
 pub mod alignment;
 pub mod all;
 pub mod astro_calibration;
@@ -67,20 +99,30 @@ pub enum ExperimentError {
     Measurement(String),
 }
 
-/// One experiment of `sextant experiment NAME`: its name, what it reproduces, how it runs with
-/// its default settings and how its summary reads as a table.
+/// One experiment of `sextant experiment NAME`: its name, what it reproduces, how it runs and
+/// how its summary reads as a table.
 pub trait Experiment {
     /// The name on the command line (`sextant experiment NAME`) and of its directory under
     /// `sextant experiment all`.
     const NAME: &'static str;
     /// One line about what it reproduces (the heading text of its section in RESULTS.md).
     const DESCRIPTION: &'static str;
+    /// Its settings; the default is the full experiment.
+    type Settings: Default;
     /// The figures it measures, under self-explaining names with their units in the name;
     /// written as `summary.json`.
     type Summary: Serialize + DeserializeOwned;
-    /// Run with the default settings into `out_dir` (created if missing): `summary.json` and
-    /// PNG plots; `progress` shows progress bars on stderr for the long loops.
-    fn run(out_dir: &Path, progress: bool) -> Result<Self::Summary, ExperimentError>;
+    /// Run with `settings` into `out_dir` (created if missing): `summary.json` and PNG plots;
+    /// `progress` shows progress bars on stderr for the long loops.
+    fn run_with(
+        settings: &Self::Settings,
+        out_dir: &Path,
+        progress: bool,
+    ) -> Result<Self::Summary, ExperimentError>;
+    /// Run with the default settings (the full experiment).
+    fn run(out_dir: &Path, progress: bool) -> Result<Self::Summary, ExperimentError> {
+        Self::run_with(&Self::Settings::default(), out_dir, progress)
+    }
     /// The human-readable table of `summary`.
     fn table(summary: &Self::Summary) -> String;
 }

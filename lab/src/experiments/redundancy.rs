@@ -40,8 +40,7 @@
 
 use super::plot::{Chart, Line, color, line_chart};
 use super::{
-    Experiment, ExperimentError, create_out_dir, fmt_f64, measurement, nan_if_null, progress_bar,
-    scenario_file, write_summary,
+    Experiment, ExperimentError, fmt_f64, measurement, nan_if_null, progress_bar, scenario_file,
 };
 use drivers_sim::imu::ChannelErrorModel;
 use drivers_sim::scenario::{
@@ -89,6 +88,13 @@ pub struct Settings {
     pub failure_window_s: f64,
     /// Onset of the injected failures, s (before the first turn of the flight).
     pub failure_onset_s: f64,
+}
+
+impl Default for Settings {
+    /// The full experiment: [`Settings::full`].
+    fn default() -> Self {
+        Self::full()
+    }
 }
 
 impl Settings {
@@ -599,25 +605,16 @@ pub struct Summary {
     pub fdi: Fdi,
 }
 
-/// `sextant experiment redundancy`.
-pub struct Redundancy;
+experiment!(
+    /// `sextant experiment redundancy`.
+    Redundancy,
+    "redundancy",
+    "Paper 004: structural redundancy, skewed vs orthogonal, fault isolation"
+);
 
-impl Experiment for Redundancy {
-    const NAME: &'static str = "redundancy";
-    const DESCRIPTION: &'static str =
-        "Paper 004: structural redundancy, skewed vs orthogonal, fault isolation";
-    type Summary = Summary;
-    fn run(out_dir: &Path, progress: bool) -> Result<Summary, ExperimentError> {
-        run_with(out_dir, progress, &Settings::full())
-    }
-    fn table(summary: &Summary) -> String {
-        table(summary)
-    }
-}
-
-/// Run with the given sizes (the tests use a reduced one).
-pub fn run_with(out_dir: &Path, progress: bool, s: &Settings) -> Result<Summary, ExperimentError> {
-    create_out_dir(out_dir)?;
+/// The measurement with `settings` into the existing `out_dir` (plots); returns the summary
+/// ([`Experiment::run_with`] writes it to `summary.json`).
+fn measure(s: &Settings, out_dir: &Path, progress: bool) -> Result<Summary, ExperimentError> {
     let scn = Scenario::load(&scenario_path()).map_err(measurement)?;
     let horizon = s.duration_s.max(s.failure_window_s);
     let truth = build_truth(&scn, horizon, progress);
@@ -835,7 +832,6 @@ pub fn run_with(out_dir: &Path, progress: bool, s: &Settings) -> Result<Summary,
             fault_free_horizontal_error_end_rms_m: clean_rms,
         },
     };
-    write_summary(out_dir, &summary)?;
     plots(out_dir, &per_layout, &lays, cruise_height_m)?;
     Ok(summary)
 }
@@ -1032,7 +1028,7 @@ mod tests {
             failure_onset_s: 400.0,
         };
         let t0 = std::time::Instant::now();
-        let summary = run_with(&dir, false, &s).expect("experiment");
+        let summary = Redundancy::run_with(&s, &dir, false).expect("experiment");
         eprintln!("{}", table(&summary));
         eprintln!("reduced experiment: {:.1} s", t0.elapsed().as_secs_f64());
         let failures = &summary.fdi.failures;

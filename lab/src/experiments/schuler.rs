@@ -33,9 +33,7 @@
 //! a perfect baro/altimeter aiding does; the horizontal dynamics are untouched.
 
 use super::plot::{Chart, Line, color, line_chart, xy};
-use super::{
-    Experiment, ExperimentError, create_out_dir, fmt_f64, linear_fit, progress_bar, write_summary,
-};
+use super::{Experiment, ExperimentError, fmt_f64, linear_fit, progress_bar};
 use fusion::attitude::q_n_b_from_rpy;
 use fusion::earth::{
     Geodetic, GravityModel, WGS84, c_e_n, ecef_to_geodetic, geodetic_to_ecef, gravity_ecef,
@@ -355,30 +353,20 @@ pub struct Summary {
     pub vertical_time_constant_gravity_gradient_model_s: f64,
 }
 
-/// `sextant experiment schuler`.
-pub struct Schuler;
+experiment!(
+    /// `sextant experiment schuler`.
+    Schuler,
+    "schuler",
+    "Paper 002: Schuler period and vertical-channel divergence of free inertial navigation"
+);
 
-impl Experiment for Schuler {
-    const NAME: &'static str = "schuler";
-    const DESCRIPTION: &'static str =
-        "Paper 002: Schuler period and vertical-channel divergence of free inertial navigation";
-    type Summary = Summary;
-    fn run(out_dir: &Path, progress: bool) -> Result<Summary, ExperimentError> {
-        run_with(out_dir, progress, &Settings::default())
-    }
-    fn table(summary: &Summary) -> String {
-        table(summary)
-    }
-}
-
-/// Run with `settings`; writes `summary.json`, `schuler_velocity_error_run_ne_error.png`,
-/// `schuler_tilt_run_ne_error.png` and `schuler_free_vertical_height_error_log.png`.
-pub fn run_with(
+/// The measurement with `settings` into the existing `out_dir` (plots); returns the summary
+/// ([`Experiment::run_with`] writes it to `summary.json`).
+fn measure(
+    settings: &Settings,
     out_dir: &Path,
     progress: bool,
-    settings: &Settings,
 ) -> Result<Summary, ExperimentError> {
-    create_out_dir(out_dir)?;
     let ell = WGS84;
     let g0 = site();
     let total =
@@ -512,7 +500,6 @@ pub fn run_with(
         vertical_time_constant_relative_error: tau_fit / tau_expected - 1.0,
         vertical_time_constant_gravity_gradient_model_s: tau_gradient,
     };
-    write_summary(out_dir, &summary)?;
 
     // Plots.
     let minutes = |t: &[f64]| t.iter().map(|t| t / 60.0).collect::<Vec<f64>>();
@@ -664,7 +651,7 @@ mod tests {
             horizontal_duration_s: 3.0 * 3600.0,
             ..Settings::default()
         };
-        let s = run_with(&dir, false, &settings).expect("run");
+        let s = Schuler::run_with(&settings, &dir, false).expect("run");
         eprintln!("{}", table(&s));
         assert!(s.schuler_period_relative_error.abs() < 0.01, "{s:?}");
         assert!(s.tilt_run_fit_period_relative_error.abs() < 0.01, "{s:?}");
@@ -693,7 +680,7 @@ mod tests {
             dt_s: -1.0,
             ..Settings::default()
         };
-        assert!(run_with(&dir, false, &settings).is_err());
+        assert!(Schuler::run_with(&settings, &dir, false).is_err());
         let _ = std::fs::remove_dir_all(&dir);
     }
 

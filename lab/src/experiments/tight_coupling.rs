@@ -57,10 +57,7 @@
 
 use super::consistency::{filter_config, load_scenario};
 use super::plot::{Chart, Line, color, line_chart, xy};
-use super::{
-    Experiment, ExperimentError, create_out_dir, fmt_f64, fmt_opt, nan_if_null, present,
-    progress_bar, write_summary,
-};
+use super::{Experiment, ExperimentError, fmt_f64, fmt_opt, nan_if_null, present, progress_bar};
 use drivers_sim::offline::SimMessage;
 use drivers_sim::offline::{Channel, OfflineSim, SatelliteLimit, run_navigator};
 use fusion::navigator::{Navigator, NavigatorConfig};
@@ -579,29 +576,20 @@ pub struct Summary {
     pub wall_time_s: f64,
 }
 
-/// `sextant experiment tight-coupling`.
-pub struct TightCoupling;
+experiment!(
+    /// `sextant experiment tight-coupling`.
+    TightCoupling,
+    "tight-coupling",
+    "Paper 003 / issue 5: tight vs loose vs free inertial with 0–≥4 satellites"
+);
 
-impl Experiment for TightCoupling {
-    const NAME: &'static str = "tight-coupling";
-    const DESCRIPTION: &'static str =
-        "Paper 003 / issue 5: tight vs loose vs free inertial with 0–≥4 satellites";
-    type Summary = Summary;
-    fn run(out_dir: &Path, progress: bool) -> Result<Summary, ExperimentError> {
-        run_with(&Settings::default(), out_dir, progress)
-    }
-    fn table(summary: &Summary) -> String {
-        table(summary)
-    }
-}
-
-/// Run with `settings` into `out_dir`; returns the summary (also in `summary.json`).
-pub fn run_with(
+/// The measurement with `settings` into the existing `out_dir` (plots); returns the summary
+/// ([`Experiment::run_with`] writes it to `summary.json`).
+fn measure(
     settings: &Settings,
     out_dir: &Path,
     progress: bool,
 ) -> Result<Summary, ExperimentError> {
-    create_out_dir(out_dir)?;
     // Tight coupling is switched on by the filter configuration; a filter without it makes
     // the tight column absent (reported), not the experiment fail.
     let tight_cfg = config(Coupling::Tight);
@@ -798,7 +786,6 @@ pub fn run_with(
             lines: &lines,
         },
     )?;
-    write_summary(out_dir, &summary)?;
     Ok(summary)
 }
 
@@ -913,7 +900,7 @@ mod tests {
             mc_seeds: Vec::new(),
             ..Settings::default()
         };
-        let s = run_with(&settings, &dir, false).expect("run");
+        let s = TightCoupling::run_with(&settings, &dir, false).expect("run");
         let t = table(&s);
         assert!(s.tight_available, "{t}");
         for i in 0..2 {
