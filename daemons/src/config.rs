@@ -326,15 +326,13 @@ pub fn parse_navigator_config(text: &str, file: &Path) -> Result<NavigatorConfig
     })?;
     cfg.validate().map_err(|e| {
         // fusion names the key as `filter.<dotted key> <what>`: report the key itself.
-        let (key, message) = match &e {
-            fusion::FusionError::Config(m) => match m.strip_prefix("filter.") {
-                Some(rest) => match rest.split_once(' ') {
-                    Some((k, what)) => (k.to_string(), what.to_string()),
-                    None => ("filter".to_string(), m.clone()),
-                },
+        let fusion::ConfigError(m) = &e;
+        let (key, message) = match m.strip_prefix("filter.") {
+            Some(rest) => match rest.split_once(' ') {
+                Some((k, what)) => (k.to_string(), what.to_string()),
                 None => ("filter".to_string(), m.clone()),
             },
-            other => ("filter".to_string(), other.to_string()),
+            None => ("filter".to_string(), m.clone()),
         };
         ConfigError::Invalid {
             file: file.to_path_buf(),

@@ -10,7 +10,7 @@ use crate::config::SystemConfig;
 use crate::recorder::{
     Record, Recorder, RecorderError, RecorderOptions, RecorderStats, SensorAliveEvent,
 };
-use fusion::FusionError;
+use fusion::Rejection;
 use fusion::navigator::Navigator;
 use iceoryx2::prelude::*;
 use msgs::ipc::{Bus, IpcError, Sub};
@@ -26,15 +26,15 @@ use std::time::{Duration, Instant};
 /// What the daemon needs from the fusion engine ([`Navigator`] implements it).
 pub trait NavEngine {
     /// Feed an IMU sample; the solution once navigating.
-    fn push_imu(&mut self, s: &ImuSample) -> Result<Option<NavSolution>, FusionError>;
+    fn push_imu(&mut self, s: &ImuSample) -> Result<Option<NavSolution>, Rejection>;
     /// Queue a star-tracker sample.
-    fn push_star_tracker(&mut self, s: &StarTrackerSample) -> Result<(), FusionError>;
+    fn push_star_tracker(&mut self, s: &StarTrackerSample) -> Result<(), Rejection>;
     /// Queue a GNSS sample.
-    fn push_gnss(&mut self, s: &GnssSample) -> Result<(), FusionError>;
+    fn push_gnss(&mut self, s: &GnssSample) -> Result<(), Rejection>;
     /// Queue an odometer sample.
-    fn push_odometer(&mut self, s: &OdometerSample) -> Result<(), FusionError>;
+    fn push_odometer(&mut self, s: &OdometerSample) -> Result<(), Rejection>;
     /// Queue a baro sample.
-    fn push_baro(&mut self, s: &BaroSample) -> Result<(), FusionError>;
+    fn push_baro(&mut self, s: &BaroSample) -> Result<(), Rejection>;
     /// Tell whether a sensor delivers within its deadline.
     fn set_sensor_alive(&mut self, sensor: usize, alive: bool);
     /// Per-sensor counters.
@@ -84,19 +84,19 @@ pub fn engine_status<E: NavEngine>(engine: &E) -> Status {
 }
 
 impl NavEngine for Navigator {
-    fn push_imu(&mut self, s: &ImuSample) -> Result<Option<NavSolution>, FusionError> {
+    fn push_imu(&mut self, s: &ImuSample) -> Result<Option<NavSolution>, Rejection> {
         Navigator::push_imu(self, s)
     }
-    fn push_star_tracker(&mut self, s: &StarTrackerSample) -> Result<(), FusionError> {
+    fn push_star_tracker(&mut self, s: &StarTrackerSample) -> Result<(), Rejection> {
         Navigator::push_star_tracker(self, s)
     }
-    fn push_gnss(&mut self, s: &GnssSample) -> Result<(), FusionError> {
+    fn push_gnss(&mut self, s: &GnssSample) -> Result<(), Rejection> {
         Navigator::push_gnss(self, s)
     }
-    fn push_odometer(&mut self, s: &OdometerSample) -> Result<(), FusionError> {
+    fn push_odometer(&mut self, s: &OdometerSample) -> Result<(), Rejection> {
         Navigator::push_odometer(self, s)
     }
-    fn push_baro(&mut self, s: &BaroSample) -> Result<(), FusionError> {
+    fn push_baro(&mut self, s: &BaroSample) -> Result<(), Rejection> {
         Navigator::push_baro(self, s)
     }
     fn set_sensor_alive(&mut self, sensor: usize, alive: bool) {
@@ -127,7 +127,7 @@ impl NavEngine for Navigator {
 pub fn feed<E: NavEngine>(
     engine: &mut E,
     record: &Record,
-) -> Result<Option<NavSolution>, FusionError> {
+) -> Result<Option<NavSolution>, Rejection> {
     match record {
         Record::Imu(s) => engine.push_imu(s),
         Record::StarTracker(s) => engine.push_star_tracker(s).map(|()| None),
@@ -243,7 +243,7 @@ impl<E: NavEngine> State<'_, E> {
         }
     }
 
-    fn log_push_error(&mut self, e: FusionError) {
+    fn log_push_error(&mut self, e: Rejection) {
         self.errors_logged += 1;
         if self.errors_logged <= 20 || self.errors_logged.is_power_of_two() {
             tracing::warn!("rejected input ({} so far): {e}", self.errors_logged);
@@ -549,23 +549,23 @@ mod tests {
     }
 
     impl NavEngine for Fake {
-        fn push_imu(&mut self, s: &ImuSample) -> Result<Option<NavSolution>, FusionError> {
+        fn push_imu(&mut self, s: &ImuSample) -> Result<Option<NavSolution>, Rejection> {
             let mut n = NavSolution::default();
             n.header.time_ns = s.header.time_ns;
             n.q_ned_body = [1.0, 0.0, 0.0, 0.0];
             Ok(Some(n))
         }
-        fn push_star_tracker(&mut self, _: &StarTrackerSample) -> Result<(), FusionError> {
+        fn push_star_tracker(&mut self, _: &StarTrackerSample) -> Result<(), Rejection> {
             Ok(())
         }
-        fn push_gnss(&mut self, _: &GnssSample) -> Result<(), FusionError> {
+        fn push_gnss(&mut self, _: &GnssSample) -> Result<(), Rejection> {
             *self.gnss.lock().unwrap() += 1;
             Ok(())
         }
-        fn push_odometer(&mut self, _: &OdometerSample) -> Result<(), FusionError> {
+        fn push_odometer(&mut self, _: &OdometerSample) -> Result<(), Rejection> {
             Ok(())
         }
-        fn push_baro(&mut self, _: &BaroSample) -> Result<(), FusionError> {
+        fn push_baro(&mut self, _: &BaroSample) -> Result<(), Rejection> {
             Ok(())
         }
         fn set_sensor_alive(&mut self, sensor: usize, alive: bool) {
@@ -584,19 +584,19 @@ mod tests {
     fn status_carries_redundancy_counters() {
         struct Red(Fake);
         impl NavEngine for Red {
-            fn push_imu(&mut self, s: &ImuSample) -> Result<Option<NavSolution>, FusionError> {
+            fn push_imu(&mut self, s: &ImuSample) -> Result<Option<NavSolution>, Rejection> {
                 self.0.push_imu(s)
             }
-            fn push_star_tracker(&mut self, s: &StarTrackerSample) -> Result<(), FusionError> {
+            fn push_star_tracker(&mut self, s: &StarTrackerSample) -> Result<(), Rejection> {
                 self.0.push_star_tracker(s)
             }
-            fn push_gnss(&mut self, s: &GnssSample) -> Result<(), FusionError> {
+            fn push_gnss(&mut self, s: &GnssSample) -> Result<(), Rejection> {
                 self.0.push_gnss(s)
             }
-            fn push_odometer(&mut self, s: &OdometerSample) -> Result<(), FusionError> {
+            fn push_odometer(&mut self, s: &OdometerSample) -> Result<(), Rejection> {
                 self.0.push_odometer(s)
             }
-            fn push_baro(&mut self, s: &BaroSample) -> Result<(), FusionError> {
+            fn push_baro(&mut self, s: &BaroSample) -> Result<(), Rejection> {
                 self.0.push_baro(s)
             }
             fn set_sensor_alive(&mut self, sensor: usize, alive: bool) {

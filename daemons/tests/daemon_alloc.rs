@@ -157,26 +157,26 @@ impl Tally {
 struct Probe(Arc<Tally>);
 
 impl NavEngine for Probe {
-    fn push_imu(&mut self, s: &ImuSample) -> Result<Option<NavSolution>, fusion::FusionError> {
+    fn push_imu(&mut self, s: &ImuSample) -> Result<Option<NavSolution>, fusion::Rejection> {
         self.0.note(0);
         let mut n = NavSolution::default();
         n.header.time_ns = s.header.time_ns;
         n.q_ned_body = [1.0, 0.0, 0.0, 0.0];
         Ok(Some(n))
     }
-    fn push_star_tracker(&mut self, _: &StarTrackerSample) -> Result<(), fusion::FusionError> {
+    fn push_star_tracker(&mut self, _: &StarTrackerSample) -> Result<(), fusion::Rejection> {
         self.0.note(1);
         Ok(())
     }
-    fn push_gnss(&mut self, _: &GnssSample) -> Result<(), fusion::FusionError> {
+    fn push_gnss(&mut self, _: &GnssSample) -> Result<(), fusion::Rejection> {
         self.0.note(2);
         Ok(())
     }
-    fn push_odometer(&mut self, _: &OdometerSample) -> Result<(), fusion::FusionError> {
+    fn push_odometer(&mut self, _: &OdometerSample) -> Result<(), fusion::Rejection> {
         self.0.note(3);
         Ok(())
     }
-    fn push_baro(&mut self, _: &BaroSample) -> Result<(), fusion::FusionError> {
+    fn push_baro(&mut self, _: &BaroSample) -> Result<(), fusion::Rejection> {
         self.0.note(4);
         Ok(())
     }

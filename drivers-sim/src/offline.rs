@@ -26,7 +26,7 @@ use crate::scenario::Scenario;
 use crate::sources::{
     BaroSource, GnssSource, ImuSource, OdometerSource, SampleSource, StarTrackerSource, TruthSource,
 };
-use fusion::FusionError;
+use fusion::Rejection;
 use fusion::ekf::idx;
 use fusion::navigator::Navigator;
 use msgs::{
@@ -325,7 +325,7 @@ pub enum OfflineError {
         /// Its time of validity, GPS ns.
         time_ns: i64,
         /// The navigator's reason.
-        source: FusionError,
+        source: Rejection,
     },
 }
 

@@ -38,10 +38,19 @@ pub mod redundancy;
 pub mod strapdown;
 pub mod time;
 
-/// Errors of the navigation library.
+pub use navigator::{RejectReason, Rejection};
+
+/// A configuration value makes no sense; the message names the key (`filter.<key> <what>` for
+/// the filter tuning file).
+#[derive(Debug, thiserror::Error, Clone, PartialEq, Eq)]
+#[error("invalid configuration: {0}")]
+pub struct ConfigError(pub String);
+
+/// Errors of the navigation library's batch estimators and constructors (the navigator's
+/// per-sample refusals are the `Copy` [`Rejection`], its configuration errors [`ConfigError`]).
 #[derive(Debug, thiserror::Error, Clone, PartialEq)]
 pub enum FusionError {
-    /// A sample carried a value that cannot be physical (NaN, infinity, impossible magnitude).
+    /// Input data of a batch estimator that cannot be used (not static, not physical).
     #[error("invalid {sensor} sample at t = {time_ns} ns: {reason}")]
     InvalidSample {
         /// Which sensor.
@@ -51,17 +60,10 @@ pub enum FusionError {
         /// What was wrong.
         reason: String,
     },
-    /// A sample's time went backwards or repeated.
-    #[error("{sensor} sample at t = {time_ns} ns is not after the previous one ({previous_ns} ns)")]
-    TimeNotIncreasing {
-        /// Which sensor.
-        sensor: &'static str,
-        /// Time of validity of the sample, GPS ns.
-        time_ns: i64,
-        /// Time of the previous sample, GPS ns.
-        previous_ns: i64,
-    },
+    /// A sample refused by the navigator.
+    #[error(transparent)]
+    Rejected(#[from] Rejection),
     /// A configuration value makes no sense.
-    #[error("invalid configuration: {0}")]
-    Config(String),
+    #[error(transparent)]
+    Config(#[from] ConfigError),
 }

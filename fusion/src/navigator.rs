@@ -57,7 +57,10 @@
 //! correction computed with the current covariance (which ignores the cross-covariance
 //! between the delayed and the current error). Cost: one replay of up to window + 100 ms of
 //! IMU steps (≈ 2 µs each) per burst of late samples. Samples older than the window are
-//! counted in `dropped_late` and never fused. The first checkpoint is the start of navigation,
+//! counted in `dropped_late` and never fused. The IMU log is sized from the configuration
+//! ([`NavigatorConfig::imu_log_capacity`]: `max_imu_rate_hz × (window + 0.2 s)` steps); should
+//! a faster IMU leave it too short for a replay, the late samples are dropped (`dropped_late`)
+//! and the event counted (`replays_impossible`), never fused at a later epoch. The first checkpoint is the start of navigation,
 //! so a sample late in the first 100 ms is replayed from there too; a sample whose time of
 //! validity is at or before the start belongs to the alignment period and is discarded
 //! whenever it arrives, as alignment discards it in time. So the solution at an epoch depends
@@ -71,7 +74,7 @@
 //! touches the filter. Nothing here panics on input, allocates per sample, reads a clock or
 //! does I/O.
 
-use crate::FusionError;
+use crate::ConfigError;
 use crate::alignment::{self, Accumulator};
 use crate::attitude::{quat_from_wire, quat_to_wire, rpy_from_q_n_b};
 use crate::celestial::EarthOrientation;
@@ -87,6 +90,9 @@ use msgs::{
     NavMode, NavSolution, OdometerSample, SensorHealth, SensorId, StarTrackerSample,
 };
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
+
+mod gate;
+pub use gate::{RejectReason, Rejection};
 
 const DEG: f64 = std::f64::consts::PI / 180.0;
 /// Standard gravity, m/s² (unit conversions only).
@@ -427,6 +433,11 @@ pub struct NavigatorConfig {
     pub gate_probability: f64,
     /// How far behind the IMU time a sample may arrive and still be fused, s (≤ 2).
     pub buffer_window_s: f64,
+    /// Highest IMU sample rate the delayed-fusion log is sized for, Hz: it keeps
+    /// `max_imu_rate_hz × (buffer_window_s + 0.2 s)` steps ([`NavigatorConfig::imu_log_capacity`]).
+    /// A faster IMU makes a late sample impossible to replay; it is then dropped and counted
+    /// (`replays_impossible` in [`NavigatorDiagnostics`]).
+    pub max_imu_rate_hz: f64,
     /// Covariance propagation interval, s: the transition is accumulated over IMU steps and
     /// the covariance propagated at this interval and before every update ([`crate::ekf`]).
     pub covariance_interval_s: f64,
@@ -462,6 +473,7 @@ impl Default for NavigatorConfig {
             coning_sculling: true,
             gate_probability: 0.999,
             buffer_window_s: 1.0,
+            max_imu_rate_hz: 2000.0,
             covariance_interval_s: 0.05,
             gnss_mode: GnssMode::Loose,
             states: StateSwitches::default(),
@@ -477,11 +489,11 @@ impl Default for NavigatorConfig {
     }
 }
 
-fn check(ok: bool, key: &str, what: &str) -> Result<(), FusionError> {
+fn check(ok: bool, key: &str, what: &str) -> Result<(), ConfigError> {
     if ok {
         Ok(())
     } else {
-        Err(FusionError::Config(format!("filter.{key} {what}")))
+        Err(ConfigError(format!("filter.{key} {what}")))
     }
 }
 
@@ -495,7 +507,7 @@ fn nonneg(x: f64) -> bool {
 
 impl NavigatorConfig {
     /// Check the meaning of the values (ranges, consistency); the error names the key.
-    pub fn validate(&self) -> Result<(), FusionError> {
+    pub fn validate(&self) -> Result<(), ConfigError> {
         check(
             nonneg(self.alignment_s) && self.alignment_s <= 3600.0,
             "alignment_s",
@@ -512,6 +524,17 @@ impl NavigatorConfig {
             nonneg(self.buffer_window_s) && self.buffer_window_s <= 2.0,
             "buffer_window_s",
             "must be in [0, 2] s",
+        )?;
+        check(
+            pos(self.max_imu_rate_hz) && self.max_imu_rate_hz <= 100_000.0,
+            "max_imu_rate_hz",
+            "must be in (0, 100000] Hz",
+        )?;
+        check(
+            self.imu_log_capacity() <= IMU_LOG_MAX_CAP,
+            "max_imu_rate_hz",
+            "× (buffer_window_s + 0.2 s) must be at most 65536 IMU steps (the delayed-fusion \
+             log): lower the rate or the window",
         )?;
         if let Some(p) = &self.initial_position {
             check(
@@ -617,7 +640,7 @@ impl NavigatorConfig {
     }
 
     /// Checks of the state-group and coupling keys (filter engineer's part of `validate`).
-    fn validate_filter_keys(&self) -> Result<(), FusionError> {
+    fn validate_filter_keys(&self) -> Result<(), ConfigError> {
         check(
             pos(self.covariance_interval_s) && self.covariance_interval_s <= 1.0,
             "covariance_interval_s",
@@ -652,6 +675,21 @@ impl NavigatorConfig {
             "must be true with gnss_mode = \"tight\"",
         )?;
         Ok(())
+    }
+
+    /// IMU steps the delayed-fusion log keeps: every step from the checkpoint before the oldest
+    /// sample still fused (up to `buffer_window_s` behind, the checkpoint up to one period
+    /// before it, the rewind one IMU step after the arrival) to now, at `max_imu_rate_hz`, with
+    /// a second checkpoint period and two steps of margin.
+    pub fn imu_log_capacity(&self) -> usize {
+        let period_s = CHECKPOINT_PERIOD_NS as f64 * 1e-9;
+        let steps = (self.max_imu_rate_hz * (self.buffer_window_s + 2.0 * period_s)).ceil();
+        // Saturating: an absurd rate fails the IMU_LOG_MAX_CAP check, never overflows.
+        if steps.is_finite() && steps < IMU_LOG_MAX_CAP as f64 {
+            steps as usize + 2
+        } else {
+            IMU_LOG_MAX_CAP + 1
+        }
     }
 
     /// Mechanization settings derived from this configuration.
@@ -896,8 +934,8 @@ impl<T: Clone> Ring<T> {
 const CHECKPOINT_PERIOD_NS: i64 = 100_000_000;
 /// Checkpoints kept: the 2 s longest buffer window plus margin, at the period above.
 const CHECKPOINT_CAP: usize = 32;
-/// IMU steps kept for replay: > 2.3 s at 400 Hz.
-const IMU_LOG_CAP: usize = 1024;
+/// Largest delayed-fusion IMU log, steps (≈ 5 MB; 2 kHz with the 2 s window needs 4 402).
+const IMU_LOG_MAX_CAP: usize = 65_536;
 const GNSS_CAP: usize = 32;
 const STAR_CAP: usize = 64;
 const ODO_CAP: usize = 256;
@@ -982,6 +1020,36 @@ pub struct NavigatorDiagnostics {
     pub gnss_ls_pdop: f64,
     /// Times the navigator started over (re-alignment).
     pub reinitializations: u64,
+    /// Late samples that could not be replayed at their epoch because the IMU log no longer
+    /// reached back to the checkpoint before them (an IMU faster than
+    /// [`NavigatorConfig::max_imu_rate_hz`]): one per rewind; the samples are dropped and
+    /// counted in their sensor's `dropped_late`, never fused at a wrong epoch.
+    pub replays_impossible: u64,
+}
+
+/// One input of the navigator ([`Navigator::push`]): a sensor sample (borrowed, time of
+/// validity in its header, GPS ns) or the daemon's verdict that a sensor is, or no longer is,
+/// delivering within its deadline.
+#[derive(Debug, Clone, Copy)]
+pub enum Input<'a> {
+    /// IMU increments (body frame).
+    Imu(&'a ImuSample),
+    /// Star-tracker attitude (sensor frame w.r.t. ICRF).
+    StarTracker(&'a StarTrackerSample),
+    /// GNSS fix, raw satellites and baseline phases (ECEF).
+    Gnss(&'a GnssSample),
+    /// Odometer speed and distance over its interval.
+    Odometer(&'a OdometerSample),
+    /// Barometric pressure.
+    Baro(&'a BaroSample),
+    /// Whether sensor `sensor` (index = `msgs::SensorId`; out-of-range indices are ignored)
+    /// delivers within its deadline.
+    SensorAlive {
+        /// Sensor slot (`msgs::SensorId as usize`).
+        sensor: usize,
+        /// True when it delivers again, false when its deadline was missed.
+        alive: bool,
+    },
 }
 
 /// The fusion engine.
@@ -1122,7 +1190,7 @@ const fn sid(s: SensorId) -> usize {
 
 impl Navigator {
     /// A navigator waiting for its first IMU sample.
-    pub fn new(config: NavigatorConfig) -> Result<Self, FusionError> {
+    pub fn new(config: NavigatorConfig) -> Result<Self, ConfigError> {
         config.validate()?;
         let ell = config.ellipsoid.ellipsoid();
         let nav = NavState {
@@ -1155,7 +1223,7 @@ impl Navigator {
             star_q: TimeQueue::new(),
             odo_q: TimeQueue::new(),
             baro_q: TimeQueue::new(),
-            imu_log: Ring::new(IMU_LOG_CAP, ImuLogEntry::default()),
+            imu_log: Ring::new(config.imu_log_capacity(), ImuLogEntry::default()),
             checkpoints: Ring::new(
                 CHECKPOINT_CAP,
                 Checkpoint {
@@ -1205,11 +1273,11 @@ impl Navigator {
     /// Feed one IMU sample (in time order). Returns the solution at its time once navigating
     /// (None while initializing/aligning). Buffered aiding samples whose time of validity is
     /// reached are fused before the solution is formed. Allocates nothing.
-    pub fn push_imu(&mut self, s: &ImuSample) -> Result<Option<NavSolution>, FusionError> {
+    pub fn push_imu(&mut self, s: &ImuSample) -> Result<Option<NavSolution>, Rejection> {
         let id = sid(SensorId::Imu);
         self.health[id].received += 1;
         if let Err(e) = self
-            .validate_header("imu", id, &s.header)
+            .validate_header(SensorId::Imu, &s.header)
             .and_then(|_| self.validate_imu(s))
             .and_then(|_| self.check_imu_time(&s.header))
         {
@@ -1267,19 +1335,19 @@ impl Navigator {
     }
 
     /// Queue a star-tracker sample for fusion at its time of validity.
-    pub fn push_star_tracker(&mut self, s: &StarTrackerSample) -> Result<(), FusionError> {
+    pub fn push_star_tracker(&mut self, s: &StarTrackerSample) -> Result<(), Rejection> {
         let id = sid(SensorId::StarTracker);
         self.health[id].received += 1;
         if let Err(e) = self
-            .validate_header("star_tracker", id, &s.header)
+            .validate_header(SensorId::StarTracker, &s.header)
             .and_then(|_| {
-                let bad = |r: &str| invalid("star_tracker", &s.header, r);
+                let bad = |r| Rejection::new(SensorId::StarTracker, s.header.time_ns, r);
                 if !s.q_sensor_icrf.iter().all(|x| x.is_finite()) {
-                    return Err(bad("non-finite quaternion"));
+                    return Err(bad(RejectReason::NonFiniteQuaternion));
                 }
                 let n = s.q_sensor_icrf.iter().map(|x| x * x).sum::<f64>().sqrt();
                 if s.valid != 0 && (n - 1.0).abs() > 1e-3 {
-                    return Err(bad("quaternion is not unit norm"));
+                    return Err(bad(RejectReason::QuaternionNotUnit));
                 }
                 if s.valid != 0
                     && !(pos(s.sigma_cross_rad)
@@ -1287,7 +1355,7 @@ impl Navigator {
                         && s.sigma_cross_rad < 0.1
                         && s.sigma_roll_rad < 0.1)
                 {
-                    return Err(bad("sigmas must be finite, > 0 and < 0.1 rad"));
+                    return Err(bad(RejectReason::StarSigma));
                 }
                 Ok(())
             })
@@ -1314,11 +1382,11 @@ impl Navigator {
     }
 
     /// Queue a GNSS sample.
-    pub fn push_gnss(&mut self, s: &GnssSample) -> Result<(), FusionError> {
+    pub fn push_gnss(&mut self, s: &GnssSample) -> Result<(), Rejection> {
         let id = sid(SensorId::Gnss);
         self.health[id].received += 1;
         let fix = match self
-            .validate_header("gnss", id, &s.header)
+            .validate_header(SensorId::Gnss, &s.header)
             .and_then(|_| validate_gnss(s))
         {
             Ok(f) => f,
@@ -1350,21 +1418,21 @@ impl Navigator {
     }
 
     /// Queue an odometer sample.
-    pub fn push_odometer(&mut self, s: &OdometerSample) -> Result<(), FusionError> {
+    pub fn push_odometer(&mut self, s: &OdometerSample) -> Result<(), Rejection> {
         let id = sid(SensorId::Odometer);
         self.health[id].received += 1;
         if let Err(e) = self
-            .validate_header("odometer", id, &s.header)
+            .validate_header(SensorId::Odometer, &s.header)
             .and_then(|_| {
-                let bad = |r: &str| invalid("odometer", &s.header, r);
+                let bad = |r| Rejection::new(SensorId::Odometer, s.header.time_ns, r);
                 if !(s.dt_s.is_finite() && s.dt_s > 0.0 && s.dt_s <= 10.0) {
-                    return Err(bad("interval must be in (0, 10] s"));
+                    return Err(bad(RejectReason::OdometerInterval));
                 }
                 if !(s.speed_m_s.is_finite() && s.speed_m_s.abs() < 200.0) {
-                    return Err(bad("speed must be finite and below 200 m/s"));
+                    return Err(bad(RejectReason::OdometerSpeed));
                 }
                 if !s.distance_m.is_finite() {
-                    return Err(bad("non-finite distance"));
+                    return Err(bad(RejectReason::NonFiniteDistance));
                 }
                 Ok(())
             })
@@ -1384,19 +1452,22 @@ impl Navigator {
     }
 
     /// Queue a baro sample.
-    pub fn push_baro(&mut self, s: &BaroSample) -> Result<(), FusionError> {
+    pub fn push_baro(&mut self, s: &BaroSample) -> Result<(), Rejection> {
         let id = sid(SensorId::Baro);
         self.health[id].received += 1;
-        if let Err(e) = self.validate_header("baro", id, &s.header).and_then(|_| {
-            let bad = |r: &str| invalid("baro", &s.header, r);
-            if !(s.pressure_pa.is_finite() && (1_000.0..=120_000.0).contains(&s.pressure_pa)) {
-                return Err(bad("pressure must be in [1000, 120000] Pa"));
-            }
-            if !(s.temperature_c.is_finite() && (-120.0..=100.0).contains(&s.temperature_c)) {
-                return Err(bad("temperature must be in [-120, 100] °C"));
-            }
-            Ok(())
-        }) {
+        if let Err(e) = self
+            .validate_header(SensorId::Baro, &s.header)
+            .and_then(|_| {
+                let bad = |r| Rejection::new(SensorId::Baro, s.header.time_ns, r);
+                if !(s.pressure_pa.is_finite() && (1_000.0..=120_000.0).contains(&s.pressure_pa)) {
+                    return Err(bad(RejectReason::Pressure));
+                }
+                if !(s.temperature_c.is_finite() && (-120.0..=100.0).contains(&s.temperature_c)) {
+                    return Err(bad(RejectReason::Temperature));
+                }
+                Ok(())
+            })
+        {
             self.health[id].rejected_invalid += 1;
             return Err(e);
         }
@@ -1405,7 +1476,11 @@ impl Navigator {
         if !h.is_finite() {
             // Counted as invalid, but the header has been accepted (time and seq advance).
             self.health[id].rejected_invalid += 1;
-            return Err(invalid("baro", &s.header, "pressure gives no ISA altitude"));
+            return Err(Rejection::new(
+                SensorId::Baro,
+                s.header.time_ns,
+                RejectReason::NoIsaAltitude,
+            ));
         }
         if self.too_late(s.header.time_ns) || self.baro_q.insert(s.header.time_ns, h).is_some() {
             self.health[id].dropped_late += 1;
@@ -1413,6 +1488,24 @@ impl Navigator {
             self.note_arrival(s.header.time_ns);
         }
         Ok(())
+    }
+
+    /// Feed one input: the single entry point by which the daemon, offline runs and replay
+    /// drive the navigator. An IMU sample returns the solution at its time once navigating;
+    /// aiding samples are queued for fusion at their time of validity and return None, as does
+    /// a sensor alive/dead report. Allocates nothing.
+    pub fn push(&mut self, input: Input<'_>) -> Result<Option<NavSolution>, Rejection> {
+        match input {
+            Input::Imu(s) => self.push_imu(s),
+            Input::StarTracker(s) => self.push_star_tracker(s).map(|()| None),
+            Input::Gnss(s) => self.push_gnss(s).map(|()| None),
+            Input::Odometer(s) => self.push_odometer(s).map(|()| None),
+            Input::Baro(s) => self.push_baro(s).map(|()| None),
+            Input::SensorAlive { sensor, alive } => {
+                self.set_sensor_alive(sensor, alive);
+                Ok(None)
+            }
+        }
     }
 
     /// Tell the navigator whether a sensor (index = `msgs::SensorId`) is delivering within its
@@ -1534,14 +1627,11 @@ impl Navigator {
 
     // ---------------------------------------------------------------- validation
 
-    fn validate_header(
-        &self,
-        sensor: &'static str,
-        id: usize,
-        h: &Header,
-    ) -> Result<(), FusionError> {
+    fn validate_header(&self, sensor: SensorId, h: &Header) -> Result<(), Rejection> {
+        let id = sid(sensor);
+        let bad = |r: RejectReason| Rejection::new(sensor, h.time_ns, r);
         if h.time_ns < 0 {
-            return Err(invalid(sensor, h, "negative time of validity"));
+            return Err(bad(RejectReason::NegativeTime));
         }
         // The IMU's own time continuity (backward steps, gaps, jumps) is `check_imu_time`.
         let imu = id == sid(SensorId::Imu);
@@ -1549,14 +1639,12 @@ impl Navigator {
             && let Some(prev) = self.last_time[id]
             && h.time_ns <= prev
         {
-            return Err(FusionError::TimeNotIncreasing {
-                sensor,
-                time_ns: h.time_ns,
-                previous_ns: prev,
-            });
+            return Err(bad(RejectReason::TimeNotIncreasing {
+                previous: GpsTime { ns: prev },
+            }));
         }
         if self.last_seq[id] == Some(h.seq) {
-            return Err(invalid(sensor, h, "duplicated sequence number"));
+            return Err(bad(RejectReason::DuplicatedSequence));
         }
         // An aiding time of validity far ahead of the filter time is a corrupt timestamp:
         // accepted, it would make every later good sample "not increasing" (the sensor lost for
@@ -1571,11 +1659,7 @@ impl Navigator {
         if let Some(r) = reference
             && h.time_ns.saturating_sub(r) > MAX_TIME_AHEAD_NS
         {
-            return Err(invalid(
-                sensor,
-                h,
-                "time of validity more than an hour ahead of the last IMU sample",
-            ));
+            return Err(bad(RejectReason::FarAheadOfImu));
         }
         Ok(())
     }
@@ -1591,27 +1675,27 @@ impl Navigator {
         self.health[id].last_time_ns = h.time_ns;
     }
 
-    fn validate_imu(&self, s: &ImuSample) -> Result<(), FusionError> {
-        let bad = |r: &str| invalid("imu", &s.header, r);
+    fn validate_imu(&self, s: &ImuSample) -> Result<(), Rejection> {
+        let bad = |r| Rejection::new(SensorId::Imu, s.header.time_ns, r);
         // At least 10 µs: no IMU outputs faster than 100 kHz (DESIGN: up to 2 kHz), and a
         // vanishing interval divides the increments into infinite rates (found by fuzzing: a
         // subnormal dt_s made the state non-finite).
         if !(s.dt_s.is_finite() && (1e-5..=1.0).contains(&s.dt_s)) {
-            return Err(bad("interval dt_s must be in [1e-5, 1] s"));
+            return Err(bad(RejectReason::ImuInterval));
         }
         let dth = Vector3::from(s.delta_angle_rad);
         let dv = Vector3::from(s.delta_velocity_m_s);
         if !(dth.iter().all(|x| x.is_finite()) && dv.iter().all(|x| x.is_finite())) {
-            return Err(bad("non-finite increment"));
+            return Err(bad(RejectReason::NonFiniteIncrement));
         }
         if dth.norm() > self.config.imu.max_rate_rad_s * s.dt_s {
-            return Err(bad("angular rate above imu.max_rate_rad_s"));
+            return Err(bad(RejectReason::RateAboveLimit));
         }
         if dv.norm() > self.config.imu.max_specific_force_m_s2 * s.dt_s {
-            return Err(bad("specific force above imu.max_specific_force_m_s2"));
+            return Err(bad(RejectReason::SpecificForceAboveLimit));
         }
         if s.n_channels as usize > MAX_IMU_CHANNELS {
-            return Err(bad("n_channels above MAX_IMU_CHANNELS"));
+            return Err(bad(RejectReason::TooManyChannels));
         }
         Ok(())
     }
@@ -1626,7 +1710,7 @@ impl Navigator {
     /// then been re-initialised and this sample starts the new alignment). Err for a sample
     /// that steps backward or jumps more than 1 s ahead: it is held as a candidate new time
     /// base (only `imu_time_jump` changes, never the solution).
-    fn check_imu_time(&mut self, h: &Header) -> Result<(), FusionError> {
+    fn check_imu_time(&mut self, h: &Header) -> Result<(), Rejection> {
         let id = sid(SensorId::Imu);
         let Some(prev) = self.last_time[id] else {
             return Ok(());
@@ -1655,20 +1739,14 @@ impl Navigator {
             return Ok(());
         }
         self.imu_time_jump = Some(jump);
-        Err(if step <= 0 {
-            FusionError::TimeNotIncreasing {
-                sensor: "imu",
-                time_ns: t,
-                previous_ns: prev,
+        let reason = if step <= 0 {
+            RejectReason::TimeNotIncreasing {
+                previous: GpsTime { ns: prev },
             }
         } else {
-            invalid(
-                "imu",
-                h,
-                "time of validity more than 1 s ahead of the last IMU sample (held: 20 \
-                 consistent samples on the new time base re-initialise the navigator)",
-            )
-        })
+            RejectReason::ImuTimeJumpHeld
+        };
+        Err(Rejection::new(SensorId::Imu, t, reason))
     }
 
     /// Start over with alignment after a confirmed IMU time discontinuity. Kept: what
@@ -1720,22 +1798,7 @@ impl Navigator {
     fn bridge_imu_gap(&mut self, p: i64, e: &ImuLogEntry) {
         // Aiding more than one IMU interval inside the gap: its epoch was never navigated.
         let inside = e.t - (e.dt_s * 1e9) as i64 - 1;
-        let mut dropped = [0u64; MAX_SENSORS];
-        while let Some((_, _, counted)) = self.gnss_q.pop_due(inside) {
-            dropped[sid(SensorId::Gnss)] += u64::from(!counted);
-        }
-        while let Some((_, _, counted)) = self.star_q.pop_due(inside) {
-            dropped[sid(SensorId::StarTracker)] += u64::from(!counted);
-        }
-        while let Some((_, _, counted)) = self.odo_q.pop_due(inside) {
-            dropped[sid(SensorId::Odometer)] += u64::from(!counted);
-        }
-        while let Some((_, _, counted)) = self.baro_q.pop_due(inside) {
-            dropped[sid(SensorId::Baro)] += u64::from(!counted);
-        }
-        for (h, d) in self.health.iter_mut().zip(dropped) {
-            h.dropped_late += d;
-        }
+        self.drop_queued_until(inside);
         if self.imu_log.len == 0 {
             return; // first step after alignment: nothing to compare with
         }
@@ -1980,8 +2043,12 @@ impl Navigator {
     /// (module docs, "Delayed fusion"): restore the latest checkpoint before `ts`, put the
     /// aiding fused since then back in the queues (flagged as already counted) and replay the
     /// logged IMU steps, which fuse every sample — the late ones included — at the epoch and
-    /// with the state and covariance an in-time arrival would have met. When no checkpoint is
-    /// old enough (right after alignment), the samples are fused at the next epoch instead.
+    /// with the state and covariance an in-time arrival would have met. No checkpoint is
+    /// before `ts` only when `ts` is at or before the start of navigation (the first
+    /// checkpoint; the ring holds more than the window): such samples belong to the alignment
+    /// period and `fuse_due` discards them. When the IMU log does not reach back to the
+    /// checkpoint (an IMU faster than `max_imu_rate_hz`), the replay is impossible: counted,
+    /// and the late samples are dropped ([`Self::drop_unreplayable`]).
     fn replay_from(&mut self, ts: i64) {
         let mut k = self.checkpoints.len;
         while k > 0 && self.checkpoints.get(k - 1).t >= ts {
@@ -1994,11 +2061,12 @@ impl Navigator {
         // The IMU log must hold every step after the checkpoint epoch: its first entry is at
         // or before it, or is the very step after it (the log starts with navigation, right
         // after the checkpoint taken at the start).
-        if self.imu_log.len == 0 {
-            return;
-        }
-        let first = self.imu_log.get(0);
-        if first.t > c.t && first.prev_t.is_none_or(|p| p > c.t) {
+        let covered = self.imu_log.len > 0 && {
+            let first = self.imu_log.get(0);
+            first.t <= c.t || first.prev_t.is_some_and(|p| p <= c.t)
+        };
+        if !covered {
+            self.drop_unreplayable();
             return;
         }
         self.checkpoints.truncate(k);
@@ -2031,6 +2099,35 @@ impl Navigator {
             }
         }
         self.replaying = false;
+    }
+
+    /// A rewind the IMU log cannot serve: drop the samples the solution has passed (those
+    /// queued at or before the current epoch; the in-time ones stay), count them as late and
+    /// the event in `replays_impossible`.
+    fn drop_unreplayable(&mut self) {
+        self.drop_queued_until(self.time_ns);
+        self.diagnostics.replays_impossible += 1;
+    }
+
+    /// Drop the queued aiding with time of validity ≤ `t`, counting each sample (once) in its
+    /// sensor's `dropped_late`.
+    fn drop_queued_until(&mut self, t: i64) {
+        let mut dropped = [0u64; MAX_SENSORS];
+        while let Some((_, _, counted)) = self.gnss_q.pop_due(t) {
+            dropped[sid(SensorId::Gnss)] += u64::from(!counted);
+        }
+        while let Some((_, _, counted)) = self.star_q.pop_due(t) {
+            dropped[sid(SensorId::StarTracker)] += u64::from(!counted);
+        }
+        while let Some((_, _, counted)) = self.odo_q.pop_due(t) {
+            dropped[sid(SensorId::Odometer)] += u64::from(!counted);
+        }
+        while let Some((_, _, counted)) = self.baro_q.pop_due(t) {
+            dropped[sid(SensorId::Baro)] += u64::from(!counted);
+        }
+        for (h, d) in self.health.iter_mut().zip(dropped) {
+            h.dropped_late += d;
+        }
     }
 
     /// Apply an accepted correction to the current state and the error estimates.
@@ -2753,23 +2850,15 @@ fn diag_sigma(p: &Covariance, k: usize) -> [f64; 3] {
     [0, 1, 2].map(|i| p[(k + i, k + i)].max(0.0).sqrt())
 }
 
-fn invalid(sensor: &'static str, h: &Header, reason: &str) -> FusionError {
-    FusionError::InvalidSample {
-        sensor,
-        time_ns: h.time_ns,
-        reason: reason.to_string(),
-    }
-}
-
 fn matrix_from_row_major(a: &[f64; 9]) -> Matrix3<f64> {
     Matrix3::from_row_slice(a)
 }
 
 /// Check a GNSS sample; Ok(None) when it carries no valid fix (not an error).
-fn validate_gnss(s: &GnssSample) -> Result<Option<GnssFix>, FusionError> {
-    let bad = |r: &str| invalid("gnss", &s.header, r);
+fn validate_gnss(s: &GnssSample) -> Result<Option<GnssFix>, Rejection> {
+    let bad = |r| Rejection::new(SensorId::Gnss, s.header.time_ns, r);
     if s.n_satellites as usize > MAX_SATELLITES {
-        return Err(bad("n_satellites above MAX_SATELLITES"));
+        return Err(bad(RejectReason::TooManySatellites));
     }
     if s.fix_valid == 0 {
         return Ok(None);
@@ -2777,31 +2866,29 @@ fn validate_gnss(s: &GnssSample) -> Result<Option<GnssFix>, FusionError> {
     let p = Vector3::from(s.pos_ecef_m);
     let v = Vector3::from(s.vel_ecef_m_s);
     if !(p.iter().all(|x| x.is_finite()) && v.iter().all(|x| x.is_finite())) {
-        return Err(bad("non-finite position or velocity"));
+        return Err(bad(RejectReason::NonFiniteFix));
     }
     let r = p.norm();
     if !(6.30e6..=6.48e6).contains(&r) {
-        return Err(bad(
-            "position is not near the Earth's surface (|r| outside 6300–6480 km)",
-        ));
+        return Err(bad(RejectReason::PositionNotNearEarth));
     }
     if v.norm() > 2_000.0 {
-        return Err(bad("velocity above 2000 m/s"));
+        return Err(bad(RejectReason::VelocityAboveLimit));
     }
     let pc = matrix_from_row_major(&s.pos_cov_ecef_m2);
     let vc = matrix_from_row_major(&s.vel_cov_ecef_m2_s2);
     if !(pc.iter().all(|x| x.is_finite()) && vc.iter().all(|x| x.is_finite())) {
-        return Err(bad("non-finite covariance"));
+        return Err(bad(RejectReason::NonFiniteCovariance));
     }
     let pc = ekf::symmetrize(&pc);
     if nalgebra::Cholesky::new(pc).is_none() || pc.diagonal().max() > 1e8 {
-        return Err(bad("position covariance not positive definite or absurd"));
+        return Err(bad(RejectReason::PositionCovariance));
     }
     let vc = ekf::symmetrize(&vc);
     let vel_valid = if vc.iter().all(|x| *x == 0.0) {
         false
     } else if nalgebra::Cholesky::new(vc).is_none() || vc.diagonal().max() > 1e4 {
-        return Err(bad("velocity covariance not positive definite or absurd"));
+        return Err(bad(RejectReason::VelocityCovariance));
     } else {
         true
     };
@@ -3176,7 +3263,10 @@ mod tests {
         older.header.time_ns -= 1;
         assert!(matches!(
             nav.push_imu(&older),
-            Err(FusionError::TimeNotIncreasing { .. })
+            Err(Rejection {
+                reason: RejectReason::TimeNotIncreasing { .. },
+                ..
+            })
         ));
         assert_eq!(nav.health()[SensorId::Imu as usize].rejected_invalid, 5);
         // GNSS with NaN, star tracker with a non-unit quaternion, baro with absurd pressure.
@@ -3307,6 +3397,128 @@ mod tests {
             c.push_imu(&imu).unwrap();
         }
         assert!((c.nav_state().r_e - na.r_e).norm() > 1e-4);
+    }
+
+    /// Two navigators on the same 1 kHz static-site stream (baro 10 Hz, GNSS 1 Hz); B gets the
+    /// GNSS fixes of t = 75 s and 76 s only at 76.5 s, i.e. 1.5 s and 0.5 s late (in order, so
+    /// that the sensor's time still increases; never, with `deliver` false). Returns (A, B,
+    /// the number of late pushes); boxed, a navigator holds its queues inline.
+    fn late_fix_at_1_khz(
+        cfg: NavigatorConfig,
+        deliver: bool,
+    ) -> (Box<Navigator>, Box<Navigator>, u32) {
+        let mut a = Box::new(Navigator::new(cfg.clone()).unwrap());
+        let mut b = Box::new(Navigator::new(cfg).unwrap());
+        let mut sim = StaticSim::new(33, 1000.0);
+        let mut held = Vec::new();
+        let late_at = T0 + 75_000_000_000;
+        let release = late_at + 1_500_000_000;
+        let mut delayed = 0;
+        for k in 1..=(78 * 1000) {
+            let imu = sim.next_imu();
+            let t = imu.header.time_ns;
+            if k % 100 == 0 {
+                let mut baro = BaroSample::default();
+                baro.header.time_ns = t;
+                baro.header.seq = k as u64;
+                baro.pressure_pa = crate::atmosphere::isa_pressure_pa(181.0);
+                baro.temperature_c = 15.0;
+                a.push_baro(&baro).unwrap();
+                b.push_baro(&baro).unwrap();
+            }
+            if k % 1000 == 0 {
+                let g = sim.gnss();
+                a.push_gnss(&g).unwrap();
+                if (late_at..release).contains(&t) {
+                    held.push(g);
+                } else {
+                    b.push_gnss(&g).unwrap();
+                }
+            }
+            if t == release && deliver {
+                assert_eq!(
+                    held[0].header.time_ns + 1_500_000_000,
+                    b.time_ns() + 1_000_000
+                );
+                for g in held.drain(..) {
+                    b.push(Input::Gnss(&g)).unwrap();
+                    delayed += 1;
+                }
+            }
+            a.push(Input::Imu(&imu)).unwrap();
+            b.push(Input::Imu(&imu)).unwrap();
+        }
+        (a, b, delayed)
+    }
+
+    #[test]
+    fn late_gnss_sample_at_1_khz_gives_the_in_time_update() {
+        // As `late_gnss_sample_gives_the_in_time_update`, at 1 kHz with the longest window
+        // (2 s) and a fix 1.5 s late: the IMU log must hold 1.6 s of steps (1 600 entries).
+        let cfg = NavigatorConfig {
+            alignment_s: 60.0,
+            buffer_window_s: 2.0,
+            ..NavigatorConfig::default()
+        };
+        let (a, b, delayed) = late_fix_at_1_khz(cfg, true);
+        assert_eq!(delayed, 2);
+        assert_eq!(b.diagnostics().replays_impossible, 0);
+        let (na, nb) = (a.nav_state(), b.nav_state());
+        let dr = (na.r_e - nb.r_e).norm();
+        assert!(dr < 1e-9, "late fix changes the position by {dr} m");
+        assert!((na.v_e - nb.v_e).norm() < 1e-12);
+        assert!(na.q_e_b.angle_to(&nb.q_e_b) < 1e-12);
+        let dp = (a.covariance() - b.covariance()).abs().max() / a.covariance().abs().max();
+        assert!(dp < 1e-9, "covariance differs by {dp}");
+        for s in [SensorId::Gnss, SensorId::Baro] {
+            let (ha, hb) = (a.health()[s as usize], b.health()[s as usize]);
+            assert_eq!(ha.fused, hb.fused, "{s:?}");
+            assert_eq!(hb.dropped_late, 0, "{s:?}");
+        }
+    }
+
+    #[test]
+    fn a_replay_the_imu_log_cannot_hold_is_counted_and_the_late_samples_dropped() {
+        // The log sized for 100 Hz (223 steps) holds 0.22 s of a 1 kHz IMU: the fixes 1.5 s
+        // and 0.5 s late cannot be replayed at their epoch. They must be dropped and counted
+        // (not fused at the current epoch, the old silent behaviour): B ends exactly where a
+        // navigator that never received them ends.
+        let cfg = NavigatorConfig {
+            alignment_s: 60.0,
+            buffer_window_s: 2.0,
+            max_imu_rate_hz: 100.0,
+            ..NavigatorConfig::default()
+        };
+        assert_eq!(cfg.imu_log_capacity(), 223);
+        let (a, b, delayed) = late_fix_at_1_khz(cfg.clone(), true);
+        let (_, c, _) = late_fix_at_1_khz(cfg, false);
+        assert_eq!(delayed, 2);
+        assert_eq!(b.diagnostics().replays_impossible, 1);
+        let (hb, hc) = (
+            b.health()[sid(SensorId::Gnss)],
+            c.health()[sid(SensorId::Gnss)],
+        );
+        assert_eq!(hb.dropped_late, 2);
+        assert_eq!(hb.fused, hc.fused);
+        assert_eq!(hb.fused + 2, a.health()[sid(SensorId::Gnss)].fused);
+        assert!((b.nav_state().r_e - c.nav_state().r_e).norm() < 1e-9);
+        assert_eq!(b.covariance(), c.covariance());
+    }
+
+    #[test]
+    fn an_imu_rate_the_log_cannot_hold_is_a_configuration_error() {
+        let mut cfg = NavigatorConfig {
+            buffer_window_s: 2.0,
+            max_imu_rate_hz: 2000.0,
+            ..NavigatorConfig::default()
+        };
+        assert_eq!(cfg.imu_log_capacity(), 4402);
+        cfg.validate().unwrap();
+        cfg.max_imu_rate_hz = 40_000.0; // 88 000 steps
+        let e = cfg.validate().unwrap_err();
+        assert!(e.0.starts_with("filter.max_imu_rate_hz "), "{e}");
+        cfg.max_imu_rate_hz = f64::NAN;
+        assert!(Navigator::new(cfg).is_err());
     }
 
     #[test]

@@ -58,7 +58,7 @@ pub enum ReplayError {
     Config(String),
     /// The engine rejected the configuration.
     #[error("engine: {0}")]
-    Engine(#[from] fusion::FusionError),
+    Engine(#[from] fusion::ConfigError),
     /// The replay's own recording could not be written.
     #[error(transparent)]
     Recorder(#[from] crate::recorder::RecorderError),

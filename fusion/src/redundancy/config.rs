@@ -1,6 +1,6 @@
 //! Settings of the redundant-channel fault detection, isolation and exclusion.
 
-use crate::FusionError;
+use crate::ConfigError;
 
 /// Settings of the fault detection, isolation and exclusion.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize, serde::Serialize)]
@@ -51,12 +51,12 @@ impl Default for FdiConfig {
 
 impl FdiConfig {
     /// Check ranges.
-    pub fn validate(&self) -> Result<(), FusionError> {
+    pub fn validate(&self) -> Result<(), ConfigError> {
         let pos = |name: &str, v: f64| {
             if v.is_finite() && v > 0.0 {
                 Ok(())
             } else {
-                Err(FusionError::Config(format!(
+                Err(ConfigError(format!(
                     "redundancy.{name} must be finite and > 0, got {v}"
                 )))
             }
@@ -68,19 +68,19 @@ impl FdiConfig {
             ("accel_relative_sigma", self.accel_relative_sigma),
         ] {
             if !(v.is_finite() && v >= 0.0) {
-                return Err(FusionError::Config(format!(
+                return Err(ConfigError(format!(
                     "redundancy.{n} must be finite and ≥ 0, got {v}"
                 )));
             }
         }
         if !(self.false_alarm_probability > 0.0 && self.false_alarm_probability < 0.5) {
-            return Err(FusionError::Config(format!(
+            return Err(ConfigError(format!(
                 "redundancy.false_alarm_probability must be in (0, 0.5), got {}",
                 self.false_alarm_probability
             )));
         }
         if self.block_samples == 0 || self.persistence_blocks == 0 {
-            return Err(FusionError::Config(
+            return Err(ConfigError(
                 "redundancy.block_samples and persistence_blocks must be ≥ 1".into(),
             ));
         }
@@ -172,12 +172,9 @@ impl RedundancyConfig {
     }
 
     /// Check ranges; the error names the key (`filter.redundancy.<key>`).
-    pub fn validate(&self) -> Result<(), FusionError> {
-        let bad = |key: &str, what: &str| {
-            Err(FusionError::Config(format!(
-                "filter.redundancy.{key} {what}"
-            )))
-        };
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let bad =
+            |key: &str, what: &str| Err(ConfigError(format!("filter.redundancy.{key} {what}")));
         for (k, v) in [
             ("gyro_quantum_deg_s", self.gyro_quantum_deg_s),
             ("accel_quantum_mg", self.accel_quantum_mg),

@@ -30,7 +30,7 @@
 
 use super::least_squares::{ls_covariance_per_unit_variance, measurement_matrix};
 use super::{ChannelVector, FdiConfig, LsMatrix, MAX_CHANNELS, ParityProjector};
-use crate::FusionError;
+use crate::ConfigError;
 use crate::ekf::chi2_quantile;
 use nalgebra::Vector3;
 
@@ -123,11 +123,11 @@ pub struct RedundantImu {
 
 impl RedundantImu {
     /// Channels with unit axes `axes[..n]` (body frame). Needs 3 ≤ n ≤ 8 axes spanning 3-D.
-    pub fn new(axes: &[[f64; 3]], config: FdiConfig) -> Result<Self, FusionError> {
+    pub fn new(axes: &[[f64; 3]], config: FdiConfig) -> Result<Self, ConfigError> {
         config.validate()?;
         let n = axes.len();
         if !(3..=MAX_CHANNELS).contains(&n) {
-            return Err(FusionError::Config(format!(
+            return Err(ConfigError(format!(
                 "redundancy: need 3..={MAX_CHANNELS} channels, got {n}"
             )));
         }
@@ -136,7 +136,7 @@ impl RedundantImu {
             let v = Vector3::from(*src);
             let norm = v.norm();
             if !(norm.is_finite() && (norm - 1.0).abs() < 1e-6) {
-                return Err(FusionError::Config(format!(
+                return Err(ConfigError(format!(
                     "redundancy: channel {i} axis {src:?} is not a unit vector"
                 )));
             }
@@ -170,7 +170,7 @@ impl RedundantImu {
             },
         };
         if !s.rebuild() {
-            return Err(FusionError::Config(
+            return Err(ConfigError(
                 "redundancy: channel axes do not span three dimensions".into(),
             ));
         }
