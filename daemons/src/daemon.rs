@@ -7,16 +7,15 @@
 //! a stand-in before (and independently of) the real filter.
 
 use crate::config::SystemConfig;
-use crate::recorder::{
-    Record, Recorder, RecorderError, RecorderOptions, RecorderStats, SensorAliveEvent,
-};
+use crate::recorder::{Recorder, RecorderError, RecorderOptions, RecorderStats};
 use fusion::Rejection;
 use fusion::navigator::Navigator;
 use iceoryx2::prelude::*;
-use msgs::ipc::{Bus, IpcError, Sub};
+use msgs::ipc::{Bus, NodeError, PublisherError, Sub, SubscriberError, WaitSetError};
 use msgs::{
-    BaroSample, GnssSample, ImuSample, MAX_SENSORS, Message, NavSolution, OdometerSample,
-    SensorHealth, SensorId, StarTrackerSample, Status, TruthSample,
+    BaroSample, Channel, GnssSample, ImuSample, MAX_SENSORS, Message, NavSolution, OdometerSample,
+    PerSensor, Record, SensorAliveEvent, SensorHealth, SensorId, StarTrackerSample, Status,
+    TruthSample,
 };
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -153,15 +152,21 @@ pub fn stamp_solution(sol: &mut NavSolution, imu: &ImuSample, solutions: u64) {
 /// Errors of the daemon.
 #[derive(Debug, thiserror::Error)]
 pub enum DaemonError {
-    /// Shared-memory transport.
+    /// The daemon could not join the bus.
     #[error(transparent)]
-    Ipc(#[from] IpcError),
+    Bus(#[from] NodeError),
+    /// A sensor or truth subscriber could not be created.
+    #[error(transparent)]
+    Subscriber(#[from] SubscriberError),
+    /// The solution or status publisher could not be created.
+    #[error(transparent)]
+    Publisher(#[from] PublisherError),
     /// Recorder.
     #[error(transparent)]
     Recorder(#[from] RecorderError),
     /// WaitSet creation, attachment or wait.
-    #[error("waitset: {0}")]
-    WaitSet(String),
+    #[error(transparent)]
+    WaitSet(#[from] WaitSetError),
 }
 
 /// Settings of one daemon run.
@@ -201,10 +206,14 @@ struct State<'a, E: NavEngine> {
     nav_pub: msgs::ipc::Pub<NavSolution>,
     status_pub: msgs::ipc::Pub<Status>,
     decimation: u64,
-    alive: [bool; 5],
-    seen: [bool; 5],
-    got: [bool; 5],
-    misses: [u32; 5],
+    /// Delivering within its deadline (as last told to the engine).
+    alive: PerSensor<bool>,
+    /// Delivered at least once.
+    seen: PerSensor<bool>,
+    /// Delivered in the current wake-up.
+    got: PerSensor<bool>,
+    /// Deadlines missed after the first sample.
+    misses: PerSensor<u32>,
     imu_received: u64,
     solutions: u64,
     published: u64,
@@ -217,11 +226,10 @@ struct State<'a, E: NavEngine> {
 impl<E: NavEngine> State<'_, E> {
     /// Push an alive/dead transition into the engine and record it (an engine input).
     fn set_alive(&mut self, sensor: SensorId, alive: bool) {
-        let i = sensor as usize;
-        self.alive[i] = alive;
+        self.alive[sensor] = alive;
         self.alive_events += 1;
         let mut ev = SensorAliveEvent {
-            sensor: i as u32,
+            sensor: sensor as u32,
             alive,
             ..Default::default()
         };
@@ -234,10 +242,9 @@ impl<E: NavEngine> State<'_, E> {
     }
 
     fn mark_received(&mut self, sensor: SensorId) {
-        let i = sensor as usize;
-        self.got[i] = true;
-        self.seen[i] = true;
-        if !self.alive[i] {
+        self.got[sensor] = true;
+        self.seen[sensor] = true;
+        if !self.alive[sensor] {
             self.set_alive(sensor, true);
             tracing::info!("{} alive", sensor.name());
         }
@@ -250,19 +257,14 @@ impl<E: NavEngine> State<'_, E> {
         }
     }
 
-    fn drain_aiding<T: Message>(&mut self, sub: &Sub<T>, sensor: SensorId, wrap: fn(T) -> Record) {
+    /// Take every sample queued on `sub`.
+    fn drain<T: Message>(&mut self, sub: &Sub<T>)
+    where
+        Record: From<T>,
+    {
         loop {
             match sub.receive() {
-                Ok(Some(s)) => {
-                    let now = msgs::monotonic_ns();
-                    self.mark_received(sensor);
-                    let rec = wrap(s);
-                    let r = feed(&mut self.engine, &rec);
-                    self.recorder.record(rec, now);
-                    if let Err(e) = r {
-                        self.log_push_error(e);
-                    }
-                }
+                Ok(Some(s)) => self.on_message(Record::from(s)),
                 Ok(None) => break,
                 Err(e) => {
                     tracing::error!("{e}");
@@ -272,69 +274,54 @@ impl<E: NavEngine> State<'_, E> {
         }
     }
 
-    fn drain_imu(&mut self, sub: &Sub<ImuSample>) {
-        loop {
-            match sub.receive() {
-                Ok(Some(s)) => {
-                    let now = msgs::monotonic_ns();
-                    self.imu_received += 1;
-                    self.mark_received(SensorId::Imu);
-                    let rec = Record::Imu(s);
-                    let r = feed(&mut self.engine, &rec);
-                    self.recorder.record(rec, now);
-                    match r {
-                        Ok(Some(mut sol)) => {
-                            self.filter_time_ns = sol.header.time_ns;
-                            self.solutions += 1;
-                            stamp_solution(&mut sol, &s, self.solutions);
-                            sol.header.send_mono_ns = msgs::monotonic_ns();
-                            if self.solutions.is_multiple_of(self.decimation) {
-                                match self.nav_pub.send_raw(sol) {
-                                    Ok(()) => self.published += 1,
-                                    Err(e) => tracing::error!("{e}"),
-                                }
-                            }
-                            self.recorder
-                                .record(Record::Nav(sol), sol.header.send_mono_ns);
-                        }
-                        Ok(None) => self.filter_time_ns = s.header.time_ns,
-                        Err(e) => self.log_push_error(e),
+    /// A message received: a sensor's goes into the engine, then everything to the recorder;
+    /// an IMU sample's solution is published and recorded.
+    fn on_message(&mut self, rec: Record) {
+        let now = msgs::monotonic_ns();
+        let Some(sensor) = rec.channel().and_then(Channel::sensor) else {
+            // Truth goes to the recorder only: the filter never sees it.
+            self.recorder.record(rec, now);
+            return;
+        };
+        let imu = match &rec {
+            Record::Imu(s) => Some(*s),
+            _ => None,
+        };
+        if imu.is_some() {
+            self.imu_received += 1;
+        }
+        self.mark_received(sensor);
+        let r = feed(&mut self.engine, &rec);
+        self.recorder.record(rec, now);
+        match (r, imu) {
+            (Ok(Some(mut sol)), Some(s)) => {
+                self.filter_time_ns = sol.header.time_ns;
+                self.solutions += 1;
+                stamp_solution(&mut sol, &s, self.solutions);
+                sol.header.send_mono_ns = msgs::monotonic_ns();
+                if self.solutions.is_multiple_of(self.decimation) {
+                    match self.nav_pub.send_raw(sol) {
+                        Ok(()) => self.published += 1,
+                        Err(e) => tracing::error!("{e}"),
                     }
                 }
-                Ok(None) => break,
-                Err(e) => {
-                    tracing::error!("{e}");
-                    break;
-                }
+                self.recorder
+                    .record(Record::Nav(sol), sol.header.send_mono_ns);
             }
-        }
-    }
-
-    fn drain_truth(&mut self, sub: &Sub<TruthSample>) {
-        // Truth goes to the recorder only: the filter never sees it.
-        loop {
-            match sub.receive() {
-                Ok(Some(s)) => {
-                    self.recorder.record(Record::Truth(s), msgs::monotonic_ns());
-                }
-                Ok(None) => break,
-                Err(e) => {
-                    tracing::error!("{e}");
-                    break;
-                }
-            }
+            (Ok(_), Some(s)) => self.filter_time_ns = s.header.time_ns,
+            (Ok(_), None) => {}
+            (Err(e), _) => self.log_push_error(e),
         }
     }
 
     fn deadline_missed(&mut self, sensor: SensorId) {
-        let i = sensor as usize;
-        if self.got[i] {
+        if self.got[sensor] {
             return; // a sample arrived in the same wake-up
         }
-        if self.seen[i] {
-            self.misses[i] = self.misses[i].saturating_add(1);
+        if self.seen[sensor] {
+            self.misses[sensor] = self.misses[sensor].saturating_add(1);
         }
-        if self.alive[i] {
+        if self.alive[sensor] {
             self.set_alive(sensor, false);
             tracing::warn!("{} silent beyond its deadline", sensor.name());
         }
@@ -349,13 +336,13 @@ impl<E: NavEngine> State<'_, E> {
             ..engine_status(&self.engine)
         };
         st.header.time_ns = self.filter_time_ns;
-        for s in SensorId::ALL {
+        for (s, &alive) in self.alive.iter() {
             let i = s as usize;
-            if self.alive[i] {
+            if alive {
                 st.alive_mask |= 1 << i;
             }
-            st.sensors[i].alive = u32::from(self.alive[i]);
-            st.sensors[i].deadline_misses = self.misses[i];
+            st.sensors[i].alive = u32::from(alive);
+            st.sensors[i].deadline_misses = self.misses[s];
         }
         st
     }
@@ -372,10 +359,6 @@ impl<E: NavEngine> State<'_, E> {
             Err(e) => tracing::error!("{e}"),
         }
     }
-}
-
-fn ws_err(e: impl std::fmt::Debug) -> DaemonError {
-    DaemonError::WaitSet(format!("{e:?}"))
 }
 
 /// Run the daemon until `stop` is set; then drain what is queued, publish a last status, finish
@@ -412,10 +395,10 @@ pub fn run<E: NavEngine>(
         nav_pub,
         status_pub,
         decimation: u64::from(opts.system.fusion.nav_decimation.max(1)),
-        alive: [false; 5],
-        seen: [false; 5],
-        got: [false; 5],
-        misses: [0; 5],
+        alive: PerSensor::splat(false),
+        seen: PerSensor::splat(false),
+        got: PerSensor::splat(false),
+        misses: PerSensor::splat(0),
         imu_received: 0,
         solutions: 0,
         published: 0,
@@ -425,43 +408,29 @@ pub fn run<E: NavEngine>(
         stop,
     };
 
-    let ws = WaitSetBuilder::new()
-        .signal_handling_mode(SignalHandlingMode::Disabled)
-        .create::<ipc::Service>()
-        .map_err(ws_err)?;
+    let ws = msgs::ipc::waitset()?;
+    let attach = WaitSetError::Attach;
     let dl = |s: SensorId| opts.system.wall_deadline(s, opts.speed);
-    for s in SensorId::ALL {
+    let listeners = PerSensor([
+        imu.listener(),
+        star.listener(),
+        gnss.listener(),
+        odo.listener(),
+        baro.listener(),
+    ]);
+    let mut deadline_guards = Vec::with_capacity(SensorId::COUNT);
+    for (s, listener) in listeners.iter() {
         tracing::info!("{} deadline {:?} (wall)", s.name(), dl(s));
+        let guard = ws.attach_deadline(*listener, dl(s)).map_err(attach)?;
+        deadline_guards.push((s, guard));
     }
-    let g_imu = ws
-        .attach_deadline(imu.listener(), dl(SensorId::Imu))
-        .map_err(ws_err)?;
-    let g_star = ws
-        .attach_deadline(star.listener(), dl(SensorId::StarTracker))
-        .map_err(ws_err)?;
-    let g_gnss = ws
-        .attach_deadline(gnss.listener(), dl(SensorId::Gnss))
-        .map_err(ws_err)?;
-    let g_odo = ws
-        .attach_deadline(odo.listener(), dl(SensorId::Odometer))
-        .map_err(ws_err)?;
-    let g_baro = ws
-        .attach_deadline(baro.listener(), dl(SensorId::Baro))
-        .map_err(ws_err)?;
-    let _g_truth = ws.attach_notification(truth.listener()).map_err(ws_err)?;
+    let _g_truth = ws.attach_notification(truth.listener()).map_err(attach)?;
     let g_status = ws
         .attach_interval(Duration::from_secs_f64(opts.system.fusion.status_period_s))
-        .map_err(ws_err)?;
+        .map_err(attach)?;
     let _g_stop = ws
         .attach_interval(Duration::from_millis(100))
-        .map_err(ws_err)?;
-    let deadline_guards = [
-        (SensorId::Imu, &g_imu),
-        (SensorId::StarTracker, &g_star),
-        (SensorId::Gnss, &g_gnss),
-        (SensorId::Odometer, &g_odo),
-        (SensorId::Baro, &g_baro),
-    ];
+        .map_err(attach)?;
     tracing::info!(
         "fusion running: prefix {}, recording {}",
         opts.prefix,
@@ -470,34 +439,28 @@ pub fn run<E: NavEngine>(
     let started = Instant::now();
 
     let drain_all = |st: &mut State<'_, E>| {
-        st.got = [false; 5];
-        for l in [
-            imu.listener(),
-            star.listener(),
-            gnss.listener(),
-            odo.listener(),
-            baro.listener(),
-            truth.listener(),
-        ] {
+        st.got = PerSensor::splat(false);
+        for l in listeners.0.iter().chain([&truth.listener()]) {
             let _ = l.try_wait(|_| {});
         }
-        // Aiding first: the navigator buffers it until the inertial solution reaches its time.
-        st.drain_aiding(&star, SensorId::StarTracker, Record::StarTracker);
-        st.drain_aiding(&gnss, SensorId::Gnss, |s| Record::Gnss(Box::new(s)));
-        st.drain_aiding(&odo, SensorId::Odometer, Record::Odometer);
-        st.drain_aiding(&baro, SensorId::Baro, Record::Baro);
-        st.drain_imu(&imu);
-        st.drain_truth(&truth);
+        // In `Channel` order, aiding first: the navigator buffers it until the inertial
+        // solution reaches its time.
+        st.drain(&star);
+        st.drain(&gnss);
+        st.drain(&odo);
+        st.drain(&baro);
+        st.drain(&imu);
+        st.drain(&truth);
     };
 
     while !st.stop.load(Ordering::SeqCst) {
-        let mut missed = [false; 5];
+        let mut missed = PerSensor::splat(false);
         let mut status_due = false;
         ws.wait_and_process_once_with_timeout(
             |id| {
                 for (s, g) in &deadline_guards {
                     if id.has_missed_deadline(g) {
-                        missed[*s as usize] = true;
+                        missed[*s] = true;
                     }
                 }
                 if id.has_event_from(&g_status) {
@@ -507,10 +470,10 @@ pub fn run<E: NavEngine>(
             },
             Duration::from_secs(1),
         )
-        .map_err(ws_err)?;
+        .map_err(WaitSetError::Wait)?;
         drain_all(&mut st);
         for s in SensorId::ALL {
-            if missed[s as usize] {
+            if missed[s] {
                 st.deadline_missed(s);
             }
         }

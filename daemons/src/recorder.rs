@@ -21,10 +21,9 @@
 
 use crate::foxglove;
 use mcap::{WriteOptions, Writer};
-use msgs::{
-    BaroSample, Channel, GnssSample, ImuSample, NavSolution, OdometerSample, StarTrackerSample,
-    Status, TruthSample,
-};
+use msgs::Channel;
+/// What the recorder records: one message of any kind (see [`msgs::record`]).
+pub use msgs::{Record, SENSOR_ALIVE_TOPIC, SensorAliveEvent};
 use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::BufWriter;
@@ -59,10 +58,6 @@ pub enum RecorderError {
     Thread(String),
 }
 
-/// MCAP topic of the sensor alive/dead transitions the daemon decides from the WaitSet deadlines
-/// (an input of the engine that does not come from a sensor, recorded for bit-exact replay).
-pub const SENSOR_ALIVE_TOPIC: &str = "fusion/sensor_alive";
-
 /// Topic of the records that hold a non-finite number (NaN, ±inf — bad input the filter
 /// rejected). JSON has no encoding for them (serde_json would write `null`, which the channel's
 /// schema and every reader reject), so such a record goes here instead of its own topic, as
@@ -80,106 +75,6 @@ pub const CONFIG_METADATA_NAME: &str = "sextant/config";
 /// Key (in [`CONFIG_METADATA_NAME`]) of the filter configuration, TOML as serialized from the
 /// `NavigatorConfig` the engine was built with (authoritative for replay).
 pub const CONFIG_KEY_FILTER_TOML: &str = "filter_toml";
-
-/// A sensor alive/dead transition decided by the daemon and pushed into the engine with
-/// `set_sensor_alive` (topic [`SENSOR_ALIVE_TOPIC`]).
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    Default,
-    PartialEq,
-    serde::Serialize,
-    serde::Deserialize,
-    schemars::JsonSchema,
-)]
-pub struct SensorAliveEvent {
-    /// `time_ns` = filter time (time of validity of the last IMU sample pushed, GPS ns; 0 before
-    /// the first), `seq` = event counter, `send_mono_ns` = CLOCK_MONOTONIC of the decision.
-    pub header: msgs::Header,
-    /// Sensor index (`msgs::SensorId`).
-    pub sensor: u32,
-    /// True: the sensor delivers again; false: silent beyond its deadline.
-    pub alive: bool,
-}
-
-/// One record: a message of one channel.
-#[derive(Debug, Clone)]
-pub enum Record {
-    /// IMU sample.
-    Imu(ImuSample),
-    /// Star-tracker sample.
-    StarTracker(StarTrackerSample),
-    /// GNSS sample (boxed: it is large).
-    Gnss(Box<GnssSample>),
-    /// Odometer sample.
-    Odometer(OdometerSample),
-    /// Baro sample.
-    Baro(BaroSample),
-    /// Truth sample.
-    Truth(TruthSample),
-    /// Solution.
-    Nav(NavSolution),
-    /// Status (boxed: it is large).
-    Status(Box<Status>),
-    /// Sensor alive/dead transition pushed into the engine.
-    SensorAlive(SensorAliveEvent),
-}
-
-impl Record {
-    /// The channel of the record (`None` for the daemon's own events).
-    pub fn channel(&self) -> Option<Channel> {
-        Some(match self {
-            Record::Imu(_) => Channel::Imu,
-            Record::StarTracker(_) => Channel::StarTracker,
-            Record::Gnss(_) => Channel::Gnss,
-            Record::Odometer(_) => Channel::Odometer,
-            Record::Baro(_) => Channel::Baro,
-            Record::Truth(_) => Channel::Truth,
-            Record::Nav(_) => Channel::Nav,
-            Record::Status(_) => Channel::Status,
-            Record::SensorAlive(_) => return None,
-        })
-    }
-
-    /// The MCAP topic of the record.
-    pub fn topic(&self) -> &'static str {
-        match self.channel() {
-            Some(c) => c.name(),
-            None => SENSOR_ALIVE_TOPIC,
-        }
-    }
-
-    /// The message header.
-    pub fn header(&self) -> &msgs::Header {
-        match self {
-            Record::Imu(m) => &m.header,
-            Record::StarTracker(m) => &m.header,
-            Record::Gnss(m) => &m.header,
-            Record::Odometer(m) => &m.header,
-            Record::Baro(m) => &m.header,
-            Record::Truth(m) => &m.header,
-            Record::Nav(m) => &m.header,
-            Record::Status(m) => &m.header,
-            Record::SensorAlive(m) => &m.header,
-        }
-    }
-
-    fn to_json(&self, buf: &mut Vec<u8>) -> serde_json::Result<()> {
-        buf.clear();
-        match self {
-            Record::Imu(m) => serde_json::to_writer(buf, m),
-            Record::StarTracker(m) => serde_json::to_writer(buf, m),
-            Record::Gnss(m) => serde_json::to_writer(buf, m.as_ref()),
-            Record::Odometer(m) => serde_json::to_writer(buf, m),
-            Record::Baro(m) => serde_json::to_writer(buf, m),
-            Record::Truth(m) => serde_json::to_writer(buf, m),
-            Record::Nav(m) => serde_json::to_writer(buf, m),
-            Record::Status(m) => serde_json::to_writer(buf, m.as_ref()),
-            Record::SensorAlive(m) => serde_json::to_writer(buf, m),
-        }
-    }
-}
 
 /// An error with its sources (`MCAP I/O error: No space left on device (os error 28)`), so that
 /// the operator sees the operating system's reason.
@@ -337,7 +232,7 @@ impl Sink {
             })?;
         let sid = writer
             .add_schema(
-                "sextant::SensorAliveEvent",
+                msgs::record::SENSOR_ALIVE_SCHEMA_NAME,
                 "jsonschema",
                 alive_schema.as_bytes(),
             )
@@ -414,15 +309,12 @@ impl Sink {
         };
         let h = *item.record.header();
         let mut buf = std::mem::take(&mut self.buf);
-        let r = item.record.to_json(&mut buf);
+        let r = item.record.write_json(&mut buf);
         self.buf = buf;
         r.map_err(|e| self.err(e))?;
         // Our messages hold only numbers, so `null` can only be a non-finite float.
         if self.buf.windows(4).any(|w| w == b"null") {
-            let topic = item
-                .record
-                .channel()
-                .map_or(SENSOR_ALIVE_TOPIC, |c| c.name());
+            let topic = item.record.topic();
             self.buf.clear();
             serde_json::to_writer(
                 &mut self.buf,
@@ -674,6 +566,9 @@ impl Drop for Recorder {
 mod tests {
     use super::*;
     use mcap::MessageStream;
+    use msgs::{
+        BaroSample, ImuSample, NavSolution, OdometerSample, StarTrackerSample, TruthSample,
+    };
 
     fn tmp(name: &str) -> PathBuf {
         let d = std::env::temp_dir().join(format!("sextant-rec-{}-{name}", std::process::id()));

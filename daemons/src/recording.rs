@@ -13,11 +13,7 @@
 //! The configuration the fusion ran with is the MCAP metadata record
 //! [`crate::recorder::CONFIG_METADATA_NAME`], read by `open` (it precedes every chunk).
 
-use crate::recorder::{Record, SENSOR_ALIVE_TOPIC, SensorAliveEvent};
-use msgs::{
-    BaroSample, Channel, GnssSample, ImuSample, NavSolution, OdometerSample, StarTrackerSample,
-    Status, TruthSample,
-};
+use msgs::{Record, RecordKind};
 use std::collections::{BTreeMap, HashMap, VecDeque};
 use std::fs::File;
 use std::io::{BufReader, Read, Seek, SeekFrom};
@@ -104,14 +100,9 @@ pub struct Entry {
 #[derive(Debug, Clone)]
 struct ChannelInfo {
     topic: Arc<str>,
-    kind: Kind,
-}
-
-#[derive(Debug, Clone, Copy)]
-enum Kind {
-    Channel(Channel),
-    SensorAlive,
-    Other,
+    /// `None` for a topic that holds no [`Record`] (Foxglove views, non-finite inputs, topics
+    /// of other versions).
+    kind: Option<RecordKind>,
 }
 
 /// Everything [`Recording::read_to_end`] could read.
@@ -477,11 +468,7 @@ impl Recording {
                         "channel {topic} refers to unknown schema {schema_id}"
                     ));
                 }
-                let kind = if topic == SENSOR_ALIVE_TOPIC {
-                    Kind::SensorAlive
-                } else {
-                    Channel::from_name(&topic).map_or(Kind::Other, Kind::Channel)
-                };
+                let kind = RecordKind::from_topic(&topic);
                 self.channels.insert(
                     id,
                     ChannelInfo {
@@ -617,28 +604,8 @@ impl<'a> Cur<'a> {
     }
 }
 
-fn decode(kind: Kind, data: &[u8]) -> serde_json::Result<Option<Record>> {
-    let ch = match kind {
-        Kind::Other => return Ok(None),
-        Kind::SensorAlive => {
-            return Ok(Some(Record::SensorAlive(serde_json::from_slice::<
-                SensorAliveEvent,
-            >(data)?)));
-        }
-        Kind::Channel(c) => c,
-    };
-    Ok(Some(match ch {
-        Channel::Imu => Record::Imu(serde_json::from_slice::<ImuSample>(data)?),
-        Channel::StarTracker => {
-            Record::StarTracker(serde_json::from_slice::<StarTrackerSample>(data)?)
-        }
-        Channel::Gnss => Record::Gnss(Box::new(serde_json::from_slice::<GnssSample>(data)?)),
-        Channel::Odometer => Record::Odometer(serde_json::from_slice::<OdometerSample>(data)?),
-        Channel::Baro => Record::Baro(serde_json::from_slice::<BaroSample>(data)?),
-        Channel::Truth => Record::Truth(serde_json::from_slice::<TruthSample>(data)?),
-        Channel::Nav => Record::Nav(serde_json::from_slice::<NavSolution>(data)?),
-        Channel::Status => Record::Status(Box::new(serde_json::from_slice::<Status>(data)?)),
-    }))
+fn decode(kind: Option<RecordKind>, data: &[u8]) -> serde_json::Result<Option<Record>> {
+    kind.map(|k| Record::from_json(k, data)).transpose()
 }
 
 impl Iterator for Recording {
@@ -693,6 +660,7 @@ pub fn read_all(path: &Path) -> Result<ReadOutcome, RecordingError> {
 mod tests {
     use super::*;
     use crate::recorder::{Recorder, RecorderOptions};
+    use msgs::{ImuSample, NavSolution, SensorAliveEvent};
     use proptest::prelude::*;
 
     fn tmp(name: &str) -> PathBuf {

@@ -53,9 +53,15 @@ pub enum SimError {
         /// What is wrong.
         reason: String,
     },
-    /// Shared-memory transport failure.
+    /// The driver could not join the bus.
     #[error(transparent)]
-    Ipc(#[from] msgs::ipc::IpcError),
+    Bus(#[from] msgs::ipc::NodeError),
+    /// The driver's publisher could not be created.
+    #[error(transparent)]
+    Publisher(#[from] msgs::ipc::PublisherError),
+    /// A sample could not be sent.
+    #[error(transparent)]
+    Send(#[from] msgs::ipc::SendError),
     /// Installing the signal handlers failed.
     #[error("cannot install signal handler: {0}")]
     Signal(String),

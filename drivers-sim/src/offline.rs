@@ -11,10 +11,8 @@
 //!
 //! # Order
 //! Messages come out by time of validity. Ties (several channels sampling the same instant)
-//! are broken by channel: star tracker, GNSS, odometer, baro, then the IMU, then the truth
-//! ([`Channel`] order). Aiding before the IMU sample of the same time, so that a navigator that
-//! fuses an aiding sample once the inertial solution reaches its time fuses it at that IMU
-//! epoch; truth last, so that the truth at `t` meets the solution already propagated to `t`.
+//! are broken by [`Channel`] order: aiding, then the IMU, then the truth (the reasons are on
+//! [`Channel`]).
 //!
 //! # Offline-only modification: satellite limits
 //! [`OfflineSim::limit_satellites`] keeps at most `n` satellites (those of highest C/N0, i.e.
@@ -29,85 +27,8 @@ use crate::sources::{
 use fusion::Rejection;
 use fusion::ekf::idx;
 use fusion::navigator::Navigator;
-use msgs::{
-    BaroSample, GnssSample, GnssSatellite, ImuSample, OdometerSample, StarTrackerSample,
-    TruthSample,
-};
+use msgs::{Channel, GnssSample, GnssSatellite, NavSolution, Record, TruthSample};
 use nalgebra::{Matrix3, Vector3};
-
-/// The channels of the simulated system, in tie-breaking order (see the module comment).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
-pub enum Channel {
-    /// Star tracker.
-    StarTracker = 0,
-    /// GNSS receiver.
-    Gnss = 1,
-    /// Odometer.
-    Odometer = 2,
-    /// Barometer.
-    Baro = 3,
-    /// Inertial measurement unit.
-    Imu = 4,
-    /// Truth (evaluation only).
-    Truth = 5,
-}
-
-/// Every channel, in tie-breaking order.
-pub const ALL_CHANNELS: [Channel; 6] = [
-    Channel::StarTracker,
-    Channel::Gnss,
-    Channel::Odometer,
-    Channel::Baro,
-    Channel::Imu,
-    Channel::Truth,
-];
-
-/// One message of the simulated system.
-// The variants are the plain `repr(C)` messages, moved by value as the IPC moves them; the
-// GNSS one is ≈ 4 kB (32 satellites). Boxing it would allocate per GNSS epoch for no gain
-// (a stream holds one message at a time).
-#[allow(clippy::large_enum_variant)]
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum SimMessage {
-    /// IMU increment sample.
-    Imu(ImuSample),
-    /// Star-tracker attitude.
-    StarTracker(StarTrackerSample),
-    /// GNSS receiver output.
-    Gnss(GnssSample),
-    /// Odometer distance/speed.
-    Odometer(OdometerSample),
-    /// Barometric pressure.
-    Baro(BaroSample),
-    /// Truth (never given to the filter).
-    Truth(TruthSample),
-}
-
-impl SimMessage {
-    /// Time of validity, GPS ns.
-    pub fn time_ns(&self) -> i64 {
-        match self {
-            SimMessage::Imu(m) => m.header.time_ns,
-            SimMessage::StarTracker(m) => m.header.time_ns,
-            SimMessage::Gnss(m) => m.header.time_ns,
-            SimMessage::Odometer(m) => m.header.time_ns,
-            SimMessage::Baro(m) => m.header.time_ns,
-            SimMessage::Truth(m) => m.header.time_ns,
-        }
-    }
-
-    /// The channel it belongs to.
-    pub fn channel(&self) -> Channel {
-        match self {
-            SimMessage::Imu(_) => Channel::Imu,
-            SimMessage::StarTracker(_) => Channel::StarTracker,
-            SimMessage::Gnss(_) => Channel::Gnss,
-            SimMessage::Odometer(_) => Channel::Odometer,
-            SimMessage::Baro(_) => Channel::Baro,
-            SimMessage::Truth(_) => Channel::Truth,
-        }
-    }
-}
 
 /// One channel's source with its sample counter and publisher-style sequence number.
 #[derive(Debug, Clone)]
@@ -150,7 +71,7 @@ pub struct SatelliteLimit {
     pub max_satellites: usize,
 }
 
-/// The time-ordered message stream of a scenario (an [`Iterator`] of [`SimMessage`]).
+/// The time-ordered message stream of a scenario (an [`Iterator`] of [`Record`]s).
 #[derive(Debug, Clone)]
 pub struct OfflineSim {
     epoch_ns: i64,
@@ -170,13 +91,14 @@ fn stamp(h: &mut msgs::Header, seq: u64) {
 }
 
 impl OfflineSim {
-    /// Every channel of `scn` over the scenario's duration.
+    /// Every simulated channel of `scn` (the sensors and the truth) over the scenario's
+    /// duration.
     pub fn new(scn: &Scenario) -> Self {
-        Self::with_channels(scn, &ALL_CHANNELS)
+        Self::with_channels(scn, &Channel::ALL)
     }
 
     /// Only the listed channels (each costs its own truth integration; leave out the truth
-    /// when not needed).
+    /// when not needed). The fusion's outputs (nav, status) are not simulated.
     pub fn with_channels(scn: &Scenario, channels: &[Channel]) -> Self {
         let epoch_ns = scn.epoch_gps().ns;
         let on = |c: Channel| channels.contains(&c);
@@ -262,9 +184,9 @@ fn invalidate_fix(g: &mut GnssSample) {
 }
 
 impl Iterator for OfflineSim {
-    type Item = SimMessage;
+    type Item = Record;
 
-    fn next(&mut self) -> Option<SimMessage> {
+    fn next(&mut self) -> Option<Record> {
         let d = self.duration_ns;
         // (time, channel) of each stream's next sample; the smallest goes out.
         let candidates = [
@@ -290,25 +212,22 @@ impl Iterator for OfflineSim {
             .min()?;
         let msg = match ch {
             Channel::StarTracker => {
-                SimMessage::StarTracker(self.star.as_mut()?.take(|m, q| stamp(&mut m.header, q)))
+                Record::StarTracker(self.star.as_mut()?.take(|m, q| stamp(&mut m.header, q)))
             }
             Channel::Gnss => {
                 let mut g = self.gnss.as_mut()?.take(|m, q| stamp(&mut m.header, q));
                 self.apply_limits(&mut g);
-                SimMessage::Gnss(g)
+                Record::Gnss(Box::new(g))
             }
             Channel::Odometer => {
-                SimMessage::Odometer(self.odo.as_mut()?.take(|m, q| stamp(&mut m.header, q)))
+                Record::Odometer(self.odo.as_mut()?.take(|m, q| stamp(&mut m.header, q)))
             }
-            Channel::Baro => {
-                SimMessage::Baro(self.baro.as_mut()?.take(|m, q| stamp(&mut m.header, q)))
-            }
-            Channel::Imu => {
-                SimMessage::Imu(self.imu.as_mut()?.take(|m, q| stamp(&mut m.header, q)))
-            }
+            Channel::Baro => Record::Baro(self.baro.as_mut()?.take(|m, q| stamp(&mut m.header, q))),
+            Channel::Imu => Record::Imu(self.imu.as_mut()?.take(|m, q| stamp(&mut m.header, q))),
             Channel::Truth => {
-                SimMessage::Truth(self.truth.as_mut()?.take(|m, q| stamp(&mut m.header, q)))
+                Record::Truth(self.truth.as_mut()?.take(|m, q| stamp(&mut m.header, q)))
             }
+            Channel::Nav | Channel::Status => return None,
         };
         Some(msg)
     }
@@ -318,10 +237,10 @@ impl Iterator for OfflineSim {
 #[derive(Debug, thiserror::Error)]
 pub enum OfflineError {
     /// The navigator rejected a simulated sample (a simulator/filter contract violation).
-    #[error("navigator rejected the {channel:?} sample at GPS {time_ns} ns: {source}")]
+    #[error("navigator rejected the {topic} sample at GPS {time_ns} ns: {source}")]
     Rejected {
-        /// Channel of the sample.
-        channel: Channel,
+        /// Recording topic of the sample.
+        topic: &'static str,
         /// Its time of validity, GPS ns.
         time_ns: i64,
         /// The navigator's reason.
@@ -436,7 +355,7 @@ impl RunPoint {
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct RunCounts {
     /// Messages per channel (index = [`Channel`] as usize).
-    pub messages: [u64; 6],
+    pub messages: [u64; Channel::COUNT],
     /// Truth epochs compared (navigating, truth on an IMU epoch).
     pub compared: u64,
 }
@@ -476,18 +395,23 @@ pub fn compare(nav: &Navigator, truth: &TruthSample, epoch_ns: i64) -> RunPoint 
     }
 }
 
-/// Push one message into the navigator (truth is ignored). Errors name the channel and time.
-pub fn feed(nav: &mut Navigator, msg: &SimMessage) -> Result<(), OfflineError> {
+/// Push one message into the navigator (truth and outputs are ignored). Errors name the
+/// channel and time. Returns the solution an IMU sample produced.
+pub fn feed(nav: &mut Navigator, msg: &Record) -> Result<Option<NavSolution>, OfflineError> {
     let r = match msg {
-        SimMessage::Imu(m) => nav.push_imu(m).map(|_| ()),
-        SimMessage::StarTracker(m) => nav.push_star_tracker(m),
-        SimMessage::Gnss(m) => nav.push_gnss(m),
-        SimMessage::Odometer(m) => nav.push_odometer(m),
-        SimMessage::Baro(m) => nav.push_baro(m),
-        SimMessage::Truth(_) => Ok(()),
+        Record::Imu(m) => nav.push_imu(m),
+        Record::StarTracker(m) => nav.push_star_tracker(m).map(|()| None),
+        Record::Gnss(m) => nav.push_gnss(m).map(|()| None),
+        Record::Odometer(m) => nav.push_odometer(m).map(|()| None),
+        Record::Baro(m) => nav.push_baro(m).map(|()| None),
+        Record::SensorAlive(e) => {
+            nav.set_sensor_alive(e.sensor as usize, e.alive);
+            Ok(None)
+        }
+        Record::Truth(_) | Record::Nav(_) | Record::Status(_) => Ok(None),
     };
     r.map_err(|source| OfflineError::Rejected {
-        channel: msg.channel(),
+        topic: msg.topic(),
         time_ns: msg.time_ns(),
         source,
     })
@@ -503,20 +427,24 @@ pub fn run_navigator<I, F>(
     mut each: F,
 ) -> Result<RunCounts, OfflineError>
 where
-    I: IntoIterator<Item = SimMessage>,
+    I: IntoIterator<Item = Record>,
     F: FnMut(&RunPoint),
 {
     let mut counts = RunCounts::default();
     for msg in messages {
-        counts.messages[msg.channel() as usize] += 1;
+        if let Some(c) = msg.channel() {
+            counts.messages[c as usize] += 1;
+        }
         match &msg {
-            SimMessage::Truth(t) => {
+            Record::Truth(t) => {
                 if nav.is_navigating() && nav.time_ns() == t.header.time_ns {
                     each(&compare(nav, t, epoch_ns));
                     counts.compared += 1;
                 }
             }
-            m => feed(nav, m)?,
+            m => {
+                feed(nav, m)?;
+            }
         }
     }
     Ok(counts)
@@ -554,38 +482,29 @@ mod tests {
         let scn = scenario(12.5);
         let e = scn.epoch_gps().ns;
         let d = scn.duration_ns();
-        let msgs: Vec<SimMessage> = OfflineSim::new(&scn).collect();
-        let by = |c: Channel| msgs.iter().filter(move |m| m.channel() == c);
+        let msgs: Vec<Record> = OfflineSim::new(&scn).collect();
+        let by = |c: Channel| msgs.iter().filter(move |m| m.channel() == Some(c));
 
         // Same samples as calling the sources directly (publisher stamps the seq from 1).
         macro_rules! same {
-            ($ch:expr, $var:ident, $src:expr) => {{
+            ($ch:expr, $src:expr) => {{
                 let want = driver_samples($src, d);
-                let got: Vec<_> = by($ch)
-                    .map(|m| match m {
-                        SimMessage::$var(x) => *x,
-                        _ => unreachable!(),
-                    })
-                    .collect();
+                let got: Vec<&Record> = by($ch).collect();
                 assert_eq!(got.len(), want.len(), "{:?} count", $ch);
                 for (i, (g, w)) in got.iter().zip(&want).enumerate() {
                     let mut w = *w;
                     w.header.seq = i as u64 + 1;
-                    assert_eq!(*g, w, "{:?} sample {i}", $ch);
+                    assert_eq!(**g, Record::from(w), "{:?} sample {i}", $ch);
                 }
                 got.len()
             }};
         }
-        let n_imu = same!(Channel::Imu, Imu, ImuSource::new(&scn, e));
-        let n_st = same!(
-            Channel::StarTracker,
-            StarTracker,
-            StarTrackerSource::new(&scn, e)
-        );
-        let n_gnss = same!(Channel::Gnss, Gnss, GnssSource::new(&scn, e));
-        let n_odo = same!(Channel::Odometer, Odometer, OdometerSource::new(&scn, e));
-        let n_baro = same!(Channel::Baro, Baro, BaroSource::new(&scn, e));
-        let n_truth = same!(Channel::Truth, Truth, TruthSource::new(&scn, e));
+        let n_imu = same!(Channel::Imu, ImuSource::new(&scn, e));
+        let n_st = same!(Channel::StarTracker, StarTrackerSource::new(&scn, e));
+        let n_gnss = same!(Channel::Gnss, GnssSource::new(&scn, e));
+        let n_odo = same!(Channel::Odometer, OdometerSource::new(&scn, e));
+        let n_baro = same!(Channel::Baro, BaroSource::new(&scn, e));
+        let n_truth = same!(Channel::Truth, TruthSource::new(&scn, e));
 
         // Counts = rate × duration (+1 for instant channels, which include t = 0; interval
         // channels start at their first interval's end). Rates of vehicle.toml.
@@ -628,7 +547,7 @@ mod tests {
             });
         let e = sim.epoch_ns();
         for m in sim {
-            let SimMessage::Gnss(g) = m else {
+            let Record::Gnss(g) = m else {
                 panic!("only GNSS requested")
             };
             let t = (g.header.time_ns - e) as f64 * 1e-9;

@@ -86,7 +86,8 @@ fn static_shortcut_equals_the_driver_sources() {
 /// ([`sextant_drivers_sim::stand::boresight_filter_config`]).
 fn online_boresight(seed: u64, seconds: f64) -> (Vector3<f64>, Vector3<f64>, Vector3<f64>) {
     use fusion::navigator::Navigator;
-    use sextant_drivers_sim::offline::{Channel, OfflineSim, run_navigator};
+    use msgs::Channel;
+    use sextant_drivers_sim::offline::{OfflineSim, run_navigator};
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../config/scenarios/astro_stand.toml");
     let text = std::fs::read_to_string(&path)
         .expect("astro_stand.toml")

@@ -5,7 +5,8 @@
 //! excluded.
 
 use fusion::navigator::{Navigator, NavigatorConfig};
-use sextant_drivers_sim::offline::{Channel, OfflineSim, SimMessage, feed};
+use msgs::{Channel, Record};
+use sextant_drivers_sim::offline::{OfflineSim, feed};
 use sextant_drivers_sim::scenario::Scenario;
 use std::path::Path;
 
@@ -73,7 +74,7 @@ fn run_fdi(scn: &Scenario, cfg: NavigatorConfig, windows: &[(f64, f64)]) -> FdiR
         if let Err(e) = feed(&mut nav, &m) {
             panic!("{e}");
         }
-        if !matches!(m, SimMessage::Imu(_)) {
+        if !matches!(m, Record::Imu(_)) {
             continue;
         }
         let st = nav.redundancy_status().expect("channels");

@@ -237,7 +237,7 @@ fn heading_error_over_seeds_is_inside_the_chi2_band_of_its_sigma() {
 #[test]
 fn single_epoch_baseline_solution_is_white_unbiased_and_prior_free() {
     use fusion::baseline_attitude as ba;
-    use sextant_drivers_sim::offline::{Channel, SimMessage};
+    use msgs::{Channel, Record};
     use std::collections::HashMap;
     let (mut nees, mut zh, mut n) = (0.0, 0.0, 0usize);
     let mut prior_diff: f64 = 0.0;
@@ -248,10 +248,10 @@ fn single_epoch_baseline_solution_is_white_unbiased_and_prior_free() {
         let mut gnss = Vec::new();
         for m in sim {
             match m {
-                SimMessage::Truth(t) => {
+                Record::Truth(t) => {
                     truth.insert(t.header.time_ns, t);
                 }
-                SimMessage::Gnss(g) => gnss.push(g),
+                Record::Gnss(g) => gnss.push(g),
                 _ => {}
             }
         }

@@ -18,8 +18,9 @@
 //! angle random walk and the position error grows without bound.
 
 use fusion::navigator::{InitialPosition, Navigator, NavigatorConfig};
+use msgs::Channel;
 use msgs::NavMode;
-use sextant_drivers_sim::offline::{Channel, OfflineSim, RunPoint, run_navigator};
+use sextant_drivers_sim::offline::{OfflineSim, RunPoint, run_navigator};
 use sextant_drivers_sim::scenario::Scenario;
 use std::path::Path;
 

@@ -8,11 +8,10 @@
 //! states started from that satellite alone, position from the configuration).
 
 use fusion::navigator::{GnssMode, InitialPosition, Navigator, NavigatorConfig};
+use msgs::Record;
 use msgs::SensorId;
 use nalgebra::{Matrix2, Vector2, Vector3};
-use sextant_drivers_sim::offline::{
-    OfflineSim, RunPoint, SatelliteLimit, SimMessage, run_navigator,
-};
+use sextant_drivers_sim::offline::{OfflineSim, RunPoint, SatelliteLimit, run_navigator};
 use sextant_drivers_sim::scenario::Scenario;
 use std::cell::Cell;
 use std::path::Path;
@@ -69,7 +68,7 @@ fn run(mode: GnssMode, max_sats: usize, window: (f64, f64), known_start: bool) -
     // First satellite of the last GNSS message (the one kept when max_sats = 1).
     let first_sat: Cell<Option<Vector3<f64>>> = Cell::new(None);
     let sim = sim.inspect(|m| {
-        if let SimMessage::Gnss(g) = m
+        if let Record::Gnss(g) = m
             && g.n_satellites > 0
         {
             first_sat.set(Some(Vector3::from(g.satellites[0].sat_pos_ecef_m)));
@@ -269,12 +268,14 @@ fn first_single_satellite_epoch_only_starts_the_clock() {
     for msg in sim {
         feed(&mut tight, &msg).unwrap();
         match &msg {
-            SimMessage::Gnss(g) => {
+            Record::Gnss(g) => {
                 if g.n_satellites > 0 {
                     sat = Some(Vector3::from(g.satellites[0].sat_pos_ecef_m));
                 }
             }
-            m => feed(&mut free, m).unwrap(),
+            m => {
+                feed(&mut free, m).unwrap();
+            }
         }
         if tight.health()[gnss].fused == 1 {
             break;

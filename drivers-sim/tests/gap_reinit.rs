@@ -5,9 +5,10 @@
 
 use fusion::alignment::{AlignmentErrorSpec, expected_sigmas};
 use fusion::navigator::{Navigator, NavigatorConfig};
+use msgs::Record;
 use msgs::{ImuSample, NavMode, SensorId};
 use nalgebra::Vector3;
-use sextant_drivers_sim::offline::{OfflineSim, RunPoint, SimMessage, compare, feed};
+use sextant_drivers_sim::offline::{OfflineSim, RunPoint, compare, feed};
 use sextant_drivers_sim::scenario::Scenario;
 use std::path::Path;
 
@@ -76,7 +77,7 @@ fn run(scn: &Scenario, nav: &mut Navigator, edit: impl Fn(f64, &ImuSample) -> Ed
     for msg in sim {
         let t_s = (msg.time_ns() - epoch) as f64 * 1e-9;
         match msg {
-            SimMessage::Truth(tr) => {
+            Record::Truth(tr) => {
                 if nav.is_navigating() && nav.time_ns() == tr.header.time_ns {
                     let p = compare(nav, &tr, epoch);
                     if !was_navigating {
@@ -86,7 +87,7 @@ fn run(scn: &Scenario, nav: &mut Navigator, edit: impl Fn(f64, &ImuSample) -> Ed
                 }
                 was_navigating = nav.is_navigating();
             }
-            SimMessage::Imu(mut s) => {
+            Record::Imu(mut s) => {
                 match edit(t_s, &s) {
                     Edit::Keep => {}
                     Edit::Drop => continue,

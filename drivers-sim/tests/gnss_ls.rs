@@ -116,7 +116,8 @@ struct CrossCheckRun {
 
 fn cross_check_run(mode: fusion::navigator::GnssMode, spoof: bool) -> CrossCheckRun {
     use fusion::navigator::{GnssMode, Navigator, NavigatorConfig};
-    use sextant_drivers_sim::offline::{OfflineSim, SimMessage, feed};
+    use msgs::Record;
+    use sextant_drivers_sim::offline::{OfflineSim, feed};
     let scn = load("vehicle");
     let sim = OfflineSim::new(&scn);
     let mut nav = Navigator::new(NavigatorConfig {
@@ -141,7 +142,7 @@ fn cross_check_run(mode: fusion::navigator::GnssMode, spoof: bool) -> CrossCheck
         if spoof {
             spoof_epoch(&mut msg, epoch);
         }
-        if let SimMessage::Gnss(g) = &msg
+        if let Record::Gnss(g) = &msg
             && let Ok(fix) = gnss_ls::solve_sample(g)
         {
             ls_fixes.push((g.header.time_ns, fix));
@@ -200,9 +201,9 @@ const SPOOF_OFFSET_M: [f64; 3] = [30.0, -20.0, 10.0];
 /// Inside [`SPOOF_WINDOW_S`], every pseudorange and the receiver fix as if the antenna were
 /// [`SPOOF_OFFSET_M`] away (range change evaluated at the receiver's fix, which is within
 /// metres of the truth: the error of that linearisation is ~|Δ|·|δr|/ρ ≈ 10⁻⁵ m).
-fn spoof_epoch(msg: &mut sextant_drivers_sim::offline::SimMessage, epoch_ns: i64) {
-    use sextant_drivers_sim::offline::SimMessage;
-    let SimMessage::Gnss(g) = msg else {
+fn spoof_epoch(msg: &mut msgs::Record, epoch_ns: i64) {
+    use msgs::Record;
+    let Record::Gnss(g) = msg else {
         return;
     };
     let t_s = (g.header.time_ns - epoch_ns) as f64 * 1e-9;

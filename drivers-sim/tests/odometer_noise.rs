@@ -3,8 +3,9 @@
 //! vehicle run.
 
 use fusion::navigator::{Navigator, NavigatorConfig};
+use msgs::Record;
 use msgs::SensorId;
-use sextant_drivers_sim::offline::{OfflineSim, SimMessage, compare, feed};
+use sextant_drivers_sim::offline::{OfflineSim, compare, feed};
 use sextant_drivers_sim::scenario::Scenario;
 use std::path::Path;
 
@@ -40,7 +41,7 @@ fn run(cfg: NavigatorConfig, duration_s: f64) -> OdoRun {
     let mut out = OdoRun::default();
     let (mut h2, mut v2, mut a2, mut n) = (0.0, 0.0, 0.0, 0.0);
     for msg in sim {
-        if let SimMessage::Truth(t) = &msg {
+        if let Record::Truth(t) = &msg {
             if nav.is_navigating() && nav.time_ns() == t.header.time_ns {
                 let p = compare(&nav, t, epoch);
                 if p.t_s >= 120.0 {

@@ -20,16 +20,17 @@
 //! Writes `summary.json`, a latency histogram PNG, and returns the summary for the table.
 
 use crate::experiments::plot::{Chart, Line, color, line_chart};
-use crate::recorder::{Record, Recorder, RecorderOptions};
+use crate::recorder::{Recorder, RecorderOptions};
 use crate::recording::Recording;
 use anyhow::{Context, bail};
-use drivers_sim::offline::{Channel as SimChannel, OfflineSim, SimMessage};
+use drivers_sim::offline::{OfflineSim, feed};
 use drivers_sim::scenario::Scenario;
 use fusion::navigator::Navigator;
 use msgs::{
     BaroSample, GnssSample, ImuSample, NavSolution, OdometerSample, StarTrackerSample, Status,
     TruthSample,
 };
+use msgs::{Channel, Record};
 use serde_json::{Value, json};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -359,13 +360,13 @@ fn offline_throughput(cfg_dir: &Path, sim_s: f64) -> anyhow::Result<Value> {
     let cfg = crate::config::load(&cfg_dir.join("sextant.toml"))?;
     let scn = Scenario::load(&cfg_dir.join("scenarios/vehicle.toml"))?;
     let channels = [
-        SimChannel::Imu,
-        SimChannel::StarTracker,
-        SimChannel::Gnss,
-        SimChannel::Odometer,
-        SimChannel::Baro,
+        Channel::Imu,
+        Channel::StarTracker,
+        Channel::Gnss,
+        Channel::Odometer,
+        Channel::Baro,
     ];
-    let msgs: Vec<SimMessage> = OfflineSim::with_channels(&scn, &channels)
+    let msgs: Vec<Record> = OfflineSim::with_channels(&scn, &channels)
         .with_duration_s(sim_s)
         .collect();
     let mut nav = Navigator::new(cfg.navigator.clone())?;
@@ -376,26 +377,18 @@ fn offline_throughput(cfg_dir: &Path, sim_s: f64) -> anyhow::Result<Value> {
     let mut rejected = 0u64;
     let t0 = Instant::now();
     for m in &msgs {
-        let r = match m {
-            SimMessage::Imu(s) => {
-                imu_all += 1;
-                let r = nav.push_imu(s).map(|_| ());
-                if nav.is_navigating() {
-                    if t_nav_start.is_none() {
-                        t_nav_start = Some((Instant::now(), s.header.time_ns));
-                    } else {
-                        imu_nav += 1;
-                    }
-                    last_t = s.header.time_ns;
+        let r = feed(&mut nav, m);
+        if let Record::Imu(s) = m {
+            imu_all += 1;
+            if nav.is_navigating() {
+                if t_nav_start.is_none() {
+                    t_nav_start = Some((Instant::now(), s.header.time_ns));
+                } else {
+                    imu_nav += 1;
                 }
-                r
+                last_t = s.header.time_ns;
             }
-            SimMessage::StarTracker(s) => nav.push_star_tracker(s),
-            SimMessage::Gnss(s) => nav.push_gnss(s),
-            SimMessage::Odometer(s) => nav.push_odometer(s),
-            SimMessage::Baro(s) => nav.push_baro(s),
-            SimMessage::Truth(_) => Ok(()),
-        };
+        }
         if r.is_err() {
             rejected += 1;
         }

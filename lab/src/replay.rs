@@ -70,9 +70,15 @@ pub enum ReplayError {
         /// The I/O error.
         source: std::io::Error,
     },
-    /// Shared-memory transport (live replay).
+    /// Live replay could not join the bus.
     #[error(transparent)]
-    Ipc(#[from] msgs::ipc::IpcError),
+    Bus(#[from] msgs::ipc::NodeError),
+    /// Live replay could not create a publisher.
+    #[error(transparent)]
+    Publisher(#[from] msgs::ipc::PublisherError),
+    /// Live replay could not send a message.
+    #[error(transparent)]
+    Send(#[from] msgs::ipc::SendError),
 }
 
 /// Settings of an offline replay.

@@ -6,33 +6,157 @@
 //! deadline for silent sensors) instead of polling (iceoryx2 0.10 subscribers cannot block).
 
 use crate::{Channel, Message};
-use iceoryx2::node::NodeState;
-use iceoryx2::port::listener::Listener;
-use iceoryx2::port::notifier::Notifier;
-use iceoryx2::port::publisher::Publisher;
-use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::node::{NodeCreationFailure, NodeListFailure, NodeState};
+use iceoryx2::port::listener::{Listener, ListenerCreateError};
+use iceoryx2::port::notifier::{Notifier, NotifierCreateError, NotifierNotifyError};
+use iceoryx2::port::publisher::{Publisher, PublisherCreateError};
+use iceoryx2::port::subscriber::{Subscriber, SubscriberCreateError};
+use iceoryx2::port::{ReceiveError as IceReceiveError, SendError as IceSendError};
 use iceoryx2::prelude::*;
+use iceoryx2::service::builder::event::EventOpenOrCreateError;
+use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenOrCreateError;
+use iceoryx2::service::port_factory::{event, publish_subscribe};
+use iceoryx2::service::service_name::ServiceNameError;
+use iceoryx2::waitset::{WaitSetAttachmentError, WaitSetCreateError, WaitSetRunError};
 
-/// Errors of the shared-memory transport.
-#[derive(Debug, thiserror::Error)]
-pub enum IpcError {
-    /// An iceoryx2 call failed.
-    #[error("iceoryx2: {context} failed: {detail}")]
-    Iceoryx {
-        /// What was attempted (names the service).
-        context: String,
+/// Failure to join the bus ([`Bus::new`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum NodeError {
+    /// The node name is not a valid iceoryx2 node name.
+    #[error("invalid node name: {0}")]
+    InvalidName(SemanticStringError),
+    /// iceoryx2 could not create the node.
+    #[error("cannot create the node: {0}")]
+    Create(NodeCreationFailure),
+}
+
+/// Failure to open (or create) the publish-subscribe and event services of a channel.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum ServiceError {
+    /// Prefix and channel name do not form a valid service name.
+    #[error("invalid service name for {}: {error}", channel.name())]
+    InvalidName {
+        /// The channel.
+        channel: Channel,
+        /// Why the name is invalid.
+        error: ServiceNameError,
+    },
+    /// The publish-subscribe service could not be opened nor created (e.g. another process
+    /// created it with other settings or another message type).
+    #[error("publish-subscribe service of {}: {error}", channel.name())]
+    PublishSubscribe {
+        /// The channel.
+        channel: Channel,
         /// The iceoryx2 error.
-        detail: String,
+        error: PublishSubscribeOpenOrCreateError,
+    },
+    /// The event service could not be opened nor created.
+    #[error("event service of {}: {error}", channel.name())]
+    Event {
+        /// The channel.
+        channel: Channel,
+        /// The iceoryx2 error.
+        error: EventOpenOrCreateError,
     },
 }
 
-fn ice<E: core::fmt::Debug>(context: impl Into<String>) -> impl FnOnce(E) -> IpcError {
-    let context = context.into();
-    move |e| IpcError::Iceoryx {
-        context,
-        detail: format!("{e:?}"),
-    }
+/// Failure to create a channel's publisher ([`Bus::publisher`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum PublisherError {
+    /// The channel's services.
+    #[error(transparent)]
+    Service(#[from] ServiceError),
+    /// The publisher port.
+    #[error("publisher on {}: {error}", channel.name())]
+    Publisher {
+        /// The channel.
+        channel: Channel,
+        /// The iceoryx2 error.
+        error: PublisherCreateError,
+    },
+    /// The notifier port paired with the publisher.
+    #[error("notifier on {}: {error}", channel.name())]
+    Notifier {
+        /// The channel.
+        channel: Channel,
+        /// The iceoryx2 error.
+        error: NotifierCreateError,
+    },
 }
+
+/// Failure to create a channel's subscriber ([`Bus::subscriber`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum SubscriberError {
+    /// The channel's services.
+    #[error(transparent)]
+    Service(#[from] ServiceError),
+    /// The subscriber port.
+    #[error("subscriber on {}: {error}", channel.name())]
+    Subscriber {
+        /// The channel.
+        channel: Channel,
+        /// The iceoryx2 error.
+        error: SubscriberCreateError,
+    },
+    /// The listener port paired with the subscriber.
+    #[error("listener on {}: {error}", channel.name())]
+    Listener {
+        /// The channel.
+        channel: Channel,
+        /// The iceoryx2 error.
+        error: ListenerCreateError,
+    },
+}
+
+/// Failure to send a message ([`Pub::send`], [`Pub::send_raw`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum SendError {
+    /// The sample could not be delivered.
+    #[error("send on {}: {error}", channel.name())]
+    Send {
+        /// The channel.
+        channel: Channel,
+        /// The iceoryx2 error.
+        error: IceSendError,
+    },
+    /// The sample was delivered but the listeners could not be woken.
+    #[error("notify on {}: {error}", channel.name())]
+    Notify {
+        /// The channel.
+        channel: Channel,
+        /// The iceoryx2 error.
+        error: NotifierNotifyError,
+    },
+}
+
+/// Failure to receive a message ([`Sub::receive`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[error("receive on {}: {error}", channel.name())]
+pub struct ReceiveError {
+    /// The channel.
+    pub channel: Channel,
+    /// The iceoryx2 error.
+    pub error: IceReceiveError,
+}
+
+/// Failure of a WaitSet ([`waitset`] and the attachments and waits of the caller).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum WaitSetError {
+    /// The WaitSet could not be created.
+    #[error("cannot create the waitset: {0}")]
+    Create(#[from] WaitSetCreateError),
+    /// A listener, deadline or interval could not be attached.
+    #[error("cannot attach to the waitset: {0}")]
+    Attach(#[from] WaitSetAttachmentError),
+    /// Waiting failed.
+    #[error("waitset wait failed: {0}")]
+    Wait(#[from] WaitSetRunError),
+}
+
+/// Failure to list the nodes of the machine ([`cleanup_dead_nodes`], [`alive_node_count`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[error("cannot list the iceoryx2 nodes: {0}")]
+pub struct NodeListError(pub NodeListFailure);
 
 /// Depth of each subscriber's queue, per channel: enough for one second of the fastest rate we
 /// support plus margin, so that a briefly descheduled fusion loses nothing.
@@ -41,6 +165,12 @@ fn buffer_size(channel: Channel) -> usize {
         Channel::Imu | Channel::Truth | Channel::Nav => 2048,
         _ => 256,
     }
+}
+
+/// The publish-subscribe service of a channel and its paired event service.
+struct Services<T: Message> {
+    pubsub: publish_subscribe::PortFactory<ipc::Service, T, ()>,
+    event: event::PortFactory<ipc::Service>,
 }
 
 /// A node on the bus with the service-name prefix of this run.
@@ -52,13 +182,13 @@ pub struct Bus {
 impl Bus {
     /// Create a node named `name` for the run with service prefix `prefix`. Signal handling by
     /// iceoryx2 is disabled: every Sextant process handles SIGINT/SIGTERM itself.
-    pub fn new(prefix: &str, name: &str) -> Result<Self, IpcError> {
-        let node_name: NodeName = name.try_into().map_err(ice(format!("node name {name}")))?;
+    pub fn new(prefix: &str, name: &str) -> Result<Self, NodeError> {
+        let node_name: NodeName = name.try_into().map_err(NodeError::InvalidName)?;
         let node = NodeBuilder::new()
             .name(&node_name)
             .signal_handling_mode(SignalHandlingMode::Disabled)
             .create::<ipc::Service>()
-            .map_err(ice(format!("create node {name}")))?;
+            .map_err(NodeError::Create)?;
         Ok(Self {
             node,
             prefix: prefix.to_string(),
@@ -70,44 +200,52 @@ impl Bus {
         &self.prefix
     }
 
-    fn service_name(&self, channel: Channel) -> Result<ServiceName, IpcError> {
+    /// Open (or create) the services of `T`'s channel. Every process opens them with these
+    /// settings, so that publishers and subscribers in different binaries always agree.
+    fn services<T: Message>(&self) -> Result<Services<T>, ServiceError> {
+        let channel = T::CHANNEL;
         let s = channel.service_name(&self.prefix);
-        s.as_str()
+        let name: ServiceName = s
+            .as_str()
             .try_into()
-            .map_err(ice(format!("service name {s}")))
-    }
-
-    /// Open (or create) the publish-subscribe service and event service of `T`'s channel and
-    /// return a publisher that notifies after every send.
-    pub fn publisher<T: Message>(&self) -> Result<Pub<T>, IpcError> {
-        let name = self.service_name(T::CHANNEL)?;
-        let svc = self
+            .map_err(|error| ServiceError::InvalidName { channel, error })?;
+        let pubsub = self
             .node
             .service_builder(&name)
             .publish_subscribe::<T>()
-            .subscriber_max_buffer_size(buffer_size(T::CHANNEL))
+            .subscriber_max_buffer_size(buffer_size(channel))
             .history_size(0)
             .max_publishers(4)
             .max_subscribers(8)
             .enable_safe_overflow(true)
             .open_or_create()
-            .map_err(ice(format!("open pub-sub service {name}")))?;
-        let publisher = svc
-            .publisher_builder()
-            .create()
-            .map_err(ice(format!("create publisher {name}")))?;
-        let ev = self
+            .map_err(|error| ServiceError::PublishSubscribe { channel, error })?;
+        let event = self
             .node
             .service_builder(&name)
             .event()
             .max_notifiers(8)
             .max_listeners(8)
             .open_or_create()
-            .map_err(ice(format!("open event service {name}")))?;
-        let notifier = ev
+            .map_err(|error| ServiceError::Event { channel, error })?;
+        Ok(Services { pubsub, event })
+    }
+
+    /// Open (or create) the publish-subscribe service and event service of `T`'s channel and
+    /// return a publisher that notifies after every send.
+    pub fn publisher<T: Message>(&self) -> Result<Pub<T>, PublisherError> {
+        let channel = T::CHANNEL;
+        let svc = self.services::<T>()?;
+        let publisher = svc
+            .pubsub
+            .publisher_builder()
+            .create()
+            .map_err(|error| PublisherError::Publisher { channel, error })?;
+        let notifier = svc
+            .event
             .notifier_builder()
             .create()
-            .map_err(ice(format!("create notifier {name}")))?;
+            .map_err(|error| PublisherError::Notifier { channel, error })?;
         Ok(Pub {
             publisher,
             notifier,
@@ -116,41 +254,33 @@ impl Bus {
     }
 
     /// Open (or create) the services of `T`'s channel and return a subscriber with its listener.
-    pub fn subscriber<T: Message>(&self) -> Result<Sub<T>, IpcError> {
-        let name = self.service_name(T::CHANNEL)?;
-        let svc = self
-            .node
-            .service_builder(&name)
-            .publish_subscribe::<T>()
-            .subscriber_max_buffer_size(buffer_size(T::CHANNEL))
-            .history_size(0)
-            .max_publishers(4)
-            .max_subscribers(8)
-            .enable_safe_overflow(true)
-            .open_or_create()
-            .map_err(ice(format!("open pub-sub service {name}")))?;
+    pub fn subscriber<T: Message>(&self) -> Result<Sub<T>, SubscriberError> {
+        let channel = T::CHANNEL;
+        let svc = self.services::<T>()?;
         let subscriber = svc
+            .pubsub
             .subscriber_builder()
-            .buffer_size(buffer_size(T::CHANNEL))
+            .buffer_size(buffer_size(channel))
             .create()
-            .map_err(ice(format!("create subscriber {name}")))?;
-        let ev = self
-            .node
-            .service_builder(&name)
-            .event()
-            .max_notifiers(8)
-            .max_listeners(8)
-            .open_or_create()
-            .map_err(ice(format!("open event service {name}")))?;
-        let listener = ev
+            .map_err(|error| SubscriberError::Subscriber { channel, error })?;
+        let listener = svc
+            .event
             .listener_builder()
             .create()
-            .map_err(ice(format!("create listener {name}")))?;
+            .map_err(|error| SubscriberError::Listener { channel, error })?;
         Ok(Sub {
             subscriber,
             listener,
         })
     }
+}
+
+/// A WaitSet with iceoryx2's signal handling disabled (every Sextant process handles
+/// SIGINT/SIGTERM itself), to attach [`Sub::listener`]s, deadlines and intervals to.
+pub fn waitset() -> Result<WaitSet<ipc::Service>, WaitSetError> {
+    Ok(WaitSetBuilder::new()
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<ipc::Service>()?)
 }
 
 /// Publisher of one channel, with its notifier; stamps sequence number and send time.
@@ -163,7 +293,7 @@ pub struct Pub<T: Message> {
 impl<T: Message> Pub<T> {
     /// Stamp `msg`'s header (sequence number, monotonic send time), send it by copy into shared
     /// memory and wake the listeners. Returns the stamped message.
-    pub fn send(&mut self, mut msg: T) -> Result<T, IpcError> {
+    pub fn send(&mut self, mut msg: T) -> Result<T, SendError> {
         self.seq += 1;
         let h = msg.header_mut();
         h.seq = self.seq;
@@ -173,15 +303,14 @@ impl<T: Message> Pub<T> {
     }
 
     /// Send `msg` as it is (header untouched), e.g. when republishing a recording.
-    pub fn send_raw(&mut self, msg: T) -> Result<(), IpcError> {
-        // The error context is formatted only on failure: this runs once per published
-        // message, which must not allocate (the daemon's hot path).
+    pub fn send_raw(&mut self, msg: T) -> Result<(), SendError> {
+        let channel = T::CHANNEL;
         self.publisher
             .send_copy(msg)
-            .map_err(|e| ice(format!("send on {}", T::CHANNEL.name()))(e))?;
+            .map_err(|error| SendError::Send { channel, error })?;
         self.notifier
             .notify()
-            .map_err(|e| ice(format!("notify on {}", T::CHANNEL.name()))(e))?;
+            .map_err(|error| SendError::Notify { channel, error })?;
         Ok(())
     }
 }
@@ -204,18 +333,21 @@ impl<T: Message> Sub<T> {
     }
 
     /// Take the next sample, copied out of shared memory.
-    pub fn receive(&self) -> Result<Option<T>, IpcError> {
+    pub fn receive(&self) -> Result<Option<T>, ReceiveError> {
         match self.subscriber.receive() {
             Ok(Some(sample)) => Ok(Some(*sample)),
             Ok(None) => Ok(None),
-            Err(e) => Err(ice(format!("receive on {}", T::CHANNEL.name()))(e)),
+            Err(error) => Err(ReceiveError {
+                channel: T::CHANNEL,
+                error,
+            }),
         }
     }
 }
 
 /// Remove the shared-memory resources of nodes whose process died (a crashed run), so that a new
 /// run starts clean. Returns the number of dead nodes cleaned.
-pub fn cleanup_dead_nodes() -> Result<usize, IpcError> {
+pub fn cleanup_dead_nodes() -> Result<usize, NodeListError> {
     let mut cleaned = 0;
     Node::<ipc::Service>::list(Config::global_config(), |state| {
         if let NodeState::<ipc::Service>::Dead(view) = state
@@ -225,12 +357,12 @@ pub fn cleanup_dead_nodes() -> Result<usize, IpcError> {
         }
         CallbackProgression::Continue
     })
-    .map_err(ice("list nodes"))?;
+    .map_err(NodeListError)?;
     Ok(cleaned)
 }
 
 /// Number of nodes currently alive (all prefixes).
-pub fn alive_node_count() -> Result<usize, IpcError> {
+pub fn alive_node_count() -> Result<usize, NodeListError> {
     let mut n = 0;
     Node::<ipc::Service>::list(Config::global_config(), |state| {
         if let NodeState::<ipc::Service>::Alive(_) = state {
@@ -238,6 +370,6 @@ pub fn alive_node_count() -> Result<usize, IpcError> {
         }
         CallbackProgression::Continue
     })
-    .map_err(ice("list nodes"))?;
+    .map_err(NodeListError)?;
     Ok(n)
 }

@@ -12,6 +12,9 @@
 //! `c_n_b` maps body coordinates into NED.
 
 pub mod ipc;
+pub mod record;
+
+pub use record::{Record, RecordKind, SENSOR_ALIVE_TOPIC, SensorAliveEvent};
 
 use iceoryx2::prelude::ZeroCopySend;
 use schemars::JsonSchema;
@@ -248,18 +251,19 @@ pub enum NavMode {
 }
 
 impl NavMode {
+    /// Every mode, in wire-value order.
+    pub const ALL: [NavMode; 7] = [
+        Self::Initializing,
+        Self::Aligning,
+        Self::FreeInertial,
+        Self::GnssInertial,
+        Self::AstroInertial,
+        Self::GnssAstroInertial,
+        Self::DeadReckoning,
+    ];
     /// Decode the wire value, `None` for an unknown one.
     pub fn from_u32(v: u32) -> Option<Self> {
-        Some(match v {
-            0 => Self::Initializing,
-            1 => Self::Aligning,
-            2 => Self::FreeInertial,
-            3 => Self::GnssInertial,
-            4 => Self::AstroInertial,
-            5 => Self::GnssAstroInertial,
-            6 => Self::DeadReckoning,
-            _ => return None,
-        })
+        Self::ALL.into_iter().find(|m| *m as u32 == v)
     }
     /// Short human name.
     pub fn name(self) -> &'static str {
@@ -355,23 +359,66 @@ pub enum SensorId {
 }
 
 impl SensorId {
+    /// Number of sensors (≤ [`MAX_SENSORS`], the slots of the wire format).
+    pub const COUNT: usize = 5;
     /// Every sensor, in slot order.
-    pub const ALL: [SensorId; 5] = [
+    pub const ALL: [SensorId; Self::COUNT] = [
         SensorId::Imu,
         SensorId::StarTracker,
         SensorId::Gnss,
         SensorId::Odometer,
         SensorId::Baro,
     ];
-    /// Short name.
+    /// The sensor of slot `i`, `None` past the last.
+    pub fn from_index(i: usize) -> Option<Self> {
+        Self::ALL.get(i).copied()
+    }
+    /// Short name (that of its channel).
     pub fn name(self) -> &'static str {
+        self.channel().name()
+    }
+    /// The channel the sensor publishes on.
+    pub fn channel(self) -> Channel {
         match self {
-            Self::Imu => "imu",
-            Self::StarTracker => "star_tracker",
-            Self::Gnss => "gnss",
-            Self::Odometer => "odometer",
-            Self::Baro => "baro",
+            Self::Imu => Channel::Imu,
+            Self::StarTracker => Channel::StarTracker,
+            Self::Gnss => Channel::Gnss,
+            Self::Odometer => Channel::Odometer,
+            Self::Baro => Channel::Baro,
         }
+    }
+}
+
+const _: () = assert!(SensorId::COUNT <= MAX_SENSORS);
+
+/// One value per sensor, indexed by [`SensorId`].
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct PerSensor<T>(pub [T; SensorId::COUNT]);
+
+impl<T: Copy> PerSensor<T> {
+    /// `value` for every sensor.
+    pub const fn splat(value: T) -> Self {
+        Self([value; SensorId::COUNT])
+    }
+}
+
+impl<T> PerSensor<T> {
+    /// Each sensor with its value, in slot order.
+    pub fn iter(&self) -> impl Iterator<Item = (SensorId, &T)> {
+        SensorId::ALL.into_iter().zip(self.0.iter())
+    }
+}
+
+impl<T> core::ops::Index<SensorId> for PerSensor<T> {
+    type Output = T;
+    fn index(&self, s: SensorId) -> &T {
+        &self.0[s as usize]
+    }
+}
+
+impl<T> core::ops::IndexMut<SensorId> for PerSensor<T> {
+    fn index_mut(&mut self, s: SensorId) -> &mut T {
+        &mut self.0[s as usize]
     }
 }
 
@@ -468,10 +515,15 @@ pub struct Status {
 }
 
 /// The logical channels of the system.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+///
+/// The declaration order (`Ord`) is the delivery order of simultaneous messages in every
+/// time-ordered stream (the offline simulation, the daemon's drain of one wake-up): aiding
+/// (star tracker, GNSS, odometer, baro) before the IMU sample of the same time, so that a
+/// navigator fusing an aiding sample once the inertial solution reaches its time fuses it at
+/// that IMU epoch; the truth after the IMU, so that the truth at `t` meets the solution already
+/// propagated to `t`; the fusion's outputs last.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub enum Channel {
-    /// IMU samples.
-    Imu,
     /// Star-tracker attitude.
     StarTracker,
     /// GNSS fix and raw measurements.
@@ -480,6 +532,8 @@ pub enum Channel {
     Odometer,
     /// Barometer.
     Baro,
+    /// IMU samples.
+    Imu,
     /// Simulated truth.
     Truth,
     /// Navigation solution.
@@ -489,13 +543,15 @@ pub enum Channel {
 }
 
 impl Channel {
-    /// Every channel.
-    pub const ALL: [Channel; 8] = [
-        Channel::Imu,
+    /// Number of channels.
+    pub const COUNT: usize = 8;
+    /// Every channel, in delivery order.
+    pub const ALL: [Channel; Self::COUNT] = [
         Channel::StarTracker,
         Channel::Gnss,
         Channel::Odometer,
         Channel::Baro,
+        Channel::Imu,
         Channel::Truth,
         Channel::Nav,
         Channel::Status,
@@ -512,6 +568,10 @@ impl Channel {
             Self::Nav => "nav",
             Self::Status => "status",
         }
+    }
+    /// The sensor publishing on the channel (`None` for truth and the fusion's outputs).
+    pub fn sensor(self) -> Option<SensorId> {
+        SensorId::ALL.into_iter().find(|s| s.channel() == self)
     }
     /// Full iceoryx2 service name, e.g. `sextant/imu` for prefix `sextant`.
     pub fn service_name(self, prefix: &str) -> String {
@@ -640,6 +700,31 @@ mod tests {
     fn service_names_carry_the_prefix() {
         assert_eq!(Channel::Imu.service_name("sextant"), "sextant/imu");
         assert_eq!(Channel::from_name("nav"), Some(Channel::Nav));
+    }
+
+    #[test]
+    fn sensors_and_channels_map_both_ways() {
+        for s in SensorId::ALL {
+            assert_eq!(s.channel().sensor(), Some(s));
+            assert_eq!(SensorId::from_index(s as usize), Some(s));
+        }
+        assert_eq!(Channel::Truth.sensor(), None);
+        assert_eq!(SensorId::from_index(SensorId::COUNT), None);
+        for m in NavMode::ALL {
+            assert_eq!(NavMode::from_u32(m as u32), Some(m));
+        }
+        assert_eq!(NavMode::from_u32(7), None);
+        let mut p = PerSensor::splat(0u32);
+        p[SensorId::Gnss] += 2;
+        assert_eq!(p.0, [0, 0, 2, 0, 0]);
+    }
+
+    #[test]
+    fn simultaneous_messages_deliver_aiding_then_imu_then_truth() {
+        let mut v = Channel::ALL;
+        v.sort();
+        assert_eq!(v, Channel::ALL);
+        assert!(Channel::Baro < Channel::Imu && Channel::Imu < Channel::Truth);
     }
 
     #[test]

@@ -264,8 +264,9 @@ fn online_estimate(
     k: usize,
     online_s: f64,
 ) -> Result<(Vector3<f64>, Vector3<f64>), ExperimentError> {
-    use drivers_sim::offline::{Channel, OfflineSim, run_navigator};
+    use drivers_sim::offline::{OfflineSim, run_navigator};
     use fusion::navigator::Navigator;
+    use msgs::Channel;
     let scn = record_scenario(k)?;
     let sim = OfflineSim::with_channels(&scn, &[Channel::Imu, Channel::StarTracker, Channel::Gnss])
         .with_duration_s(online_s);

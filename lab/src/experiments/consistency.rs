@@ -62,10 +62,11 @@
 
 use super::plot::{Chart, Line, color, line_chart, xy};
 use super::{Experiment, ExperimentError, fmt_f64, nan_if_null, progress_bar};
-use drivers_sim::offline::{Channel, OfflineSim, RunPoint, run_navigator};
+use drivers_sim::offline::{OfflineSim, RunPoint, run_navigator};
 use drivers_sim::scenario::Scenario;
 use fusion::ekf::chi2_quantile;
 use fusion::navigator::{Navigator, NavigatorConfig};
+use msgs::Channel;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};

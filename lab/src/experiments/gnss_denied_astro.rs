@@ -60,12 +60,13 @@
 use super::consistency::{filter_config, load_scenario};
 use super::plot::{Chart, Line, color, line_chart};
 use super::{Experiment, ExperimentError, fmt_f64, fmt_opt, nan_if_null, progress_bar};
-use drivers_sim::offline::{Channel, OfflineSim, RunPoint, run_navigator};
+use drivers_sim::offline::{OfflineSim, RunPoint, run_navigator};
 use drivers_sim::scenario::Scenario;
 use drivers_sim::sources::{ImuSource, SampleSource};
 use fusion::earth::{WGS84, normal_gravity};
 use fusion::ekf::gravity_gradient;
 use fusion::navigator::Navigator;
+use msgs::Channel;
 use nalgebra::{Matrix2, Vector2, Vector3};
 use serde::{Deserialize, Serialize};
 use std::path::Path;

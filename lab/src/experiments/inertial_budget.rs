@@ -84,12 +84,13 @@ use super::consistency::{filter_config, load_scenario};
 use super::plot::{Chart, Line, color, line_chart, xy};
 use super::{Experiment, ExperimentError, fmt_f64, nan_if_null, progress_bar};
 use drivers_sim::imu::{ImuErrorModel, IntervalErrors};
-use drivers_sim::offline::{Channel, OfflineSim, SatelliteLimit, SimMessage, compare, feed};
+use drivers_sim::offline::{OfflineSim, SatelliteLimit, compare, feed};
 use drivers_sim::scenario::period_ns;
 use drivers_sim::truth::{TruthGenerator, TruthPoint};
 use fusion::ekf::{Covariance, ErrorStateEkf, gravity_gradient, idx, nonorthogonality_matrix};
 use fusion::navigator::{Navigator, NavigatorConfig};
 use fusion::strapdown::{ImuIncrement, NavState, Strapdown};
+use msgs::{Channel, Record};
 use nalgebra::{Matrix3, SVector, UnitQuaternion, Vector2, Vector3};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -185,7 +186,7 @@ fn navigator_run(
     let mut m = Measured::default();
     for msg in sim {
         match &msg {
-            SimMessage::Truth(t) => {
+            Record::Truth(t) => {
                 if !(nav.is_navigating() && nav.time_ns() == t.header.time_ns) {
                     continue;
                 }
@@ -208,10 +209,12 @@ fn navigator_run(
                 m.err_ne_m.push(Vector2::new(e.x, e.y));
                 m.sigma_m.push(p.horizontal_sigma_m());
             }
-            SimMessage::Baro(b)
-                if !baro_in_window && (b.header.time_ns - epoch) as f64 * 1e-9 > w0 => {}
-            other => feed(&mut nav, other)
-                .map_err(|e| ExperimentError::Measurement(format!("navigator run: {e}")))?,
+            Record::Baro(b) if !baro_in_window && (b.header.time_ns - epoch) as f64 * 1e-9 > w0 => {
+            }
+            other => {
+                feed(&mut nav, other)
+                    .map_err(|e| ExperimentError::Measurement(format!("navigator run: {e}")))?;
+            }
         }
     }
     let snap = snap.ok_or_else(|| {

@@ -58,9 +58,10 @@
 use super::consistency::{filter_config, load_scenario};
 use super::plot::{Chart, Line, color, line_chart, xy};
 use super::{Experiment, ExperimentError, fmt_f64, fmt_opt, nan_if_null, present, progress_bar};
-use drivers_sim::offline::SimMessage;
-use drivers_sim::offline::{Channel, OfflineSim, SatelliteLimit, run_navigator};
+use drivers_sim::offline::{OfflineSim, SatelliteLimit, run_navigator};
 use fusion::navigator::{Navigator, NavigatorConfig};
+use msgs::Channel;
+use msgs::Record;
 use nalgebra::{Matrix2, Vector2, Vector3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -194,7 +195,7 @@ fn one_run(
     // Satellite positions of the last GNSS epoch (for the observed direction).
     let sats: RefCell<Vec<Vector3<f64>>> = RefCell::new(Vec::new());
     let sim = sim.inspect(|m| {
-        if let SimMessage::Gnss(g) = m {
+        if let Record::Gnss(g) = m {
             let n = (g.n_satellites as usize).min(g.satellites.len());
             let mut v = sats.borrow_mut();
             v.clear();
