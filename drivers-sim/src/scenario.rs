@@ -663,23 +663,6 @@ pub struct BaroGrade {
     pub noise_pa: f64,
 }
 
-/// UTC calendar instant parsed from `start_utc`.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct UtcCalendar {
-    /// Year.
-    pub year: i32,
-    /// Month 1..=12.
-    pub month: u32,
-    /// Day 1..=31.
-    pub day: u32,
-    /// Hour 0..=23.
-    pub hour: u32,
-    /// Minute 0..=59.
-    pub minute: u32,
-    /// Second (0 ≤ s < 61).
-    pub second: f64,
-}
-
 /// A parsed and validated scenario with its grades resolved.
 #[derive(Debug, Clone)]
 pub struct Scenario {
@@ -688,7 +671,7 @@ pub struct Scenario {
     /// The file as written.
     pub spec: ScenarioFile,
     /// Start epoch, UTC.
-    pub start: UtcCalendar,
+    pub start: fusion::time::UtcDateTime,
     /// Resolved IMU grade.
     pub imu: ImuGrade,
     /// Resolved star-tracker grade.
@@ -707,60 +690,6 @@ fn invalid(file: &Path, key: impl Into<String>, reason: impl Into<String>) -> Si
         key: key.into(),
         reason: reason.into(),
     }
-}
-
-/// Parse `YYYY-MM-DDTHH:MM:SS[.fff][Z]` (also with a space instead of `T`).
-pub fn parse_utc(s: &str) -> Option<UtcCalendar> {
-    let s = s.trim().trim_end_matches('Z');
-    let (date, time) = s.split_once(['T', ' '])?;
-    let mut d = date.split('-');
-    let year: i32 = d.next()?.parse().ok()?;
-    let month: u32 = d.next()?.parse().ok()?;
-    let day: u32 = d.next()?.parse().ok()?;
-    if d.next().is_some() {
-        return None;
-    }
-    let mut t = time.split(':');
-    let hour: u32 = t.next()?.parse().ok()?;
-    let minute: u32 = t.next()?.parse().ok()?;
-    let second: f64 = t.next()?.parse().ok()?;
-    if t.next().is_some() {
-        return None;
-    }
-    let leap = (year % 4 == 0 && year % 100 != 0) || year % 400 == 0;
-    let mdays = [
-        31,
-        if leap { 29 } else { 28 },
-        31,
-        30,
-        31,
-        30,
-        31,
-        31,
-        30,
-        31,
-        30,
-        31,
-    ];
-    if !(1980..=2100).contains(&year)
-        || !(1..=12).contains(&month)
-        || day < 1
-        || day > mdays[(month - 1) as usize]
-        || hour > 23
-        || minute > 59
-        || !second.is_finite()
-        || !(0.0..61.0).contains(&second)
-    {
-        return None;
-    }
-    Some(UtcCalendar {
-        year,
-        month,
-        day,
-        hour,
-        minute,
-        second,
-    })
 }
 
 /// Deep-merge `over` into `base` (tables merge key by key, other values replace).
@@ -903,12 +832,12 @@ impl Scenario {
         };
 
         let m = &spec.scenario;
-        let start = parse_utc(&m.start_utc).ok_or_else(|| {
+        let start = fusion::time::parse_utc(&m.start_utc).ok_or_else(|| {
             invalid(
                 f,
                 "scenario.start_utc",
                 format!(
-                    "`{}` is not a UTC calendar instant YYYY-MM-DDTHH:MM:SS[.fff] in 1980..2100",
+                    "`{}` is not a UTC calendar instant YYYY-MM-DDTHH:MM:SS[.fff] in 1980..=2100",
                     m.start_utc
                 ),
             )
@@ -1238,8 +1167,7 @@ impl Scenario {
 
     /// GPS time of the scenario epoch (needs `fusion::time`).
     pub fn epoch_gps(&self) -> fusion::time::GpsTime {
-        let s = &self.start;
-        fusion::time::GpsTime::from_utc(s.year, s.month, s.day, s.hour, s.minute, s.second)
+        fusion::time::GpsTime::from_utc_datetime(&self.start)
     }
 }
 

@@ -527,3 +527,103 @@ mod tests {
         }
     }
 }
+
+/// Parse a UTC instant written `YYYY-MM-DDTHH:MM:SS[.fffffffff][Z]` (ISO 8601; a space may
+/// replace the `T`; at most nine decimals, read exactly). `None` unless it names a real
+/// instant of years 1980–2100: month 1–12, the day within its month, hour 0–23, minute 0–59,
+/// second 0–60 (60 inside a leap second).
+pub fn parse_utc(s: &str) -> Option<UtcDateTime> {
+    fn digits<T: core::str::FromStr>(s: &str) -> Option<T> {
+        if s.is_empty() || !s.bytes().all(|b| b.is_ascii_digit()) {
+            return None;
+        }
+        s.parse().ok()
+    }
+    let s = s.trim();
+    let s = s.strip_suffix('Z').unwrap_or(s);
+    let (date, time) = s.split_once(['T', ' '])?;
+    let mut d = date.split('-');
+    let (year, month, day) = (d.next()?, d.next()?, d.next()?);
+    let mut t = time.split(':');
+    let (hour, minute, second) = (t.next()?, t.next()?, t.next()?);
+    if d.next().is_some() || t.next().is_some() {
+        return None;
+    }
+    let (second, fraction) = second.split_once('.').unwrap_or((second, ""));
+    if fraction.len() > 9 || (!fraction.is_empty() && digits::<u32>(fraction).is_none()) {
+        return None;
+    }
+    let nanosecond = fraction
+        .bytes()
+        .chain(core::iter::repeat(b'0'))
+        .take(9)
+        .fold(0u32, |n, b| n * 10 + u32::from(b - b'0'));
+    let u = UtcDateTime {
+        year: digits(year)?,
+        month: digits(month)?,
+        day: digits(day)?,
+        hour: digits(hour)?,
+        minute: digits(minute)?,
+        second: digits(second)?,
+        nanosecond,
+    };
+    // The day exists when it survives the round trip through the day count.
+    let real_day = (1..=12).contains(&u.month)
+        && u.day >= 1
+        && civil_from_days(days_from_civil(u.year, u.month, u.day)) == (u.year, u.month, u.day);
+    let valid = (1980..=2100).contains(&u.year)
+        && real_day
+        && u.hour <= 23
+        && u.minute <= 59
+        && u.second <= 60;
+    valid.then_some(u)
+}
+
+#[cfg(test)]
+mod parse_utc_tests {
+    use super::*;
+
+    #[test]
+    fn instants_parse_exactly_and_nonsense_is_refused() {
+        let u = parse_utc("2025-03-20T21:00:00").unwrap();
+        assert_eq!(
+            GpsTime::from_utc_datetime(&u),
+            GpsTime::from_utc(2025, 3, 20, 21, 0, 0.0)
+        );
+        assert_eq!(
+            parse_utc(" 2024-02-29 12:30:05.25Z").unwrap().nanosecond,
+            250_000_000
+        );
+        assert_eq!(
+            parse_utc("2016-12-31T23:59:60.123456789").unwrap(),
+            UtcDateTime {
+                year: 2016,
+                month: 12,
+                day: 31,
+                hour: 23,
+                minute: 59,
+                second: 60,
+                nanosecond: 123_456_789,
+            }
+        );
+        for bad in [
+            "2025-13-20T21:00:00",
+            "2025-13-45T99:00:00",
+            "2023-02-29T00:00:00",
+            "2025-04-31T00:00:00",
+            "1979-12-31T23:59:59",
+            "2025-03-20T24:00:00",
+            "2025-03-20T21:60:00",
+            "2025-03-20T21:00:61",
+            "2025-03-20T21:00:00.1234567891",
+            "2025-03-20T21:00:-1",
+            "2025-03-20T21:00",
+            "2025-03-20",
+            "2025-03-20T21:00:00:00",
+            "yesterday",
+            "",
+        ] {
+            assert_eq!(parse_utc(bad), None, "{bad}");
+        }
+    }
+}

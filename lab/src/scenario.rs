@@ -56,32 +56,6 @@ pub struct ScenarioInfo {
     pub gnss_outages: Vec<TimeWindow>,
 }
 
-/// Parse `YYYY-MM-DDTHH:MM:SS[.fff][Z]` (UTC) into GPS time.
-pub fn parse_utc(s: &str) -> Option<GpsTime> {
-    let s = s.trim().trim_end_matches('Z');
-    let (date, time) = s.split_once(['T', ' '])?;
-    let mut d = date.split('-');
-    let year: i32 = d.next()?.parse().ok()?;
-    let month: u32 = d.next()?.parse().ok()?;
-    let day: u32 = d.next()?.parse().ok()?;
-    let mut t = time.split(':');
-    let hour: u32 = t.next()?.parse().ok()?;
-    let minute: u32 = t.next()?.parse().ok()?;
-    let second: f64 = t.next()?.parse().ok()?;
-    if d.next().is_some()
-        || t.next().is_some()
-        || !(1..=12).contains(&month)
-        || !(1..=31).contains(&day)
-        || hour > 23
-        || minute > 59
-        || !(0.0..61.0).contains(&second)
-        || year < 1980
-    {
-        return None;
-    }
-    Some(GpsTime::from_utc(year, month, day, hour, minute, second))
-}
-
 fn num(v: &toml::Value) -> Option<f64> {
     v.as_float().or_else(|| v.as_integer().map(|i| i as f64))
 }
@@ -111,11 +85,13 @@ impl ScenarioInfo {
             .get("start_utc")
             .and_then(|s| s.as_str())
             .ok_or_else(|| bad("missing string scenario.start_utc".into()))?;
-        let epoch = parse_utc(start).ok_or_else(|| {
-            bad(format!(
-                "scenario.start_utc: expected YYYY-MM-DDTHH:MM:SS[.fff][Z], got {start:?}"
-            ))
-        })?;
+        let epoch = fusion::time::parse_utc(start)
+            .map(|u| GpsTime::from_utc_datetime(&u))
+            .ok_or_else(|| {
+                bad(format!(
+                    "scenario.start_utc: expected YYYY-MM-DDTHH:MM:SS[.fff][Z], got {start:?}"
+                ))
+            })?;
         let duration_s = meta.get("duration_s").and_then(num);
         let name = meta
             .get("name")

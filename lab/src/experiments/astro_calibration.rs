@@ -128,8 +128,7 @@ pub fn record_scenario(k: usize) -> Result<Scenario, ExperimentError> {
     })?;
     let mut table: toml::Table = toml::from_str(&text).map_err(measurement)?;
     let base = Scenario::from_toml_str(&text, &path).map_err(measurement)?;
-    let s = base.start;
-    let start = GpsTime::from_utc(s.year, s.month, s.day, s.hour, s.minute, s.second)
+    let start = GpsTime::from_utc_datetime(&base.start)
         .add_ns((k as i64 - 1) * 86_400 * NS_PER_S)
         .to_utc();
     let meta = table
