@@ -7,7 +7,7 @@
 //! the meaning (ranges, consistency). Every error names the file and the key.
 
 use fusion::navigator::NavigatorConfig;
-use msgs::SensorId;
+use msgs::{PerSensor, SensorId};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -78,36 +78,6 @@ pub struct RunSection {
     pub drivers: Vec<String>,
 }
 
-/// `[fusion.deadlines_ms]`: per-sensor deadlines in ms of simulated time (divided by the run's
-/// speed-up to get the wall-clock deadline, floored at `fusion.min_wall_deadline_ms`).
-#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
-#[serde(deny_unknown_fields)]
-pub struct Deadlines {
-    /// IMU deadline, ms.
-    pub imu: f64,
-    /// Star-tracker deadline, ms.
-    pub star_tracker: f64,
-    /// GNSS deadline, ms.
-    pub gnss: f64,
-    /// Odometer deadline, ms.
-    pub odometer: f64,
-    /// Barometer deadline, ms.
-    pub baro: f64,
-}
-
-impl Deadlines {
-    /// Deadline of a sensor, ms of simulated time.
-    pub fn get_ms(&self, sensor: SensorId) -> f64 {
-        match sensor {
-            SensorId::Imu => self.imu,
-            SensorId::StarTracker => self.star_tracker,
-            SensorId::Gnss => self.gnss,
-            SensorId::Odometer => self.odometer,
-            SensorId::Baro => self.baro,
-        }
-    }
-}
-
 /// `[fusion]`: the fusion daemon.
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
@@ -118,8 +88,11 @@ pub struct FusionSection {
     pub status_period_s: f64,
     /// Smallest wall-clock deadline after scaling by the speed-up, ms (scheduling jitter).
     pub min_wall_deadline_ms: f64,
-    /// Per-sensor deadlines.
-    pub deadlines_ms: Deadlines,
+    /// `[fusion.deadlines_ms]`: how long each sensor may stay silent before the daemon declares
+    /// it dead, ms of simulated time (divided by the run's speed-up to get the wall-clock
+    /// deadline, floored at `min_wall_deadline_ms`). Not the filter's `[deadlines]`, which
+    /// say how long a fused aiding source counts for the navigation mode.
+    pub deadlines_ms: PerSensor<f64>,
 }
 
 /// `[recorder]`: the MCAP writer.
@@ -282,7 +255,7 @@ impl SystemConfig {
             positive(
                 file,
                 &format!("fusion.deadlines_ms.{}", s.name()),
-                f.deadlines_ms.get_ms(s),
+                f.deadlines_ms[s],
             )?;
         }
         let rec = &self.recorder;
@@ -306,7 +279,7 @@ impl SystemConfig {
 
     /// Wall-clock deadline of a sensor at speed-up `speed`.
     pub fn wall_deadline(&self, sensor: SensorId, speed: f64) -> Duration {
-        let ms = (self.fusion.deadlines_ms.get_ms(sensor) / speed.max(1e-9))
+        let ms = (self.fusion.deadlines_ms[sensor] / speed.max(1e-9))
             .max(self.fusion.min_wall_deadline_ms);
         Duration::from_secs_f64(ms / 1000.0)
     }
@@ -417,7 +390,7 @@ mod tests {
     #[test]
     fn invalid_value_is_named() {
         let mut c = SystemConfig::parse(GOOD, &f()).unwrap();
-        c.fusion.deadlines_ms.gnss = -1.0;
+        c.fusion.deadlines_ms[SensorId::Gnss] = -1.0;
         let e = c.validate(&f()).unwrap_err().to_string();
         assert!(e.contains("fusion.deadlines_ms.gnss"), "{e}");
         assert!(e.contains("test/sextant.toml"), "{e}");

@@ -599,7 +599,7 @@ mod tests {
         let mut system =
             SystemConfig::parse(include_str!("../../config/sextant.toml"), path).unwrap();
         system.fusion.status_period_s = 0.1;
-        system.fusion.deadlines_ms.imu = 50.0;
+        system.fusion.deadlines_ms[SensorId::Imu] = 50.0;
         system.fusion.min_wall_deadline_ms = 20.0;
         system.validate(path).unwrap();
         let opts = DaemonOptions {

@@ -374,11 +374,11 @@ impl SensorId {
         Self::ALL.get(i).copied()
     }
     /// Short name (that of its channel).
-    pub fn name(self) -> &'static str {
+    pub const fn name(self) -> &'static str {
         self.channel().name()
     }
     /// The channel the sensor publishes on.
-    pub fn channel(self) -> Channel {
+    pub const fn channel(self) -> Channel {
         match self {
             Self::Imu => Channel::Imu,
             Self::StarTracker => Channel::StarTracker,
@@ -406,6 +406,65 @@ impl<T> PerSensor<T> {
     /// Each sensor with its value, in slot order.
     pub fn iter(&self) -> impl Iterator<Item = (SensorId, &T)> {
         SensorId::ALL.into_iter().zip(self.0.iter())
+    }
+}
+
+/// Written as a table keyed by [`SensorId::name`] in slot order (`imu = …, star_tracker = …`).
+impl<T: Serialize> Serialize for PerSensor<T> {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeMap;
+        let mut map = serializer.serialize_map(Some(SensorId::COUNT))?;
+        for (s, v) in self.iter() {
+            map.serialize_entry(s.name(), v)?;
+        }
+        map.end()
+    }
+}
+
+/// Read from a table with every sensor's name exactly once and no other key.
+impl<'de, T: Deserialize<'de>> Deserialize<'de> for PerSensor<T> {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        struct Visit<T>(core::marker::PhantomData<T>);
+        const NAMES: [&str; SensorId::COUNT] = {
+            let mut n = [""; SensorId::COUNT];
+            let mut i = 0;
+            while i < SensorId::COUNT {
+                n[i] = SensorId::ALL[i].name();
+                i += 1;
+            }
+            n
+        };
+        impl<'de, T: Deserialize<'de>> serde::de::Visitor<'de> for Visit<T> {
+            type Value = PerSensor<T>;
+            fn expecting(&self, f: &mut core::fmt::Formatter) -> core::fmt::Result {
+                f.write_str("a table with one value per sensor")
+            }
+            fn visit_map<A: serde::de::MapAccess<'de>>(
+                self,
+                mut map: A,
+            ) -> Result<Self::Value, A::Error> {
+                use serde::de::Error;
+                let mut values: [Option<T>; SensorId::COUNT] = Default::default();
+                while let Some(key) = map.next_key::<String>()? {
+                    let Some(i) = NAMES.iter().position(|n| *n == key) else {
+                        return Err(A::Error::unknown_field(&key, &NAMES));
+                    };
+                    if values[i].is_some() {
+                        return Err(A::Error::duplicate_field(NAMES[i]));
+                    }
+                    values[i] = Some(map.next_value()?);
+                }
+                let mut out = Vec::with_capacity(SensorId::COUNT);
+                for (i, v) in values.into_iter().enumerate() {
+                    out.push(v.ok_or_else(|| A::Error::missing_field(NAMES[i]))?);
+                }
+                let Ok(arr) = out.try_into() else {
+                    unreachable!("one value per sensor");
+                };
+                Ok(PerSensor(arr))
+            }
+        }
+        deserializer.deserialize_map(Visit(core::marker::PhantomData))
     }
 }
 
@@ -557,7 +616,7 @@ impl Channel {
         Channel::Status,
     ];
     /// Channel name without prefix: the last component of the service name and the MCAP topic.
-    pub fn name(self) -> &'static str {
+    pub const fn name(self) -> &'static str {
         match self {
             Self::Imu => "imu",
             Self::StarTracker => "star_tracker",
@@ -717,6 +776,21 @@ mod tests {
         let mut p = PerSensor::splat(0u32);
         p[SensorId::Gnss] += 2;
         assert_eq!(p.0, [0, 0, 2, 0, 0]);
+        let j = serde_json::to_string(&p).unwrap();
+        assert_eq!(
+            j,
+            r#"{"imu":0,"star_tracker":0,"gnss":2,"odometer":0,"baro":0}"#
+        );
+        assert_eq!(serde_json::from_str::<PerSensor<u32>>(&j).unwrap(), p);
+        for bad in [
+            r#"{"imu":0,"star_tracker":0,"gnss":2,"odometer":0}"#,
+            r#"{"imu":0,"star_tracker":0,"gnss":2,"odometer":0,"baro":0,"sonar":1}"#,
+        ] {
+            assert!(
+                serde_json::from_str::<PerSensor<u32>>(bad).is_err(),
+                "{bad}"
+            );
+        }
     }
 
     #[test]
