@@ -3,7 +3,7 @@
 //! with a counting allocator that counts per thread — the daemon's own thread, not the
 //! recorder's writer thread (which serialises records to JSON and may allocate).
 //!
-//! Finding (session 3), per mechanism, each measured on its own in
+//! Finding, per mechanism, each measured on its own in
 //! `each_step_of_the_loop_costs_what_it_costs` and together in `daemon_loop_allocations`:
 //! - publishing a message (`msgs::ipc::Pub::send_raw`): 1 allocation inside iceoryx2 0.10
 //!   (`Publisher::loan_uninit` allocates an `Rc` of shared state per sample). It was 3: its two
@@ -190,7 +190,7 @@ impl NavEngine for Probe {
 }
 
 /// Allocations per published message (`Pub::send_raw`): iceoryx2's per-loan `Rc` only (its
-/// error contexts are formatted on failure only since session 3; they were 2 eager `format!`s).
+/// error contexts are formatted on failure only; they were 2 eager `format!`s).
 const PER_SEND: u64 = 1;
 /// Allocations per WaitSet wake-up inside iceoryx2 0.10.
 const PER_WAKEUP: u64 = 2;

@@ -17,7 +17,7 @@ use nix::time::{ClockId, ClockNanosleepFlags, clock_nanosleep};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 
-/// Command line common to every simulated driver (HELPERS.md process contract).
+/// Command line common to every simulated driver (docs/ARCHITECTURE.md, process contract).
 #[derive(Debug, Clone, Parser)]
 pub struct DriverArgs {
     /// Scenario file (TOML).

@@ -15,7 +15,7 @@ const ARCSEC_TO_RAD: f64 = std::f64::consts::PI / 180.0 / 3600.0;
 /// Header status bit of a star-tracker sample in an outage.
 pub const STAR_STATUS_OUTAGE: u32 = 1;
 
-/// Nominal star-tracker mounting (HELPERS.md): sensor from body by 180° about body x,
+/// Nominal star-tracker mounting (docs/ARCHITECTURE.md, frames and conventions): sensor from body by 180° about body x,
 /// `v_s = C_s_b · v_b`.
 pub fn c_s_b_nominal() -> Matrix3<f64> {
     Matrix3::from_diagonal(&Vector3::new(1.0, -1.0, -1.0))

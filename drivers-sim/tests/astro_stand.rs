@@ -107,7 +107,7 @@ fn online_boresight(seed: u64, seconds: f64) -> (Vector3<f64>, Vector3<f64>, Vec
     (kappa, sigma, truth)
 }
 
-/// Paper 000 stand, issue 5 item (3): the online boresight σ of κ2, κ3 (the tracker's tilt)
+/// Paper 000 stand: the online boresight σ of κ2, κ3 (the tracker's tilt)
 /// must be honest. On a static stand the tilt of the mount is not separable from the IMU's
 /// level error, which is the accelerometer bias over g (250 µg → 0.0143°); the filter once
 /// initialised the level error and the bias as independent, counted that information twice

@@ -228,7 +228,7 @@ fn one_satellite_from_the_start_is_consistent() {
 /// One pseudorange (and range rate) with an unknown clock carries no information on the
 /// position (or velocity): the first tight epoch only starts the clock. So after that epoch
 /// every non-clock state and covariance entry must be what the free run (same samples, no
-/// GNSS) has. Before session 3 the clock was started from the residual with a covariance
+/// GNSS) has. Earlier the clock was started from the residual with a covariance
 /// uncorrelated with the position and the same pseudorange was then fused again, shrinking
 /// the line-of-sight σ from 10 m at once — the filter claimed knowledge it did not have.
 /// Tolerance: the tight run propagates its covariance once more (at the GNSS epoch), which

@@ -242,7 +242,7 @@ fn cross_check_flags_a_spoofed_jump() {
     }
 }
 
-/// The Navigator uses the least-squares fix (issue 5): for its initial position and (tight)
+/// The Navigator uses the least-squares fix: for its initial position and (tight)
 /// clock, and as a per-epoch cross-check whose NIS is χ²(3) when filter and fix are both
 /// consistent.
 ///

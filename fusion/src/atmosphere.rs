@@ -5,7 +5,7 @@
 //! isothermal at 216.65 K); the troposphere law is also used below sea level. Altitudes are
 //! treated as geopotential (the < 0.1 % difference to geometric altitude below 20 km is ignored
 //! consistently in both directions, so the pair is an exact inverse). Sextant feeds it the
-//! height above the WGS-84 ellipsoid (HELPERS.md: no geoid).
+//! height above the WGS-84 ellipsoid (docs/ARCHITECTURE.md: no geoid).
 //!
 //! OWNER: simulator helper.
 

@@ -1,4 +1,4 @@
-//! The GNSS paths added for issue 5 allocate nothing on the hot path: the per-epoch
+//! The GNSS paths allocate nothing on the hot path: the per-epoch
 //! least-squares cross-check (`gnss_ls::solve` inside `Navigator::push_imu`), the tight clock
 //! start by state augmentation (first tight epoch after alignment without GNSS) and the tight
 //! updates. A static navigator in tight mode gets GNSS only after alignment (position from the

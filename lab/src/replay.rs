@@ -21,12 +21,12 @@
 //! a few σ of the filter's own position uncertainty (measured on a 20 s navigation run: ≈ 95 %
 //! of the epochs bit-identical, the rest ≤ 0.23 σ; `tests/tests/replay.rs` derives the bound).
 //! The alive/dead decisions, which come from wall-clock deadlines and so differ too, touch only
-//! the health counters. Before session 3 two boundary cases broke this — aiding stamped at the
+//! the health counters. Earlier, two boundary cases broke this — aiding stamped at the
 //! end of alignment was discarded when in time but fused when late, and a sample late in the
 //! first 100 ms of navigation was fused at the next epoch instead of at its time — and left a
 //! start-up difference of centimetres that decayed over tens of seconds. The "up to 0.70 σ"
 //! reported then was the largest difference over all epochs, i.e. a pending update. Open: with
-//! the navigator changes later in session 3 a run showed a 0.2 mm difference at an epoch with
+//! the navigator changes later a run showed a 0.2 mm difference at an epoch with
 //! nothing pending (0.8 s after the start): some input of the start still depends on the
 //! arrival order (suspect: the alignment now keeps the latest GNSS fix, so a fix stamped in its
 //! last IMU interval is used when in time and discarded when late). With the working tree of

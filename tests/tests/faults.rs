@@ -241,8 +241,8 @@ fn killed_driver_is_reported_degrades_and_is_used_again_after_restart() {
     // Lower bound of the growth: along track the position is then dead reckoning on the
     // odometer, whose white speed noise (σ 0.02 m/s, config/filter.toml, at 20 Hz in
     // config/scenarios/vehicle.toml) integrates to a variance σ²·Δt·T over the gap; heading,
-    // scale-factor and bias terms only add to it. (Session 2 asserted a 1.2× growth; with the
-    // odometer model and the gyro non-orthogonality states of session 3 the filter grows
+    // scale-factor and bias terms only add to it. (An earlier version asserted a 1.2× growth; with the
+    // odometer model and the gyro non-orthogonality states the filter grows
     // 0.159 → 0.181 m over 42 s, well above this bound.)
     let odo_growth_m2 = 0.02f64.powi(2) * 0.05 * gap_s;
     assert!(

@@ -339,7 +339,7 @@ fn live_replay_drives_a_real_fusion_daemon_like_the_drivers() {
     //   epoch (≤ 10⁻³ over the ~1000 epochs with a sample pending). √tr P⁻_rr is the 3-D σ of
     //   the run that lacks the update, i.e. the larger of the two published σ's;
     // - pending in both runs (different samples): the triangle inequality, 2·k·σ.
-    // Open (session 3, after the navigator's alignment took the latest least-squares GNSS fix
+    // Open (after the navigator's alignment took the latest least-squares GNSS fix
     // and the session's other navigator changes): epochs with nothing pending were
     // bit-identical in 3812 of 4001 solutions with the navigator at 166f124, but a later run
     // showed a 0.2 mm difference at 0.8 s — an input of the start (the alignment's last fix?)

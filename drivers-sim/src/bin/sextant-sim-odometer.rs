@@ -1,4 +1,4 @@
-//! `sextant-sim-odometer`: simulated driver process (see HELPERS.md for the command line).
+//! `sextant-sim-odometer`: simulated driver process (command line: docs/ARCHITECTURE.md, process contract).
 
 use clap::Parser;
 use sextant_drivers_sim::driver::{self, DriverArgs};

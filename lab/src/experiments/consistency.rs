@@ -20,7 +20,7 @@
 //! (`sqrt` of the run-averaged variance); they agree for a consistent filter.
 //!
 //! # Findings (50 runs)
-//! Before issue 5's fix (filter of 2026-11-23 03:10 UTC): position consistent (mean NEES
+//! Before the fix (filter of 2026-11-23 03:10 UTC): position consistent (mean NEES
 //! 3.33 in [2.36, 3.72]), velocity (11.3) and attitude (209; tilt error 6.5″ against a
 //! reported 0.7″) optimistic. Cause: the simulated IMU axis misalignment (10″ per
 //! off-diagonal, not a filter state); without it (`diagnose_attitude_consistency`, 10 runs)
@@ -37,7 +37,7 @@
 //!   (attitude a little pessimistic: 39 % of the epochs below the band, as the random-walk
 //!   bound over-covers turns shorter than 2.3 rad).
 //!
-//! Session 3: the gyro non-orthogonality as three filter states (`[states]
+//! Then: the gyro non-orthogonality as three filter states (`[states]
 //! gyro_misalignment`, replacing that noise; the `inertial-budget` experiment shows why).
 //! 50 runs on the same tree, states on / off: position 3.03 / 3.03, attitude 2.90 (97.9 % of
 //! the epochs in the band) / 2.43 (60.6 %), velocity 2.18 / 2.19 — below the band either
@@ -649,7 +649,7 @@ mod tests {
         assert!(filter_config(&[("updates.no_such_key", toml::Value::Boolean(false))]).is_err());
     }
 
-    /// The simulated IMU without axis misalignment (the diagnosis of issue 5, see the module
+    /// The simulated IMU without axis misalignment (the diagnosis, see the module
     /// comment's findings).
     fn no_misalignment(s: &mut Scenario) {
         s.imu.gyro.misalignment_arcsec = 0.0;

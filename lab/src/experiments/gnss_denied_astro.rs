@@ -354,7 +354,7 @@ experiment!(
     /// `sextant experiment gnss-denied-astro`.
     GnssDeniedAstro,
     "gnss-denied-astro",
-    "Paper 000 / issue 5: 10 h astro-inertial without GNSS against its error floor"
+    "Paper 000: 10 h astro-inertial without GNSS against its error floor"
 );
 
 /// The measurement with `settings` into the existing `out_dir` (plots); returns the summary

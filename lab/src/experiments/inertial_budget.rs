@@ -1,4 +1,4 @@
-//! Experiment `inertial-budget` (issue 5): the error budget of the free-inertial window of the
+//! Experiment `inertial-budget`: the error budget of the free-inertial window of the
 //! `tight-coupling` experiment — which error source makes the horizontal error after 600 s
 //! without GNSS, and is that the simulator's IMU model, a simulator bug, or something the
 //! filter estimated badly while GNSS was there.

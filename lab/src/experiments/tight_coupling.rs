@@ -49,7 +49,7 @@
 //! over 20 seeds the RMS along the line of sight is 7.5 m tight vs 18.2 m free (tight ≤ free
 //! in 18 of 20), mean NEES along it tight 0.68, free 0.85 (95 % band 0.48–1.71). Control
 //! without IMU misalignment: tight 23.5 m vs free 36.5 m. Tight GNSS updates NIS/dof
-//! 1.00–1.03; LS cross-check 0 disagreements in 350–950 checks per run. (Session 2's "82 m
+//! 1.00–1.03; LS cross-check 0 disagreements in 350–950 checks per run. (An earlier "82 m
 //! vs 44 m" was a single draw with the then 200 m free drift, not the clock handling: the
 //! clock is started with all satellites 300 s before the window; the clock start by state
 //! augmentation, `Navigator::initialize_clock`, is proven in
@@ -581,7 +581,7 @@ experiment!(
     /// `sextant experiment tight-coupling`.
     TightCoupling,
     "tight-coupling",
-    "Paper 003 / issue 5: tight vs loose vs free inertial with 0–≥4 satellites"
+    "Paper 003: tight vs loose vs free inertial with 0–≥4 satellites"
 );
 
 /// The measurement with `settings` into the existing `out_dir` (plots); returns the summary
