@@ -13,6 +13,7 @@
 //! - [`bench`]: latency, throughput and resources of the real processes.
 //! - [`experiments`]: the named offline experiments of `sextant experiment`.
 //! - [`shipped_config`]: where they find their scenarios (embedded, or `--config DIR`).
+//! - [`import_rinex`]: RINEX 3 observation + navigation files to a recording of GNSS samples.
 //!
 //! The runtime modules the lab reads (configuration, daemon, recorder, recording reader,
 //! Foxglove conversion, signals, supervisor) are those of `sextant-daemons`, re-exported here under the
@@ -25,6 +26,7 @@ pub mod bench;
 pub mod calibrate;
 pub mod experiments;
 pub mod fonts;
+pub mod import_rinex;
 pub mod plots;
 pub mod replay;
 pub mod report;

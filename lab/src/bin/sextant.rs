@@ -36,6 +36,38 @@ enum Command {
     /// Calibrate a sensor from a recording: `calibrate boresight REC.mcap --site LAT,LON,H`
     /// estimates the star-tracker / IMU boresight angles κ1..κ3 (paper 000) from a static log.
     Calibrate(CalibrateArgs),
+    /// Import real data into a recording: `import rinex OBS NAV --out REC.mcap` fixes every
+    /// epoch of a RINEX 3 observation file with the GPS broadcast ephemerides of a navigation
+    /// file and writes the GNSS samples (measurements and fix) for `report` and `replay`.
+    Import(ImportArgs),
+}
+
+#[derive(Debug, clap::Args)]
+struct ImportArgs {
+    #[command(subcommand)]
+    what: ImportWhat,
+}
+
+#[derive(Debug, Subcommand)]
+enum ImportWhat {
+    /// RINEX 3 observations (GPS C1C, C2W, D1C, S1C) + GPS broadcast navigation (`.rnx` or
+    /// `.rnx.gz`). Pseudoranges are written corrected for the satellite clock and the modelled
+    /// atmosphere, as the GNSS message defines them.
+    Rinex {
+        /// Observation file.
+        observation: PathBuf,
+        /// Navigation file.
+        navigation: PathBuf,
+        /// The recording to write.
+        #[arg(long, default_value = "out/import/recording.mcap")]
+        out: PathBuf,
+        /// Code solution: l1 (C1C + Klobuchar) or iono-free (C1C/C2W).
+        #[arg(long, value_enum, default_value = "l1")]
+        mode: sextant_lab::import_rinex::ImportMode,
+        /// Elevation mask, degrees.
+        #[arg(long, default_value_t = 10.0)]
+        elevation_mask: f64,
+    },
 }
 
 #[derive(Debug, clap::Args)]
@@ -197,6 +229,30 @@ fn main() -> anyhow::Result<()> {
             let s = sextant_lab::calibrate::boresight(&opts)?;
             println!("{}", sextant_lab::calibrate::table(&s));
             println!("summary.json and plot in {}", out.display());
+            Ok(())
+        }
+        Command::Import(ImportArgs {
+            what:
+                ImportWhat::Rinex {
+                    observation,
+                    navigation,
+                    out,
+                    mode,
+                    elevation_mask,
+                },
+        }) => {
+            if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
+                std::fs::create_dir_all(dir)?;
+            }
+            let opts = sextant_lab::import_rinex::ImportOptions {
+                observation,
+                navigation,
+                out: out.clone(),
+                mode,
+                elevation_mask_deg: elevation_mask,
+            };
+            let s = sextant_lab::import_rinex::import_rinex(&opts)?;
+            println!("{}", sextant_lab::import_rinex::format_table(&s, &out));
             Ok(())
         }
         Command::Report(args) => {
