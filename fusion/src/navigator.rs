@@ -1200,7 +1200,7 @@ impl Navigator {
         };
         Ok(Self {
             gates: GateTable::new(config.gate_probability),
-            // Nominal star-tracker mount (HELPERS.md): 180° about body x.
+            // Nominal star-tracker mount (docs/ARCHITECTURE.md): 180° about body x.
             c_s_b: Matrix3::new(1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, -1.0),
             phase: Phase::Initializing,
             align: Accumulator::default(),
@@ -2349,7 +2349,7 @@ impl Navigator {
     /// line of sight) and `δd = −H_j δx − η_j`; the bias is stored at the filter time
     /// `t = t_s + back_s` as `b̂(t) = b̂(t_s) + d̂·back_s`, so its row is `H_k + back_s·H_j` and
     /// the noise `[[σ_k² + back_s²σ_j², back_s σ_j²], [back_s σ_j², σ_j²]]`. The covariance
-    /// rows follow exactly (`P_cx = −H P`, `P_cc = H P Hᵀ + R`). Before session 3 the clock
+    /// rows follow exactly (`P_cx = −H P`, `P_cc = H P Hᵀ + R`). Earlier the clock
     /// got a variance uncorrelated with position, which made one satellite worse than none
     /// (82 m vs 44 m along its line of sight in `tight-coupling`).
     ///
@@ -2521,7 +2521,7 @@ impl Navigator {
         self.clock_initialized = true;
     }
 
-    /// Receiver-style cross-check of one epoch (issue 5: the least-squares fix "as a
+    /// Receiver-style cross-check of one epoch (the least-squares fix "as a
     /// cross-check"): with ≥ 4 pseudoranges, the fix `r_ls` of this epoch alone against the
     /// filter's prediction at its time of validity, before any update of the epoch:
     /// `d = r_ls − r̂(t_s)`, `S = P_rr + C_ls`, `NIS = dᵀS⁻¹d`, χ² with 3 dof if both are
@@ -3631,7 +3631,7 @@ mod baro_tests {
         // epochs — including the samples stamped at the end of alignment (discarded by both)
         // and the late ones in the first 100 ms of navigation (replayed from the start
         // checkpoint) — so the solutions are equal to rounding (1e-9 m, as in
-        // `late_gnss_sample_gives_the_in_time_update`). Before session 3 those two cases were
+        // `late_gnss_sample_gives_the_in_time_update`). Earlier those two cases were
         // fused at the next epoch in B, a difference of centimetres that the filter took
         // seconds to forget (found comparing `sextant replay --live` with the original run).
         let cfg = NavigatorConfig {
