@@ -384,7 +384,7 @@ experiment!(
     /// `sextant experiment consistency`.
     Consistency,
     "consistency",
-    "Issue 5: Monte Carlo NEES of the filter against the chi-square band"
+    "Monte Carlo NEES of the filter against the chi-square band"
 );
 
 /// The figures of group `g` (0 position, 1 velocity, 2 attitude) from the run-averaged NEES
@@ -719,7 +719,7 @@ mod tests {
         }
     }
 
-    /// Issue 5 velocity diagnosis: down-velocity RMS error and filter σ over 10 runs at a few
+    /// Velocity diagnosis: down-velocity RMS error and filter σ over 10 runs at a few
     /// epochs, per filter variant (`cargo test --release -p sextant-lab --lib
     /// diagnose_velocity -- --ignored --nocapture`).
     #[test]

@@ -529,7 +529,7 @@ experiment!(
     /// `sextant experiment inertial-budget`.
     InertialBudget,
     "inertial-budget",
-    "Issue 5: error budget of 600 s free inertial after GNSS (each IMU error source alone)"
+    "Error budget of 600 s free inertial after GNSS (each IMU error source alone)"
 );
 
 /// The measurement with `settings` into the existing `out_dir` (plots); returns the summary
