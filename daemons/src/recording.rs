@@ -14,7 +14,7 @@
 //! [`crate::recorder::CONFIG_METADATA_NAME`], read by `open` (it precedes every chunk).
 
 use msgs::{Record, RecordKind};
-use std::collections::{BTreeMap, HashMap, VecDeque};
+use std::collections::{BTreeMap, HashMap, HashSet, VecDeque};
 use std::fs::File;
 use std::io::{BufReader, Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
@@ -129,6 +129,10 @@ pub struct Recording {
     deferred: Option<RecordingError>,
     /// Footer seen and the end magic verified.
     complete: bool,
+    /// File offsets of the chunks read from the data section, checked against the summary's
+    /// chunk index: a chunk whose opcode was damaged into another valid record type would
+    /// otherwise vanish without a word.
+    chunks_read: HashSet<u64>,
 }
 
 impl std::fmt::Debug for Recording {
@@ -180,6 +184,7 @@ impl Recording {
             done: false,
             deferred: None,
             complete: false,
+            chunks_read: HashSet::new(),
         };
         // Header and metadata precede every chunk: read them now, stop at the first other
         // record. An error here is reported by the iterator, like any other.
@@ -390,7 +395,24 @@ impl Recording {
                     }
                     p = next;
                 }
+                self.chunks_read.insert(at);
                 self.pending.extend(entries);
+            }
+            op::CHUNK_INDEX => {
+                let mut c = Cur::new(&body);
+                let chunk_at = c
+                    .u64()
+                    .and_then(|_| c.u64())
+                    .and_then(|_| c.u64())
+                    .map_err(|e| self.corrupt(at, what(e)))?;
+                if !self.chunks_read.contains(&chunk_at) {
+                    return Err(self.corrupt(
+                        at,
+                        format!(
+                            "the summary's chunk index lists a chunk at offset {chunk_at} that the data section does not hold as a chunk (its messages were not read)"
+                        ),
+                    ));
+                }
             }
             op::SCHEMA | op::CHANNEL | op::MESSAGE => {
                 if let Some(e) = self
@@ -513,6 +535,7 @@ mod op {
     pub const CHANNEL: u8 = 0x04;
     pub const MESSAGE: u8 = 0x05;
     pub const CHUNK: u8 = 0x06;
+    pub const CHUNK_INDEX: u8 = 0x08;
     pub const METADATA: u8 = 0x0C;
     pub const DATA_END: u8 = 0x0F;
 }
@@ -801,6 +824,35 @@ mod tests {
         assert_eq!(last, records.len());
     }
 
+    /// A chunk whose opcode is damaged into another valid record type (a message index) would
+    /// be skipped as an index; the summary's chunk index (or the next chunk's unknown channel)
+    /// exposes it, so the loss is an error naming an offset, never silent.
+    #[test]
+    fn chunk_damaged_into_an_index_record_is_an_error_not_a_silent_loss() {
+        let (path, records) = make_recording("chunk-op");
+        let full = std::fs::read(&path).unwrap();
+        let mut at = 8usize;
+        let mut chunks = Vec::new();
+        while at + 9 <= full.len() && full[at] != op::DATA_END {
+            if full[at] == op::CHUNK {
+                chunks.push(at);
+            }
+            at += 9 + u64::from_le_bytes(full[at + 1..at + 9].try_into().unwrap()) as usize;
+        }
+        assert!(chunks.len() >= 3, "fixture has {} chunks", chunks.len());
+        for &c in &chunks {
+            let mut bytes = full.clone();
+            bytes[c] = 0x07;
+            let out = read_bytes(&path.with_file_name("chunk-op-damaged.mcap"), &bytes).unwrap();
+            let n = out.entries.iter().filter(|e| e.record.is_some()).count();
+            assert!(n < records.len());
+            // Either the chunk index names it or, when it held a channel definition, the next
+            // chunk's messages on that channel do.
+            let e = out.error.expect("a hidden chunk must be reported");
+            assert!(e.offset().unwrap() >= c as u64, "{e}");
+        }
+    }
+
     proptest! {
         #![proptest_config(ProptestConfig::with_cases(200))]
         /// Flipping any byte never panics; either the flip is harmless (padding, an index) and
@@ -823,10 +875,17 @@ mod tests {
                 prop_assert!(e.offset().is_some(), "{}", e);
                 prop_assert!(e.offset().unwrap() <= bytes.len() as u64, "{} (flip at {})", e, pos);
             }
+            // Every record returned was written, in order (a damaged chunk may be skipped, so
+            // the records read are a subsequence); log/publish times live in the CRC-checked
+            // chunk too, so each one is intact.
             let got: Vec<_> = out.entries.iter().filter_map(|e| e.record.as_ref()).collect();
-            for (a, b) in got.iter().zip(&records) {
-                // Log/publish times live in the (CRC-checked) chunk too, so records are intact.
-                prop_assert!(same(a, b), "flip at {}: {:?} != {:?}", pos, a, b);
+            let mut written = records.iter();
+            for a in &got {
+                prop_assert!(written.any(|b| same(a, b)), "flip at {}: {:?} was not written (or is out of order)", pos, a);
+            }
+            // Nothing is lost without an error: a complete read returns every record.
+            if out.error.is_none() {
+                prop_assert_eq!(got.len(), records.len(), "flip at {}: records lost without an error", pos);
             }
         }
     }

@@ -704,6 +704,21 @@ fn merge(base: &mut toml::Table, over: &toml::Table) {
     }
 }
 
+/// The grade names (`*.toml` stems) present in `dir`, sorted; empty when it cannot be read.
+fn known_grades(dir: &Path) -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .into_iter()
+        .flatten()
+        .flatten()
+        .filter_map(|e| {
+            let p = e.path();
+            (p.extension()? == "toml").then(|| p.file_stem()?.to_str().map(String::from))?
+        })
+        .collect();
+    names.sort();
+    names
+}
+
 /// Load the `section` table of grade file `<dir>/<grade>.toml`, merge `overrides`, parse it.
 fn load_grade<T: DeserializeOwned>(
     dir: &Path,
@@ -720,10 +735,31 @@ fn load_grade<T: DeserializeOwned>(
         ));
     }
     let path = dir.join(format!("{grade}.toml"));
-    let text = std::fs::read_to_string(&path).map_err(|e| SimError::Io {
-        file: path.clone(),
-        reason: format!("grade `{grade}` of `{section}.grade`: {e}"),
-    })?;
+    let text = match std::fs::read_to_string(&path) {
+        Ok(t) => t,
+        // An unknown grade is a mistake in the scenario, so the scenario's key is named (with
+        // the grades that do exist), not only the missing file.
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            return Err(invalid(
+                scenario_file,
+                format!("{section}.grade"),
+                format!(
+                    "unknown grade `{grade}` (no {}; known grades: {})",
+                    path.display(),
+                    known_grades(dir).join(", ")
+                ),
+            ));
+        }
+        Err(e) => {
+            return Err(SimError::Io {
+                file: path.clone(),
+                reason: format!(
+                    "grade `{grade}` of `{section}.grade` in {}: {e}",
+                    scenario_file.display()
+                ),
+            });
+        }
+    };
     let mut doc: toml::Table = toml::from_str(&text).map_err(|e| SimError::Parse {
         file: path.clone(),
         message: e.to_string(),
@@ -1318,4 +1354,46 @@ fn validate_aircraft(f: &Path, ac: &AircraftTrajectory) -> Result<(), SimError> 
 /// Sample period of a rate validated by [`Scenario::validate`], ns.
 pub fn period_ns(rate_hz: f64) -> i64 {
     (1e9 / rate_hz).round() as i64
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn shipped(name: &str) -> (std::path::PathBuf, String) {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../config/scenarios")
+            .join(name);
+        let text = std::fs::read_to_string(&path).unwrap();
+        (path, text)
+    }
+
+    /// A grade that has no file is the scenario's mistake: the error names the scenario file,
+    /// the key and the grades that exist.
+    #[test]
+    fn unknown_grade_names_the_scenario_key_and_the_known_grades() {
+        let (path, text) = shipped("static_site.toml");
+        let line = text
+            .lines()
+            .skip_while(|l| l.trim() != "[gnss]")
+            .find(|l| l.trim_start().starts_with("grade"))
+            .expect("static_site.toml has a [gnss] grade");
+        let broken = text.replacen(line, "grade = \"}\"", 1);
+        let e = Scenario::from_toml_str(&broken, &path)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("static_site.toml"), "{e}");
+        assert!(e.contains("gnss.grade"), "{e}");
+        assert!(e.contains("unknown grade `}`"), "{e}");
+        assert!(e.contains("known grades:"), "{e}");
+    }
+
+    /// The shipped scenarios load as they are.
+    #[test]
+    fn shipped_scenarios_load() {
+        for name in ["static_site.toml", "vehicle.toml"] {
+            let (path, text) = shipped(name);
+            Scenario::from_toml_str(&text, &path).unwrap();
+        }
+    }
 }
