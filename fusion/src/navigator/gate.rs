@@ -4,8 +4,11 @@
 //! three are `Copy`, so refusing a sample on the real-time path allocates nothing (the text is
 //! only built when the caller formats the error, e.g. to log it).
 
+use super::obs::GnssFix;
+use crate::ekf;
 use crate::time::GpsTime;
-use msgs::SensorId;
+use msgs::{GnssSample, MAX_SATELLITES, SensorId};
+use nalgebra::{Matrix3, Vector3};
 
 /// Why the navigator refused a sample. Each reason names the offending quantity and the range
 /// the navigator accepts (units as in `msgs`).
@@ -134,6 +137,57 @@ impl std::fmt::Display for Rejection {
 }
 
 impl std::error::Error for Rejection {}
+
+pub(super) fn matrix_from_row_major(a: &[f64; 9]) -> Matrix3<f64> {
+    Matrix3::from_row_slice(a)
+}
+
+/// Check a GNSS sample; Ok(None) when it carries no valid fix (not an error).
+pub(super) fn validate_gnss(s: &GnssSample) -> Result<Option<GnssFix>, Rejection> {
+    let bad = |r| Rejection::new(SensorId::Gnss, s.header.time_ns, r);
+    if s.n_satellites as usize > MAX_SATELLITES {
+        return Err(bad(RejectReason::TooManySatellites));
+    }
+    if s.fix_valid == 0 {
+        return Ok(None);
+    }
+    let p = Vector3::from(s.pos_ecef_m);
+    let v = Vector3::from(s.vel_ecef_m_s);
+    if !(p.iter().all(|x| x.is_finite()) && v.iter().all(|x| x.is_finite())) {
+        return Err(bad(RejectReason::NonFiniteFix));
+    }
+    let r = p.norm();
+    if !(6.30e6..=6.48e6).contains(&r) {
+        return Err(bad(RejectReason::PositionNotNearEarth));
+    }
+    if v.norm() > 2_000.0 {
+        return Err(bad(RejectReason::VelocityAboveLimit));
+    }
+    let pc = matrix_from_row_major(&s.pos_cov_ecef_m2);
+    let vc = matrix_from_row_major(&s.vel_cov_ecef_m2_s2);
+    if !(pc.iter().all(|x| x.is_finite()) && vc.iter().all(|x| x.is_finite())) {
+        return Err(bad(RejectReason::NonFiniteCovariance));
+    }
+    let pc = ekf::symmetrize(&pc);
+    if nalgebra::Cholesky::new(pc).is_none() || pc.diagonal().max() > 1e8 {
+        return Err(bad(RejectReason::PositionCovariance));
+    }
+    let vc = ekf::symmetrize(&vc);
+    let vel_valid = if vc.iter().all(|x| *x == 0.0) {
+        false
+    } else if nalgebra::Cholesky::new(vc).is_none() || vc.diagonal().max() > 1e4 {
+        return Err(bad(RejectReason::VelocityCovariance));
+    } else {
+        true
+    };
+    Ok(Some(GnssFix {
+        pos: p,
+        vel: v,
+        pos_cov: pc,
+        vel_cov: vc,
+        vel_valid,
+    }))
+}
 
 #[cfg(test)]
 mod tests {

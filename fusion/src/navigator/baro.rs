@@ -1,0 +1,30 @@
+//! Barometric height updates (ISA height against the ellipsoidal height plus the baro bias
+//! state).
+
+use super::*;
+
+impl Navigator {
+    pub(super) fn fuse_baro(&mut self, ts: i64, height_m: f64) {
+        let id = sid(SensorId::Baro);
+        if !self.config.updates.baro {
+            return;
+        }
+        let min_dt = (self.config.aiding.baro_min_interval_s * 1e9) as i64;
+        if let Some(last) = self.last_baro_fused
+            && ts - last < min_dt
+        {
+            return;
+        }
+        let m = ekf::baro_height(
+            &self.nav,
+            &self.ell,
+            height_m,
+            self.ekf.baro_bias_m,
+            self.config.aiding.baro_sigma_m,
+        );
+        self.last_baro_fused = Some(ts);
+        if self.run_update(Some(id), &m) {
+            self.mark_fused(id, ts);
+        }
+    }
+}

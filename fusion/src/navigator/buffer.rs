@@ -1,0 +1,143 @@
+//! The delayed-fusion buffers (module docs of [`super`], "Delayed fusion"): time-ordered,
+//! fixed-capacity queues of the aiding samples waiting for (or already past) their time of
+//! validity, and the rings of validated IMU steps and checkpoints a replay starts from.
+//! Nothing here allocates after construction.
+
+use super::*;
+
+/// Time-ordered ring buffer of fixed capacity (no allocation).
+#[derive(Debug, Clone)]
+pub(super) struct TimeQueue<T: Copy + Default, const CAP: usize> {
+    /// (time of validity, value, already counted in the health counters).
+    pub(super) buf: [(i64, T, bool); CAP],
+    pub(super) head: usize,
+    pub(super) len: usize,
+}
+
+impl<T: Copy + Default, const CAP: usize> TimeQueue<T, CAP> {
+    pub(super) fn new() -> Self {
+        Self {
+            buf: [(0, T::default(), false); CAP],
+            head: 0,
+            len: 0,
+        }
+    }
+    pub(super) fn slot(&self, i: usize) -> usize {
+        (self.head + i) % CAP
+    }
+    /// Insert keeping time order; when full, the oldest entry is evicted and returned.
+    pub(super) fn insert(&mut self, t: i64, v: T) -> Option<(i64, T, bool)> {
+        self.insert_flagged(t, v, false)
+    }
+    /// Insert with the "already counted" flag (samples re-queued for a replay).
+    pub(super) fn insert_flagged(&mut self, t: i64, v: T, counted: bool) -> Option<(i64, T, bool)> {
+        let evicted = if self.len == CAP {
+            let e = self.buf[self.head];
+            self.head = (self.head + 1) % CAP;
+            self.len -= 1;
+            Some(e)
+        } else {
+            None
+        };
+        let mut i = self.len;
+        self.len += 1;
+        while i > 0 && self.buf[self.slot(i - 1)].0 > t {
+            let (a, b) = (self.slot(i), self.slot(i - 1));
+            self.buf[a] = self.buf[b];
+            i -= 1;
+        }
+        let s = self.slot(i);
+        self.buf[s] = (t, v, counted);
+        evicted
+    }
+    /// Remove and return the newest entry if its time is > `t`.
+    pub(super) fn pop_newer(&mut self, t: i64) -> Option<(i64, T, bool)> {
+        if self.len > 0 {
+            let s = self.slot(self.len - 1);
+            if self.buf[s].0 > t {
+                self.len -= 1;
+                return Some(self.buf[s]);
+            }
+        }
+        None
+    }
+    /// Remove and return the oldest entry if its time is ≤ `t`.
+    pub(super) fn pop_due(&mut self, t: i64) -> Option<(i64, T, bool)> {
+        if self.len > 0 && self.buf[self.head].0 <= t {
+            let e = self.buf[self.head];
+            self.head = (self.head + 1) % CAP;
+            self.len -= 1;
+            Some(e)
+        } else {
+            None
+        }
+    }
+    pub(super) fn clear(&mut self) {
+        self.len = 0;
+    }
+}
+
+/// One navigating IMU step as logged for replay (validated, channels already combined).
+#[derive(Debug, Clone, Copy, Default)]
+pub(super) struct ImuLogEntry {
+    pub(super) t: i64,
+    pub(super) prev_t: Option<i64>,
+    pub(super) dth: Vector3<f64>,
+    pub(super) dv: Vector3<f64>,
+    pub(super) dt_s: f64,
+}
+
+/// Fixed-capacity ring (allocated once at construction, never again).
+#[derive(Debug, Clone)]
+pub(super) struct Ring<T: Clone> {
+    pub(super) buf: Vec<T>,
+    pub(super) head: usize,
+    pub(super) len: usize,
+}
+
+impl<T: Clone> Ring<T> {
+    pub(super) fn new(cap: usize, fill: T) -> Self {
+        Self {
+            buf: vec![fill; cap],
+            head: 0,
+            len: 0,
+        }
+    }
+    pub(super) fn get(&self, i: usize) -> &T {
+        &self.buf[(self.head + i) % self.buf.len()]
+    }
+    /// Append, evicting the oldest entry when full.
+    pub(super) fn push(&mut self, v: T) {
+        let cap = self.buf.len();
+        let i = (self.head + self.len) % cap;
+        self.buf[i] = v;
+        if self.len == cap {
+            self.head = (self.head + 1) % cap;
+        } else {
+            self.len += 1;
+        }
+    }
+    pub(super) fn truncate(&mut self, len: usize) {
+        self.len = self.len.min(len);
+    }
+    pub(super) fn clear(&mut self) {
+        self.len = 0;
+    }
+}
+
+/// Checkpoints are taken at this period of IMU time, ns.
+pub(super) const CHECKPOINT_PERIOD_NS: i64 = 100_000_000;
+
+/// Checkpoints kept: the 2 s longest buffer window plus margin, at the period above.
+pub(super) const CHECKPOINT_CAP: usize = 32;
+
+/// Largest delayed-fusion IMU log, steps (≈ 5 MB; 2 kHz with the 2 s window needs 4 402).
+pub(super) const IMU_LOG_MAX_CAP: usize = 65_536;
+
+pub(super) const GNSS_CAP: usize = 32;
+
+pub(super) const STAR_CAP: usize = 64;
+
+pub(super) const ODO_CAP: usize = 256;
+
+pub(super) const BARO_CAP: usize = 128;

@@ -1,0 +1,610 @@
+//! The navigator's configuration (`config/filter.toml`, deserialized into
+//! [`NavigatorConfig`]) and its validation: every key's range and the consistency between keys,
+//! reported as a [`ConfigError`] naming the key (`filter.<key> <what>`).
+
+use super::*;
+
+/// Reference ellipsoid selection.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum EllipsoidName {
+    /// WGS-84 (default).
+    #[default]
+    Wgs84,
+    /// PZ-90.11.
+    Pz90,
+}
+
+impl EllipsoidName {
+    /// The ellipsoid constants.
+    pub fn ellipsoid(self) -> Ellipsoid {
+        match self {
+            Self::Wgs84 => WGS84,
+            Self::Pz90 => PZ90,
+        }
+    }
+}
+
+/// IMU error specification (1-σ values, datasheet units as in the key names).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ImuSpec {
+    /// Gyro bias (turn-on / in-run), °/h: initial σ of the gyro bias states.
+    pub gyro_bias_deg_h: f64,
+    /// Angle random walk, °/√h.
+    pub arw_deg_sqrt_h: f64,
+    /// Accelerometer bias, µg: initial σ of the accelerometer bias states.
+    pub accel_bias_ug: f64,
+    /// Velocity random walk, µg/√Hz.
+    pub vrw_ug_sqrt_hz: f64,
+    /// Gyro bias random walk, °/h/√h.
+    pub gyro_bias_rw_deg_h_sqrt_h: f64,
+    /// Accelerometer bias random walk, µg/√h.
+    pub accel_bias_rw_ug_sqrt_h: f64,
+    /// Gyro scale-factor error, ppm: initial σ of the gyro scale-factor states.
+    pub gyro_scale_ppm: f64,
+    /// Accelerometer scale-factor error, ppm: initial σ of the accelerometer scale states.
+    pub accel_scale_ppm: f64,
+    /// Axis misalignment of the triads (each off-diagonal term), arcsec: the prior σ of the
+    /// gyro non-orthogonality states (`[states] gyro_misalignment`), the widening of the
+    /// accelerometer-bias prior (its gravity part) and, since the body frame is realised by
+    /// the IMU axes, an irreducible bias of a boresight estimated against them (added to the
+    /// reported boresight σ as a "consider" term, see [`Navigator::boresight_rad`]).
+    pub misalignment_arcsec: f64,
+    /// Largest plausible angular rate, rad/s (input validation).
+    pub max_rate_rad_s: f64,
+    /// Largest plausible specific force, m/s² (input validation).
+    pub max_specific_force_m_s2: f64,
+}
+
+impl Default for ImuSpec {
+    fn default() -> Self {
+        Self {
+            gyro_bias_deg_h: 0.01,
+            arw_deg_sqrt_h: 0.002,
+            accel_bias_ug: 50.0,
+            vrw_ug_sqrt_hz: 20.0,
+            gyro_bias_rw_deg_h_sqrt_h: 0.002,
+            accel_bias_rw_ug_sqrt_h: 5.0,
+            gyro_scale_ppm: 50.0,
+            accel_scale_ppm: 100.0,
+            misalignment_arcsec: 10.0,
+            max_rate_rad_s: 10.0,
+            max_specific_force_m_s2: 300.0,
+        }
+    }
+}
+
+impl ImuSpec {
+    /// Gyro bias σ, rad/s.
+    pub fn gyro_bias_rad_s(&self) -> f64 {
+        self.gyro_bias_deg_h * DEG / 3600.0
+    }
+    /// Accelerometer bias σ, m/s².
+    pub fn accel_bias_m_s2(&self) -> f64 {
+        self.accel_bias_ug * 1e-6 * G0
+    }
+    /// Noise densities in SI units.
+    pub fn process_noise(&self) -> ProcessNoise {
+        ProcessNoise {
+            arw_rad_sqrt_s: self.arw_deg_sqrt_h * DEG / 60.0,
+            vrw_m_s_sqrt_s: self.vrw_ug_sqrt_hz * 1e-6 * G0,
+            gyro_bias_rw_rad_s_sqrt_s: self.gyro_bias_rw_deg_h_sqrt_h * DEG / 3600.0 / 60.0,
+            accel_bias_rw_m_s2_sqrt_s: self.accel_bias_rw_ug_sqrt_h * 1e-6 * G0 / 60.0,
+            baro_bias_rw_m_sqrt_s: 0.0,
+            odo_scale_rw_per_sqrt_s: 0.0,
+            clock_bias_psd_m2_s: 0.0,
+            clock_drift_psd_m2_s3: 0.0,
+            gyro_misalignment_rad: self.misalignment_arcsec / 3600.0 * DEG,
+        }
+    }
+}
+
+/// Switchable state groups (`[states]` in `config/filter.toml`); an inactive group keeps
+/// zero covariance and zero process noise ([`crate::ekf`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct StateSwitches {
+    /// Gyro scale factors (3 states).
+    pub gyro_scale: bool,
+    /// Accelerometer scale factors (3 states).
+    pub accel_scale: bool,
+    /// Star-tracker boresight κ1..κ3 (3 states; only with star-tracker updates). Off by
+    /// default: with a calibrated mount (paper 000 calibration, or the default scenarios'
+    /// zero misalignment) estimating κ costs accuracy, because κ and the attitude error are
+    /// only separable by turns and the IMU's own misalignment (measured, default vehicle run:
+    /// horizontal RMS 0.19 → 0.21 m, attitude RMS 0.001° → 0.008°). Switch it on for an
+    /// uncalibrated or disturbed mount.
+    pub boresight: bool,
+    /// Receiver clock bias and drift (2 states; only with `gnss_mode = "tight"`, which
+    /// requires them).
+    pub clock: bool,
+    /// Gyro non-orthogonality (3 states, prior σ `imu.misalignment_arcsec`). A turn about
+    /// body z through it tilts the solution by a body-fixed plus a navigation-fixed angle
+    /// (the chord of [`crate::ekf::MISALIGNMENT_COHERENCE_RAD`]): as states, GNSS and the
+    /// star tracker calibrate it. Off, it is bounded as attitude noise per radian turned,
+    /// which over-states the tilt uncertainty after every turn and, in the tight-coupling
+    /// window, let baro updates spoil the tilt (the `inertial-budget` experiment).
+    pub gyro_misalignment: bool,
+}
+
+impl Default for StateSwitches {
+    fn default() -> Self {
+        Self {
+            gyro_scale: true,
+            accel_scale: true,
+            boresight: false,
+            clock: true,
+            gyro_misalignment: true,
+        }
+    }
+}
+
+/// How GNSS is fused.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum GnssMode {
+    /// The receiver's position/velocity fix with its covariance (needs ≥ 4 satellites).
+    #[default]
+    Loose,
+    /// Each satellite's pseudorange and range rate as scalar updates with the receiver clock
+    /// states: usable with any number of satellites from 1 (paper 003).
+    Tight,
+}
+
+/// Initial uncertainties of the filter after coarse alignment.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct InitialUncertainty {
+    /// Position σ per axis when the position comes from configuration, m (a GNSS fix brings its
+    /// own covariance).
+    pub position_sigma_m: f64,
+    /// Velocity σ per axis (the vehicle is static during alignment), m/s.
+    pub velocity_sigma_m_s: f64,
+    /// Lower bound of the roll/pitch σ, deg (the closed-form alignment σ is used when larger).
+    pub level_sigma_min_deg: f64,
+    /// Lower bound of the heading σ, deg.
+    pub heading_sigma_min_deg: f64,
+}
+
+impl Default for InitialUncertainty {
+    fn default() -> Self {
+        Self {
+            position_sigma_m: 10.0,
+            velocity_sigma_m_s: 0.05,
+            level_sigma_min_deg: 0.005,
+            heading_sigma_min_deg: 0.05,
+        }
+    }
+}
+
+/// Which measurement updates are used.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct UpdateSwitches {
+    /// GNSS position (loose coupling).
+    pub gnss_position: bool,
+    /// GNSS velocity (loose coupling).
+    pub gnss_velocity: bool,
+    /// Star-tracker attitude.
+    pub star_tracker: bool,
+    /// Baro altitude.
+    pub baro: bool,
+    /// Odometer speed along body x.
+    pub odometer: bool,
+    /// Non-holonomic constraints with the odometer (ground vehicles).
+    pub nonholonomic: bool,
+    /// Zero-velocity updates while static.
+    pub zupt: bool,
+    /// Dual-baseline GNSS attitude (paper 003 eq. 14–21) from the baseline carrier phases.
+    pub baseline_attitude: bool,
+}
+
+impl Default for UpdateSwitches {
+    fn default() -> Self {
+        Self {
+            gnss_position: true,
+            gnss_velocity: true,
+            star_tracker: true,
+            baro: true,
+            odometer: true,
+            nonholonomic: true,
+            zupt: true,
+            baseline_attitude: false,
+        }
+    }
+}
+
+/// Noise and scheduling of the aiding measurements that carry no covariance of their own.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct AidingNoise {
+    /// Baro height white-noise σ, m (the bias is a filter state).
+    pub baro_sigma_m: f64,
+    /// Initial σ of the baro height bias state, m.
+    pub baro_bias_sigma_m: f64,
+    /// Random walk of the baro height bias, m/√s.
+    pub baro_bias_rw_m_sqrt_s: f64,
+    /// Minimum time between two fused baro samples, s (the samples in between are not fused).
+    pub baro_min_interval_s: f64,
+    /// Odometer speed white-noise σ, m/s (the mean speed over the odometer interval is
+    /// converted to the end-point speed before the update, `fuse_odometer`).
+    pub odometer_sigma_m_s: f64,
+    /// Odometer scale-factor σ (not a state yet; added as `σ·|speed|`), dimensionless.
+    pub odometer_scale_sigma: f64,
+    /// Non-holonomic constraint σ (lateral and vertical body velocity), m/s.
+    pub nhc_sigma_m_s: f64,
+    /// Zero-velocity update σ per axis, m/s.
+    pub zupt_sigma_m_s: f64,
+    /// 1-σ noise of each baseline carrier-phase difference, cycles (dual-baseline attitude).
+    pub baseline_phase_sigma_cycles: f64,
+    /// Initial σ of each star-tracker boresight angle κ1..κ3, deg.
+    pub boresight_sigma_deg: f64,
+    /// Receiver clock bias PSD (white frequency noise), m²/s (tight coupling).
+    pub clock_bias_psd_m2_s: f64,
+    /// Receiver clock drift PSD (random-walk frequency noise), m²/s³ (tight coupling).
+    pub clock_drift_psd_m2_s3: f64,
+    /// Minimum time between two zero-velocity updates, s.
+    pub zupt_interval_s: f64,
+    /// The IMU must look static this long before zero-velocity updates start, s.
+    pub zupt_window_s: f64,
+    /// Static test: |angular rate| below this, rad/s.
+    pub zupt_max_rate_rad_s: f64,
+    /// Static test: | |specific force| − g | below this, m/s².
+    pub zupt_max_accel_dev_m_s2: f64,
+    /// Static test: estimated speed below this, m/s (guards against constant-velocity motion,
+    /// which an IMU cannot tell from rest).
+    pub zupt_max_speed_m_s: f64,
+}
+
+impl Default for AidingNoise {
+    fn default() -> Self {
+        Self {
+            baro_sigma_m: 0.5,
+            baro_bias_sigma_m: 10.0,
+            baro_bias_rw_m_sqrt_s: 0.005,
+            baro_min_interval_s: 0.2,
+            odometer_sigma_m_s: 0.02,
+            odometer_scale_sigma: 0.003,
+            nhc_sigma_m_s: 1e-5,
+            zupt_sigma_m_s: 0.005,
+            baseline_phase_sigma_cycles: 0.01,
+            boresight_sigma_deg: 0.1,
+            clock_bias_psd_m2_s: 0.1,
+            clock_drift_psd_m2_s3: 0.01,
+            zupt_interval_s: 0.1,
+            zupt_window_s: 1.0,
+            zupt_max_rate_rad_s: 0.002,
+            zupt_max_accel_dev_m_s2: 0.05,
+            zupt_max_speed_m_s: 0.3,
+        }
+    }
+}
+
+/// An aiding source counts for the navigation mode while it has been fused within this age of
+/// the IMU time, s.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Deadlines {
+    /// GNSS, s.
+    pub gnss_s: f64,
+    /// Star tracker, s.
+    pub star_tracker_s: f64,
+    /// Odometer, s.
+    pub odometer_s: f64,
+    /// Baro, s.
+    pub baro_s: f64,
+}
+
+impl Default for Deadlines {
+    fn default() -> Self {
+        Self {
+            gnss_s: 2.0,
+            star_tracker_s: 2.0,
+            odometer_s: 1.0,
+            baro_s: 3.0,
+        }
+    }
+}
+
+/// A configured initial position (used for alignment when no GNSS fix is wanted or available).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct InitialPosition {
+    /// Geodetic latitude, deg.
+    pub lat_deg: f64,
+    /// Longitude, deg.
+    pub lon_deg: f64,
+    /// Height above the ellipsoid, m.
+    pub height_m: f64,
+}
+
+/// Everything the navigator needs to know, from the filter tuning file (`config/filter.toml`).
+/// Deserialized from TOML (unknown keys are errors; omitted keys take the defaults, which
+/// match `config/filter.toml`); `validate` checks its meaning.
+#[derive(Debug, Clone, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct NavigatorConfig {
+    /// Static coarse-alignment time before navigation starts, s.
+    pub alignment_s: f64,
+    /// Reference ellipsoid for the mechanization and the outputs.
+    pub ellipsoid: EllipsoidName,
+    /// Gravity model of the mechanization.
+    pub gravity: GravityModel,
+    /// Integrator of the mechanization.
+    pub integrator: Integrator,
+    /// Coning and sculling corrections.
+    pub coning_sculling: bool,
+    /// Probability of the chi-square innovation gate (e.g. 0.999; 1 disables gating).
+    pub gate_probability: f64,
+    /// How far behind the IMU time a sample may arrive and still be fused, s (≤ 2).
+    pub buffer_window_s: f64,
+    /// Highest IMU sample rate the delayed-fusion log is sized for, Hz: it keeps
+    /// `max_imu_rate_hz × (buffer_window_s + 0.2 s)` steps ([`NavigatorConfig::imu_log_capacity`]).
+    /// A faster IMU makes a late sample impossible to replay; it is then dropped and counted
+    /// (`replays_impossible` in [`NavigatorDiagnostics`]).
+    pub max_imu_rate_hz: f64,
+    /// Covariance propagation interval, s: the transition is accumulated over IMU steps and
+    /// the covariance propagated at this interval and before every update ([`crate::ekf`]).
+    pub covariance_interval_s: f64,
+    /// GNSS coupling.
+    pub gnss_mode: GnssMode,
+    /// Estimated state groups.
+    pub states: StateSwitches,
+    /// Initial position for alignment; when absent, the first valid GNSS fix is used.
+    pub initial_position: Option<InitialPosition>,
+    /// Earth orientation parameters (UT1 − UTC, polar motion) for the star-tracker model.
+    pub eop: EarthOrientation,
+    /// IMU error specification.
+    pub imu: ImuSpec,
+    /// Initial uncertainties.
+    pub initial: InitialUncertainty,
+    /// Enabled measurement updates.
+    pub updates: UpdateSwitches,
+    /// Aiding noise and scheduling.
+    pub aiding: AidingNoise,
+    /// Aiding deadlines for the navigation mode.
+    pub deadlines: Deadlines,
+    /// Redundant-channel fault detection (paper 004; used when the IMU has channels).
+    pub redundancy: crate::redundancy::RedundancyConfig,
+}
+
+impl Default for NavigatorConfig {
+    fn default() -> Self {
+        Self {
+            alignment_s: 100.0,
+            ellipsoid: EllipsoidName::Wgs84,
+            gravity: GravityModel::J2,
+            integrator: Integrator::Rk4,
+            coning_sculling: true,
+            gate_probability: 0.999,
+            buffer_window_s: 1.0,
+            max_imu_rate_hz: 2000.0,
+            covariance_interval_s: 0.05,
+            gnss_mode: GnssMode::Loose,
+            states: StateSwitches::default(),
+            initial_position: None,
+            eop: EarthOrientation::default(),
+            imu: ImuSpec::default(),
+            initial: InitialUncertainty::default(),
+            updates: UpdateSwitches::default(),
+            aiding: AidingNoise::default(),
+            deadlines: Deadlines::default(),
+            redundancy: crate::redundancy::RedundancyConfig::default(),
+        }
+    }
+}
+
+pub(super) fn check(ok: bool, key: &str, what: &str) -> Result<(), ConfigError> {
+    if ok {
+        Ok(())
+    } else {
+        Err(ConfigError(format!("filter.{key} {what}")))
+    }
+}
+
+pub(super) fn pos(x: f64) -> bool {
+    x.is_finite() && x > 0.0
+}
+
+pub(super) fn nonneg(x: f64) -> bool {
+    x.is_finite() && x >= 0.0
+}
+
+impl NavigatorConfig {
+    /// Check the meaning of the values (ranges, consistency); the error names the key.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        check(
+            nonneg(self.alignment_s) && self.alignment_s <= 3600.0,
+            "alignment_s",
+            "must be in [0, 3600] s",
+        )?;
+        check(
+            self.gate_probability.is_finite()
+                && self.gate_probability > 0.5
+                && self.gate_probability <= 1.0,
+            "gate_probability",
+            "must be in (0.5, 1]",
+        )?;
+        check(
+            nonneg(self.buffer_window_s) && self.buffer_window_s <= 2.0,
+            "buffer_window_s",
+            "must be in [0, 2] s",
+        )?;
+        check(
+            pos(self.max_imu_rate_hz) && self.max_imu_rate_hz <= 100_000.0,
+            "max_imu_rate_hz",
+            "must be in (0, 100000] Hz",
+        )?;
+        check(
+            self.imu_log_capacity() <= IMU_LOG_MAX_CAP,
+            "max_imu_rate_hz",
+            "× (buffer_window_s + 0.2 s) must be at most 65536 IMU steps (the delayed-fusion \
+             log): lower the rate or the window",
+        )?;
+        if let Some(p) = &self.initial_position {
+            check(
+                p.lat_deg.is_finite() && p.lat_deg.abs() <= 90.0,
+                "initial_position.lat_deg",
+                "must be in [-90, 90]",
+            )?;
+            check(
+                p.lon_deg.is_finite() && p.lon_deg.abs() <= 360.0,
+                "initial_position.lon_deg",
+                "must be in [-360, 360]",
+            )?;
+            check(
+                p.height_m.is_finite() && (-1000.0..=100_000.0).contains(&p.height_m),
+                "initial_position.height_m",
+                "must be in [-1000, 100000] m",
+            )?;
+        }
+        check(
+            self.eop.dut1_s.is_finite() && self.eop.dut1_s.abs() <= 0.9,
+            "eop.dut1_s",
+            "must be in [-0.9, 0.9] s",
+        )?;
+        check(
+            self.eop.xp_rad.is_finite() && self.eop.xp_rad.abs() < 1e-5,
+            "eop.xp_rad",
+            "must be a finite polar motion below 1e-5 rad",
+        )?;
+        check(
+            self.eop.yp_rad.is_finite() && self.eop.yp_rad.abs() < 1e-5,
+            "eop.yp_rad",
+            "must be a finite polar motion below 1e-5 rad",
+        )?;
+        let i = &self.imu;
+        for (v, k) in [
+            (i.gyro_bias_deg_h, "imu.gyro_bias_deg_h"),
+            (i.arw_deg_sqrt_h, "imu.arw_deg_sqrt_h"),
+            (i.accel_bias_ug, "imu.accel_bias_ug"),
+            (i.vrw_ug_sqrt_hz, "imu.vrw_ug_sqrt_hz"),
+            (i.max_rate_rad_s, "imu.max_rate_rad_s"),
+            (i.max_specific_force_m_s2, "imu.max_specific_force_m_s2"),
+            (self.initial.position_sigma_m, "initial.position_sigma_m"),
+            (
+                self.initial.velocity_sigma_m_s,
+                "initial.velocity_sigma_m_s",
+            ),
+            (
+                self.initial.level_sigma_min_deg,
+                "initial.level_sigma_min_deg",
+            ),
+            (
+                self.initial.heading_sigma_min_deg,
+                "initial.heading_sigma_min_deg",
+            ),
+            (self.aiding.baro_sigma_m, "aiding.baro_sigma_m"),
+            (self.aiding.baro_bias_sigma_m, "aiding.baro_bias_sigma_m"),
+            (self.aiding.odometer_sigma_m_s, "aiding.odometer_sigma_m_s"),
+            (self.aiding.nhc_sigma_m_s, "aiding.nhc_sigma_m_s"),
+            (self.aiding.zupt_sigma_m_s, "aiding.zupt_sigma_m_s"),
+            (
+                self.aiding.zupt_max_rate_rad_s,
+                "aiding.zupt_max_rate_rad_s",
+            ),
+            (
+                self.aiding.zupt_max_accel_dev_m_s2,
+                "aiding.zupt_max_accel_dev_m_s2",
+            ),
+            (self.aiding.zupt_max_speed_m_s, "aiding.zupt_max_speed_m_s"),
+            (self.deadlines.gnss_s, "deadlines.gnss_s"),
+            (self.deadlines.star_tracker_s, "deadlines.star_tracker_s"),
+            (self.deadlines.odometer_s, "deadlines.odometer_s"),
+            (self.deadlines.baro_s, "deadlines.baro_s"),
+        ] {
+            check(pos(v), k, "must be a finite number > 0")?;
+        }
+        for (v, k) in [
+            (i.gyro_bias_rw_deg_h_sqrt_h, "imu.gyro_bias_rw_deg_h_sqrt_h"),
+            (i.accel_bias_rw_ug_sqrt_h, "imu.accel_bias_rw_ug_sqrt_h"),
+            (
+                self.aiding.baro_min_interval_s,
+                "aiding.baro_min_interval_s",
+            ),
+            (
+                self.aiding.baro_bias_rw_m_sqrt_s,
+                "aiding.baro_bias_rw_m_sqrt_s",
+            ),
+            (
+                self.aiding.odometer_scale_sigma,
+                "aiding.odometer_scale_sigma",
+            ),
+            (self.aiding.zupt_interval_s, "aiding.zupt_interval_s"),
+            (self.aiding.zupt_window_s, "aiding.zupt_window_s"),
+        ] {
+            check(nonneg(v), k, "must be a finite number >= 0")?;
+        }
+        check(
+            i.max_specific_force_m_s2 > 2.0 * G0,
+            "imu.max_specific_force_m_s2",
+            "must exceed 2 g",
+        )?;
+        self.redundancy.validate()?;
+        self.validate_filter_keys()
+    }
+
+    /// Checks of the state-group and coupling keys (filter engineer's part of `validate`).
+    pub(super) fn validate_filter_keys(&self) -> Result<(), ConfigError> {
+        check(
+            pos(self.covariance_interval_s) && self.covariance_interval_s <= 1.0,
+            "covariance_interval_s",
+            "must be in (0, 1] s",
+        )?;
+        for (v, k) in [
+            (self.imu.gyro_scale_ppm, "imu.gyro_scale_ppm"),
+            (self.imu.accel_scale_ppm, "imu.accel_scale_ppm"),
+            (self.imu.misalignment_arcsec, "imu.misalignment_arcsec"),
+            (
+                self.aiding.boresight_sigma_deg,
+                "aiding.boresight_sigma_deg",
+            ),
+            (
+                self.aiding.baseline_phase_sigma_cycles,
+                "aiding.baseline_phase_sigma_cycles",
+            ),
+            (
+                self.aiding.clock_bias_psd_m2_s,
+                "aiding.clock_bias_psd_m2_s",
+            ),
+            (
+                self.aiding.clock_drift_psd_m2_s3,
+                "aiding.clock_drift_psd_m2_s3",
+            ),
+        ] {
+            check(nonneg(v), k, "must be a finite number >= 0")?;
+        }
+        check(
+            self.gnss_mode == GnssMode::Loose || self.states.clock,
+            "states.clock",
+            "must be true with gnss_mode = \"tight\"",
+        )?;
+        Ok(())
+    }
+
+    /// IMU steps the delayed-fusion log keeps: every step from the checkpoint before the oldest
+    /// sample still fused (up to `buffer_window_s` behind, the checkpoint up to one period
+    /// before it, the rewind one IMU step after the arrival) to now, at `max_imu_rate_hz`, with
+    /// a second checkpoint period and two steps of margin.
+    pub fn imu_log_capacity(&self) -> usize {
+        let period_s = CHECKPOINT_PERIOD_NS as f64 * 1e-9;
+        let steps = (self.max_imu_rate_hz * (self.buffer_window_s + 2.0 * period_s)).ceil();
+        // Saturating: an absurd rate fails the IMU_LOG_MAX_CAP check, never overflows.
+        if steps.is_finite() && steps < IMU_LOG_MAX_CAP as f64 {
+            steps as usize + 2
+        } else {
+            IMU_LOG_MAX_CAP + 1
+        }
+    }
+
+    /// Mechanization settings derived from this configuration.
+    pub fn mechanization(&self) -> MechanizationConfig {
+        MechanizationConfig {
+            ellipsoid: self.ellipsoid.ellipsoid(),
+            gravity: self.gravity,
+            integrator: self.integrator,
+            coning_sculling: self.coning_sculling,
+        }
+    }
+}

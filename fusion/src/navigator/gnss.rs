@@ -1,0 +1,291 @@
+//! GNSS fusion: loose (position/velocity fix), tight (pseudorange and range rate per satellite
+//! with the receiver clock states, started by state augmentation), dual-baseline attitude, and
+//! the receiver-style least-squares cross-check (paper 003 eq. 12–21).
+
+use super::*;
+
+impl Navigator {
+    /// Dual-baseline attitude of a sample (paper 003, [`crate::baseline_attitude`]), started
+    /// from the inertial attitude (so two satellites suffice), lines of sight from the
+    /// inertial position; None when switched off, not navigating, or not solvable.
+    pub(super) fn baseline_attitude(&self, s: &GnssSample) -> Option<(Matrix3<f64>, Matrix3<f64>)> {
+        use crate::baseline_attitude as ba;
+        if !self.config.updates.baseline_attitude
+            || self.phase != Phase::Navigating
+            || !(s.baseline_length_m.iter().all(|d| pos(*d)) && pos(s.wavelength_m))
+        {
+            return None;
+        }
+        let obs = ba::PhaseObservations::from_sample(s, &self.nav.r_e).ok()?;
+        let cfg = ba::BaselineConfig {
+            baseline_length_m: s.baseline_length_m,
+            wavelength_m: s.wavelength_m,
+            sigma_phase_cycles: self.config.aiding.baseline_phase_sigma_cycles,
+        };
+        let prior = self.nav.q_e_b.to_rotation_matrix().into_inner();
+        let sol = ba::solve(&obs, &cfg, &self.nav.r_e, Some(&prior)).ok()?;
+        let finite = sol
+            .c_e_b
+            .iter()
+            .chain(sol.cov_e_rad2.iter())
+            .all(|x| x.is_finite());
+        finite.then_some((sol.c_e_b, sol.cov_e_rad2))
+    }
+
+    pub(super) fn fuse_gnss(&mut self, ts: i64, obs: &GnssObs) {
+        let id = sid(SensorId::Gnss);
+        // First, before any update of this epoch: the least-squares cross-check.
+        self.gnss_ls_cross_check(ts, obs);
+        if let Some((c_e_b, cov)) = obs.attitude {
+            let m = ekf::gnss_baseline_attitude(&self.nav, &c_e_b, &cov);
+            if self.run_update(Some(id), &m) {
+                self.mark_fused(id, ts);
+            }
+        }
+        if self.config.gnss_mode == GnssMode::Tight {
+            if obs.n_sats > 0 {
+                self.fuse_gnss_tight(ts, obs);
+            }
+            return;
+        }
+        let Some(fix) = obs.fix else {
+            return;
+        };
+        // Position and velocity are gated separately; the sample's NIS is the larger one.
+        let mut fused = false;
+        let mut nis = f64::NEG_INFINITY;
+        if self.config.updates.gnss_position {
+            let m = ekf::gnss_position(&self.nav, &fix.pos, &fix.pos_cov);
+            fused |= self.run_update(Some(id), &m);
+            nis = nis.max(self.health[id].last_nis);
+        }
+        if self.config.updates.gnss_velocity && fix.vel_valid {
+            let m = ekf::gnss_velocity(&self.nav, &fix.vel, &fix.vel_cov);
+            fused |= self.run_update(Some(id), &m);
+            nis = nis.max(self.health[id].last_nis);
+        }
+        if nis.is_finite() || nis == f64::INFINITY {
+            self.health[id].last_nis = nis;
+        }
+        if fused {
+            self.mark_fused(id, ts);
+        }
+    }
+
+    /// Tight coupling: every satellite's pseudorange and range rate as a sequential scalar
+    /// update (each gated on its own 1-dof NIS) at the inertial state of the epoch. The first
+    /// epoch without clock states starts them by state augmentation from one pseudorange and
+    /// one range rate ([`Self::initialize_clock`]); those two are consumed, the others fused.
+    /// The sample's NIS is the largest one.
+    pub(super) fn fuse_gnss_tight(&mut self, ts: i64, obs: &GnssObs) {
+        let id = sid(SensorId::Gnss);
+        // The clock estimate is kept at the filter time; move it back to the sample's time.
+        let back_s = (self.time_ns - ts) as f64 * 1e-9;
+        let (skip_pr, skip_rr) = if self.clock_initialized {
+            (None, None)
+        } else {
+            self.initialize_clock(obs, back_s)
+        };
+        // A measurement consumed by the clock initialisation was used: the epoch counts.
+        let mut fused = skip_pr.is_some();
+        let mut nis = f64::NEG_INFINITY;
+        for (i, sat) in obs.sats.iter().take(obs.n_sats).enumerate() {
+            if sat.has_pr && skip_pr != Some(i) {
+                let b = self.ekf.clock_bias_m - self.ekf.clock_drift_m_s * back_s;
+                let m = ekf::gnss_pseudorange(
+                    &self.nav,
+                    &sat.pos,
+                    sat.pseudorange_m,
+                    b,
+                    sat.sigma_pr_m,
+                );
+                fused |= self.run_update(Some(id), &m);
+                nis = nis.max(self.health[id].last_nis);
+            }
+            if sat.has_rr && self.config.updates.gnss_velocity && skip_rr != Some(i) {
+                let m = ekf::gnss_range_rate(
+                    &self.nav,
+                    &sat.pos,
+                    &sat.vel,
+                    sat.range_rate_m_s,
+                    self.ekf.clock_drift_m_s,
+                    sat.sigma_rr_m_s,
+                );
+                fused |= self.run_update(Some(id), &m);
+                nis = nis.max(self.health[id].last_nis);
+            }
+        }
+        if nis > f64::NEG_INFINITY {
+            self.health[id].last_nis = nis;
+        }
+        if fused {
+            self.mark_fused(id, ts);
+        }
+    }
+
+    /// Start the clock states from this epoch by state augmentation
+    /// ([`ekf::augment_covariance`]), from one satellite up; no 4-satellite fix needed.
+    ///
+    /// Bias from the first satellite k with a pseudorange, `b̂(t_s) = ρ_k − |s_k − r̂|`, drift
+    /// from the first one j with a range rate, `d̂ = ρ̇_j − (ṡ_j − v̂)·u_j` (without one: `d̂ = 0`
+    /// with a TCXO-class σ of 10⁻⁶·c = 300 m/s). Their errors are `δb = −H_k δx − ε_k`
+    /// (`H_k,r = −u_kᵀ`, so `δb = u_k·δr − ε_k`: the bias carries the inertial error along the
+    /// line of sight) and `δd = −H_j δx − η_j`; the bias is stored at the filter time
+    /// `t = t_s + back_s` as `b̂(t) = b̂(t_s) + d̂·back_s`, so its row is `H_k + back_s·H_j` and
+    /// the noise `[[σ_k² + back_s²σ_j², back_s σ_j²], [back_s σ_j², σ_j²]]`. The covariance
+    /// rows follow exactly (`P_cx = −H P`, `P_cc = H P Hᵀ + R`). Earlier the clock
+    /// got a variance uncorrelated with position, which made one satellite worse than none
+    /// (82 m vs 44 m along its line of sight in `tight-coupling`).
+    ///
+    /// Returns the indices (in `obs.sats`) of the pseudorange and range rate consumed: they
+    /// carry no further information and must not be fused again.
+    pub(super) fn initialize_clock(
+        &mut self,
+        obs: &GnssObs,
+        back_s: f64,
+    ) -> (Option<usize>, Option<usize>) {
+        let sats = &obs.sats[..obs.n_sats];
+        let Some(k) = sats.iter().position(|s| s.has_pr) else {
+            return (None, None);
+        };
+        let j = if self.config.updates.gnss_velocity {
+            sats.iter().position(|s| s.has_rr)
+        } else {
+            None
+        };
+        self.ekf.propagate_covariance(&self.ell, &self.nav.r_e);
+        let mut active = self.active_states(true);
+        active.clock = true;
+        self.ekf.set_active(active);
+        let sk = &sats[k];
+        let m_b = ekf::gnss_pseudorange(&self.nav, &sk.pos, sk.pseudorange_m, 0.0, sk.sigma_pr_m);
+        let (d_hat, h_d, var_d) = match j {
+            Some(j) => {
+                let sj = &sats[j];
+                let m_d = ekf::gnss_range_rate(
+                    &self.nav,
+                    &sj.pos,
+                    &sj.vel,
+                    sj.range_rate_m_s,
+                    0.0,
+                    sj.sigma_rr_m_s,
+                );
+                (m_d.innovation[0], m_d.h, sj.sigma_rr_m_s.powi(2))
+            }
+            None => (
+                0.0,
+                nalgebra::SMatrix::<f64, 1, { ekf::NX }>::zeros(),
+                300.0f64.powi(2),
+            ),
+        };
+        let mut h = nalgebra::SMatrix::<f64, 2, { ekf::NX }>::zeros();
+        h.row_mut(0).copy_from(&(m_b.h + h_d * back_s));
+        h.row_mut(1).copy_from(&h_d);
+        let r = nalgebra::Matrix2::new(
+            m_b.r[(0, 0)] + back_s * back_s * var_d,
+            back_s * var_d,
+            back_s * var_d,
+            var_d,
+        );
+        ekf::augment_covariance(&mut self.ekf.p, [idx::CLK, idx::CLK_DRIFT], &h, &r);
+        self.ekf.clock_drift_m_s = d_hat;
+        self.ekf.clock_bias_m = m_b.innovation[0] + d_hat * back_s;
+        self.clock_initialized = true;
+        (Some(k), j)
+    }
+
+    /// The epoch's pseudoranges (and range rates) as least-squares observations, and the fix
+    /// (paper 003 eq. 12–13, [`crate::gnss_ls`]) started from `guess` (ECEF position m, clock
+    /// bias m; the Earth's centre without one). None with fewer than four pseudoranges or
+    /// when the solver fails (singular geometry). Allocates nothing.
+    pub(super) fn ls_fix(
+        &self,
+        obs: &GnssObs,
+        guess: Option<(Vector3<f64>, f64)>,
+    ) -> Option<crate::gnss_ls::GnssFix> {
+        use crate::gnss_ls as ls;
+        let mut o = ls::Observations::default();
+        for sat in obs.sats.iter().take(obs.n_sats).filter(|s| s.has_pr) {
+            // usable_satellites already vetted every value, so push cannot fail.
+            o.push(ls::SatelliteObservation {
+                prn: 0,
+                sat_pos_ecef_m: sat.pos,
+                sat_vel_ecef_m_s: sat.vel,
+                pseudorange_m: sat.pseudorange_m,
+                sigma_pseudorange_m: sat.sigma_pr_m,
+                has_range_rate: sat.has_rr,
+                range_rate_m_s: sat.range_rate_m_s,
+                sigma_range_rate_m_s: sat.sigma_rr_m_s,
+            })
+            .ok()?;
+        }
+        if o.len() < 4 {
+            return None;
+        }
+        let (r0, b0) = guess.unwrap_or((Vector3::zeros(), 0.0));
+        let settings = ls::LsSettings {
+            initial_r_e_m: r0,
+            initial_clock_bias_m: b0,
+            ellipsoid: self.ell,
+            ..ls::LsSettings::default()
+        };
+        ls::solve(&o, &settings).ok()
+    }
+
+    /// Receiver-style cross-check of one epoch (the least-squares fix "as a
+    /// cross-check"): with ≥ 4 pseudoranges, the fix `r_ls` of this epoch alone against the
+    /// filter's prediction at its time of validity, before any update of the epoch:
+    /// `d = r_ls − r̂(t_s)`, `S = P_rr + C_ls`, `NIS = dᵀS⁻¹d`, χ² with 3 dof if both are
+    /// consistent, tested at the configured gate probability.
+    ///
+    /// Why `S` has no cross term: the filter's error before this update depends on the IMU,
+    /// on earlier epochs' measurement noise and on the clock model; the fix's error is
+    /// `(HᵀWH)⁻¹HᵀWε` of THIS epoch's pseudorange noise, which the simulator draws white
+    /// (independent between epochs) — so the two errors are independent. In a real receiver
+    /// they share slowly varying satellite-orbit/clock and atmosphere errors that the filter
+    /// has absorbed from earlier epochs (the sim does not model them); there `S` would need
+    /// their covariance subtracted twice, and the NIS here would read high.
+    ///
+    /// What a disagreement does: it is counted (`gnss_ls_disagreements`, with
+    /// `gnss_ls_last_nis` and `gnss_ls_pdop` on `msgs::Status`) and nothing else. The epoch's
+    /// updates still go through their own gates: the test cannot tell whether the fix (one
+    /// bad pseudorange, which the per-satellite gates can single out and reject) or the filter
+    /// (drifted beyond its covariance, e.g. after a long outage) is wrong, and skipping the
+    /// epoch would, in the second case, lock the filter out of the only measurements that can
+    /// bring it back. At 99.9 % a consistent filter disagrees on 0.1 % of the epochs; a run
+    /// of disagreements is the operator's (or a supervisor's) signal to re-initialise.
+    pub(super) fn gnss_ls_cross_check(&mut self, ts: i64, obs: &GnssObs) {
+        let back_s = (self.time_ns - ts) as f64 * 1e-9;
+        let r_pred = self.nav.r_e - self.nav.v_e * back_s;
+        let b_guess = if self.clock_initialized {
+            self.ekf.clock_bias_m - self.ekf.clock_drift_m_s * back_s
+        } else {
+            0.0
+        };
+        let Some(fix) = self.ls_fix(obs, Some((r_pred, b_guess))) else {
+            return;
+        };
+        self.ekf.propagate_covariance(&self.ell, &self.nav.r_e);
+        let p_rr: Matrix3<f64> = self
+            .ekf
+            .p
+            .fixed_view::<3, 3>(idx::POS, idx::POS)
+            .into_owned();
+        let s = ekf::symmetrize(&(p_rr + fix.position.cov_r_e_m2));
+        let d = fix.position.r_e_m - r_pred;
+        let Some(chol) = nalgebra::Cholesky::new(s) else {
+            return;
+        };
+        let nis = d.dot(&chol.solve(&d));
+        if !self.count_health {
+            return; // re-fused during a replay: counted the first time
+        }
+        let dg = &mut self.diagnostics;
+        dg.gnss_ls_checks += 1;
+        if nis > self.gates.threshold(3) {
+            dg.gnss_ls_disagreements += 1;
+        }
+        dg.gnss_ls_last_nis = nis;
+        dg.gnss_ls_pdop = fix.position.dop.pdop;
+    }
+}

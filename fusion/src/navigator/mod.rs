@@ -1,0 +1,465 @@
+//! The fusion engine that the daemons drive: static coarse alignment, strapdown mechanization,
+//! the error-state Kalman filter, buffering of aiding samples until the inertial solution reaches
+//! their time of validity, navigation modes and per-sensor health.
+//!
+//! # Life cycle
+//! `Initializing` (no IMU yet) → `Aligning`: IMU increments are averaged for
+//! [`NavigatorConfig::alignment_s`] (paper 003 static alignment, [`crate::alignment`]) while
+//! GNSS gives the position (or [`NavigatorConfig::initial_position`]) → navigating: strapdown
+//! ([`crate::strapdown`]) plus the 28-state error-state EKF ([`crate::ekf`]), mode from the
+//! aiding actually fused within its deadline.
+//!
+//! # GNSS least squares (paper 003 eq. 12–13, [`crate::gnss_ls`])
+//! With ≥ 4 pseudoranges (loose or tight mode) the receiver-style fix is computed from the raw
+//! observations: during alignment the latest one is the initial position with its covariance,
+//! and in tight mode also the initial clock bias/drift with the fix's position↔clock
+//! covariance (`initialize_from_ls`); without raw observations the receiver's fix is used.
+//! While navigating, every such epoch is cross-checked against the filter's prediction before
+//! its updates (`gnss_ls_cross_check`: 3-dof NIS, counted in [`NavigatorDiagnostics`]). With
+//! fewer satellites the tight clock states start by state augmentation from one satellite
+//! (`initialize_clock`).
+//!
+//! # Modes
+//! The mode reports the aiding fused within its deadline ([`Deadlines`]): GNSS and stars →
+//! GNSS-astro-inertial; GNSS lost → **astro-inertial**; stars lost → GNSS-inertial; both lost
+//! → dead reckoning (odometer/baro/ZUPT) or free inertial, with the covariance growing by the
+//! process noise only. Astro-inertial bounds the horizontal position (paper 000's astro fix,
+//! done inside the filter): the star attitude residual is taken in ECEF
+//! (`C_s_i = C_s_b·C_b_e·C_e_i(t)`, [`crate::ekf::star_attitude`]), so the stars fix ψ
+//! independently of position, while the accelerometers sense gravity along the *true*
+//! vertical. A horizontal position error δr tilts the vertical the filter assumes by δr/R;
+//! with ψ pinned by the stars that appears as a horizontal specific-force error `g·δr/R` in
+//! the velocity error equation (the `[f̂_e×]ψ` and gravity-gradient terms of
+//! [`crate::ekf`]), i.e. the Schuler loop now has a measurement closing it, and the
+//! position error settles at what the accelerometers cannot distinguish from a tilted
+//! vertical: `δr ≈ R·b_a/g` (50 µg → 320 m per axis). Free inertial has no such feedback
+//! and drifts with the gyro errors. Test: `drivers-sim/tests/filter_modes.rs` (2 h without
+//! GNSS: astro-inertial error ≤ 600 m with σ at that floor, free inertial 1.4 km and
+//! growing).
+//!
+//! # Delayed fusion (at the time of validity, exactly)
+//! Aiding samples are queued in fixed-capacity, time-ordered ring buffers (no allocation) and
+//! fused when the IMU time reaches their time of validity: at the first IMU epoch ≥ that time
+//! (the simulator puts every sample on the IMU grid; otherwise the approximation is at most one
+//! IMU interval, ≤ 5 ms at 200 Hz).
+//!
+//! A sample that arrives after the inertial solution has passed its time (but within
+//! [`NavigatorConfig::buffer_window_s`]) is fused by **re-propagation from buffered IMU
+//! data**: every 100 ms of IMU time the replayable filter state (inertial state, error-state
+//! filter with its covariance and pending transition, strapdown history, ZUPT/baro
+//! schedulers) is checkpointed; the validated IMU increments and every fused aiding sample
+//! are kept for the window. At the next IMU sample the navigator restores the latest
+//! checkpoint before the late sample's time, re-queues the aiding fused since then and
+//! replays the logged IMU steps, fusing everything — the late sample included — at the epoch,
+//! with the state *and covariance* that an in-time arrival would have met. The result is the
+//! in-time result up to floating-point rounding (test
+//! `late_gnss_sample_gives_the_in_time_update`), unlike the usual shortcut of applying a
+//! correction computed with the current covariance (which ignores the cross-covariance
+//! between the delayed and the current error). Cost: one replay of up to window + 100 ms of
+//! IMU steps (≈ 2 µs each) per burst of late samples. Samples older than the window are
+//! counted in `dropped_late` and never fused. The IMU log is sized from the configuration
+//! ([`NavigatorConfig::imu_log_capacity`]: `max_imu_rate_hz × (window + 0.2 s)` steps); should
+//! a faster IMU leave it too short for a replay, the late samples are dropped (`dropped_late`)
+//! and the event counted (`replays_impossible`), never fused at a later epoch. The first checkpoint is the start of navigation,
+//! so a sample late in the first 100 ms is replayed from there too; a sample whose time of
+//! validity is at or before the start belongs to the alignment period and is discarded
+//! whenever it arrives, as alignment discards it in time. So the solution at an epoch depends
+//! only on which samples had arrived by then, not on the order (test
+//! `arrival_order_changes_only_the_epochs_with_a_sample_pending`). Health counters count every
+//! sample once (re-fused samples do not count again).
+//!
+//! # Input validation
+//! Every sample is checked (NaN/inf, impossible magnitudes, time not increasing, duplicated
+//! sequence number); a bad one is counted in `rejected_invalid`, returned as an error and never
+//! touches the filter. Nothing here panics on input, allocates per sample, reads a clock or
+//! does I/O.
+//!
+//! # Modules
+//! - `config`: the configuration types (`config/filter.toml`) and their validation.
+//! - `gate`: the content checks of each sample, refusing with a `Copy` [`Rejection`].
+//! - `input`: header checks, health bookkeeping and queueing of each accepted sample.
+//! - `imu_time`: IMU time continuity (bridged gaps, confirmed discontinuities).
+//! - `channels`: redundant IMU channels with fault detection (paper 004).
+//! - `align`: coarse alignment and the start of navigation.
+//! - `buffer`, `obs`: the delayed-fusion queues and logs, and the observations they hold.
+//! - `replay`: the navigating IMU step, checkpoints and the replay of late samples.
+//! - `update`: one gated measurement update and the counters folded from it.
+//! - `gnss`, `star`, `odometer`, `baro`, `zupt`: the aiding updates per sensor.
+//! - `output`: navigation mode and the `msgs::NavSolution`.
+//! - `health`: counters that are not per-sensor slots.
+
+use crate::ConfigError;
+use crate::alignment::{self, Accumulator};
+use crate::attitude::{quat_from_wire, quat_to_wire, rpy_from_q_n_b};
+use crate::celestial::EarthOrientation;
+use crate::earth::{self, Ellipsoid, Geodetic, GravityModel, PZ90, WGS84};
+use crate::ekf::{
+    self, ActiveStates, Covariance, ErrorStateEkf, GateTable, Measurement, ProcessNoise,
+    StateVector, idx,
+};
+use crate::strapdown::{ImuIncrement, Integrator, MechanizationConfig, NavState, Strapdown, q_e_n};
+use crate::time::GpsTime;
+use msgs::{
+    BaroSample, GnssSample, Header, ImuSample, MAX_IMU_CHANNELS, MAX_SATELLITES, MAX_SENSORS,
+    NavMode, NavSolution, OdometerSample, SensorHealth, SensorId, StarTrackerSample,
+};
+use nalgebra::{Matrix3, UnitQuaternion, Vector3};
+
+mod align;
+mod baro;
+mod buffer;
+mod channels;
+mod config;
+mod gate;
+mod gnss;
+mod health;
+mod imu_time;
+mod input;
+mod obs;
+mod odometer;
+mod output;
+mod replay;
+mod star;
+mod update;
+mod zupt;
+
+use buffer::*;
+pub use config::*;
+use gate::*;
+pub use gate::{RejectReason, Rejection};
+pub use health::{NavigatorDiagnostics, NhcHealth, ZuptHealth};
+pub use imu_time::CONFIRM_SAMPLES;
+use imu_time::*;
+use obs::*;
+use odometer::*;
+pub use output::ClockEstimate;
+use replay::*;
+use star::*;
+
+const DEG: f64 = std::f64::consts::PI / 180.0;
+
+/// Standard gravity, m/s² (unit conversions only).
+const G0: f64 = 9.806_65;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Phase {
+    Initializing,
+    Aligning,
+    Navigating,
+}
+
+/// One input of the navigator ([`Navigator::push`]): a sensor sample (borrowed, time of
+/// validity in its header, GPS ns) or the daemon's verdict that a sensor is, or no longer is,
+/// delivering within its deadline.
+#[derive(Debug, Clone, Copy)]
+pub enum Input<'a> {
+    /// IMU increments (body frame).
+    Imu(&'a ImuSample),
+    /// Star-tracker attitude (sensor frame w.r.t. ICRF).
+    StarTracker(&'a StarTrackerSample),
+    /// GNSS fix, raw satellites and baseline phases (ECEF).
+    Gnss(&'a GnssSample),
+    /// Odometer speed and distance over its interval.
+    Odometer(&'a OdometerSample),
+    /// Barometric pressure.
+    Baro(&'a BaroSample),
+    /// Whether sensor `sensor` (index = `msgs::SensorId`; out-of-range indices are ignored)
+    /// delivers within its deadline.
+    SensorAlive {
+        /// Sensor slot (`msgs::SensorId as usize`).
+        sensor: usize,
+        /// True when it delivers again, false when its deadline was missed.
+        alive: bool,
+    },
+}
+
+/// The fusion engine.
+#[derive(Debug, Clone)]
+pub struct Navigator {
+    config: NavigatorConfig,
+    ell: Ellipsoid,
+    gates: GateTable,
+    c_s_b: Matrix3<f64>,
+    phase: Phase,
+    align: Accumulator,
+    init_fix: Option<(Vector3<f64>, Matrix3<f64>)>,
+    strapdown: Strapdown,
+    nav: NavState,
+    ekf: ErrorStateEkf,
+    time_ns: i64,
+    last_seq: [Option<u64>; MAX_SENSORS],
+    last_time: [Option<i64>; MAX_SENSORS],
+    health: [SensorHealth; MAX_SENSORS],
+    last_fused_ns: [Option<i64>; MAX_SENSORS],
+    gnss_q: TimeQueue<GnssObs, GNSS_CAP>,
+    clock_initialized: bool,
+    celestial: CelestialCache,
+    star_q: TimeQueue<StarObs, STAR_CAP>,
+    odo_q: TimeQueue<f64, ODO_CAP>,
+    baro_q: TimeQueue<f64, BARO_CAP>,
+    imu_log: Ring<ImuLogEntry>,
+    checkpoints: Ring<Checkpoint>,
+    gnss_done: TimeQueue<GnssObs, GNSS_CAP>,
+    star_done: TimeQueue<StarObs, STAR_CAP>,
+    odo_done: TimeQueue<f64, ODO_CAP>,
+    baro_done: TimeQueue<f64, BARO_CAP>,
+    /// Earliest time of validity of a sample that arrived after the IMU passed it.
+    rewind_to: Option<i64>,
+    /// Time of validity at which navigation started (the end of alignment), GPS ns: aiding
+    /// up to it belongs to the alignment period, whenever it arrives (`fuse_due`).
+    nav_start_ns: i64,
+    replaying: bool,
+    /// Whether the sample being fused counts in the health counters (false when it is
+    /// re-fused during a replay).
+    count_health: bool,
+    last_baro_fused: Option<i64>,
+    last_odo: Option<(i64, f64)>,
+    static_since: Option<i64>,
+    last_zupt: Option<i64>,
+    zupt: ZuptHealth,
+    solutions: u64,
+    mode: NavMode,
+    aiding_mask: u32,
+    /// Redundant-channel combination and FDI (paper 004), built from the first sample with
+    /// channels.
+    redundancy: Option<crate::redundancy::RedundantImu>,
+    /// FDI settings (None: derived from `config.imu` and the sample interval).
+    redundancy_config: Option<crate::redundancy::FdiConfig>,
+    /// Cross-check and re-initialisation counters.
+    diagnostics: NavigatorDiagnostics,
+    /// An IMU time discontinuity waiting for confirmation (see [`Navigator::check_imu_time`]).
+    imu_time_jump: Option<ImuTimeJump>,
+    /// The last odometer epoch (interval-mean to end-point speed, `fuse_odometer`).
+    odo_epoch: Option<OdometerEpoch>,
+    /// Non-holonomic constraint counters.
+    nhc: NhcHealth,
+    /// The latest least-squares GNSS fix of the alignment period and its time of validity
+    /// (initial position and tight-mode clock, `initialize_from_ls`).
+    init_ls: Option<(i64, crate::gnss_ls::GnssFix)>,
+}
+
+/// Slot of a sensor in the health array.
+const fn sid(s: SensorId) -> usize {
+    s as usize
+}
+
+impl Navigator {
+    /// A navigator waiting for its first IMU sample.
+    pub fn new(config: NavigatorConfig) -> Result<Self, ConfigError> {
+        config.validate()?;
+        let ell = config.ellipsoid.ellipsoid();
+        let nav = NavState {
+            r_e: Vector3::new(ell.a_m, 0.0, 0.0),
+            v_e: Vector3::zeros(),
+            q_e_b: UnitQuaternion::identity(),
+        };
+        Ok(Self {
+            gates: GateTable::new(config.gate_probability),
+            // Nominal star-tracker mount (docs/ARCHITECTURE.md): 180° about body x.
+            c_s_b: Matrix3::new(1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, -1.0),
+            phase: Phase::Initializing,
+            align: Accumulator::default(),
+            init_fix: None,
+            strapdown: Strapdown::new(config.mechanization()),
+            nav,
+            ekf: ErrorStateEkf::new(
+                Covariance::identity(),
+                config.imu.process_noise(),
+                ActiveStates::ALL,
+            ),
+            time_ns: 0,
+            last_seq: [None; MAX_SENSORS],
+            last_time: [None; MAX_SENSORS],
+            health: [SensorHealth::default(); MAX_SENSORS],
+            last_fused_ns: [None; MAX_SENSORS],
+            gnss_q: TimeQueue::new(),
+            clock_initialized: false,
+            celestial: CelestialCache::default(),
+            star_q: TimeQueue::new(),
+            odo_q: TimeQueue::new(),
+            baro_q: TimeQueue::new(),
+            imu_log: Ring::new(config.imu_log_capacity(), ImuLogEntry::default()),
+            checkpoints: Ring::new(
+                CHECKPOINT_CAP,
+                Checkpoint {
+                    t: 0,
+                    nav,
+                    ekf: ErrorStateEkf::new(
+                        Covariance::identity(),
+                        config.imu.process_noise(),
+                        ActiveStates::ALL,
+                    ),
+                    strapdown: Strapdown::new(config.mechanization()),
+                    static_since: None,
+                    last_zupt: None,
+                    last_baro_fused: None,
+                    last_odo: None,
+                    clock_initialized: false,
+                },
+            ),
+            gnss_done: TimeQueue::new(),
+            star_done: TimeQueue::new(),
+            odo_done: TimeQueue::new(),
+            baro_done: TimeQueue::new(),
+            rewind_to: None,
+            nav_start_ns: i64::MIN,
+            replaying: false,
+            count_health: true,
+            last_baro_fused: None,
+            last_odo: None,
+            static_since: None,
+            last_zupt: None,
+            zupt: ZuptHealth::default(),
+            solutions: 0,
+            mode: NavMode::Initializing,
+            aiding_mask: 0,
+            redundancy: None,
+            redundancy_config: None,
+            diagnostics: NavigatorDiagnostics::default(),
+            imu_time_jump: None,
+            odo_epoch: None,
+            nhc: NhcHealth::default(),
+            init_ls: None,
+            ell,
+            config,
+        })
+    }
+
+    /// Feed one input: the single entry point by which the daemon, offline runs and replay
+    /// drive the navigator. An IMU sample returns the solution at its time once navigating;
+    /// aiding samples are queued for fusion at their time of validity and return None, as does
+    /// a sensor alive/dead report. Allocates nothing.
+    pub fn push(&mut self, input: Input<'_>) -> Result<Option<NavSolution>, Rejection> {
+        match input {
+            Input::Imu(s) => self.push_imu(s),
+            Input::StarTracker(s) => self.push_star_tracker(s).map(|()| None),
+            Input::Gnss(s) => self.push_gnss(s).map(|()| None),
+            Input::Odometer(s) => self.push_odometer(s).map(|()| None),
+            Input::Baro(s) => self.push_baro(s).map(|()| None),
+            Input::SensorAlive { sensor, alive } => {
+                self.set_sensor_alive(sensor, alive);
+                Ok(None)
+            }
+        }
+    }
+
+    /// Tell the navigator whether a sensor (index = `msgs::SensorId`) is delivering within its
+    /// deadline (decided by the daemon, which owns the clock).
+    pub fn set_sensor_alive(&mut self, sensor: usize, alive: bool) {
+        if let Some(h) = self.health.get_mut(sensor) {
+            if h.alive != 0 && !alive {
+                h.deadline_misses = h.deadline_misses.saturating_add(1);
+            }
+            h.alive = u32::from(alive);
+        }
+    }
+
+    /// Per-sensor health counters, indexed by `msgs::SensorId`.
+    pub fn health(&self) -> [SensorHealth; MAX_SENSORS] {
+        self.health
+    }
+
+    /// Current mode (`msgs::NavMode` as u32).
+    pub fn mode(&self) -> u32 {
+        self.mode as u32
+    }
+
+    /// Cross-check and re-initialisation counters.
+    pub fn diagnostics(&self) -> NavigatorDiagnostics {
+        self.diagnostics
+    }
+
+    /// Zero-velocity update counters.
+    pub fn zupt_health(&self) -> ZuptHealth {
+        self.zupt
+    }
+
+    /// Counters of the non-holonomic constraint updates.
+    pub fn nhc_health(&self) -> NhcHealth {
+        self.nhc
+    }
+
+    /// The configuration in use.
+    pub fn config(&self) -> &NavigatorConfig {
+        &self.config
+    }
+
+    /// Current inertial state (ECEF), valid once navigating.
+    pub fn nav_state(&self) -> &NavState {
+        &self.nav
+    }
+
+    /// Current error-state covariance (layout in [`crate::ekf`]).
+    pub fn covariance(&self) -> &Covariance {
+        &self.ekf.p
+    }
+
+    /// Estimated gyro bias (body, rad/s) and accelerometer bias (body, m/s²).
+    pub fn biases(&self) -> (Vector3<f64>, Vector3<f64>) {
+        (self.ekf.gyro_bias_rad_s, self.ekf.accel_bias_m_s2)
+    }
+
+    /// Estimated baro height bias (`h_baro = h + b`), m.
+    pub fn baro_bias_m(&self) -> f64 {
+        self.ekf.baro_bias_m
+    }
+
+    /// Estimated star-tracker boresight angles κ1..κ3 (paper 000) and their 1-σ relative to
+    /// the true body frame, rad: `σ² = P_κκ + σ_mis²`, the filter's own variance (κ relative
+    /// to the frame the IMU axes realise) plus the IMU axis misalignment
+    /// (`imu.misalignment_arcsec`), which no estimator that uses the IMU as its body
+    /// reference can remove. 0 when the boresight group is off.
+    pub fn boresight_rad(&self) -> (Vector3<f64>, Vector3<f64>) {
+        (self.ekf.kappa_rad, self.boresight_sigma())
+    }
+
+    fn boresight_sigma(&self) -> Vector3<f64> {
+        if !self.ekf.is_active(idx::KAPPA) {
+            return Vector3::zeros();
+        }
+        let mis = self.config.imu.misalignment_arcsec / 3600.0 * DEG;
+        Vector3::from_fn(|i, _| {
+            (self.ekf.p[(idx::KAPPA + i, idx::KAPPA + i)].max(0.0) + mis * mis).sqrt()
+        })
+    }
+
+    /// Receiver clock: bias × c (m), drift × c (m/s) and their 1-σ; zeros before tight
+    /// coupling has initialised the clock states.
+    pub fn clock(&self) -> ClockEstimate {
+        let p = &self.ekf.p;
+        ClockEstimate {
+            bias_m: self.ekf.clock_bias_m,
+            drift_m_s: self.ekf.clock_drift_m_s,
+            bias_sigma_m: p[(idx::CLK, idx::CLK)].max(0.0).sqrt(),
+            drift_sigma_m_s: p[(idx::CLK_DRIFT, idx::CLK_DRIFT)].max(0.0).sqrt(),
+        }
+    }
+
+    /// Estimated gyro and accelerometer scale-factor errors per body axis (dimensionless).
+    pub fn scale_factors(&self) -> (Vector3<f64>, Vector3<f64>) {
+        (self.ekf.gyro_scale, self.ekf.accel_scale)
+    }
+
+    /// 1-σ of every error state (layout in [`crate::ekf`]); zero for inactive groups.
+    pub fn state_sigma(&self) -> StateVector {
+        StateVector::from_fn(|i, _| self.ekf.p[(i, i)].max(0.0).sqrt())
+    }
+
+    /// The error-state filter (covariance as of its last propagation, estimates).
+    pub fn filter(&self) -> &ErrorStateEkf {
+        &self.ekf
+    }
+
+    /// True once alignment is complete and the filter runs.
+    pub fn is_navigating(&self) -> bool {
+        self.phase == Phase::Navigating
+    }
+
+    /// Time of the last IMU sample processed, GPS ns (0 before the first).
+    pub fn time_ns(&self) -> i64 {
+        self.time_ns
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,112 @@
+//! The navigation mode from the aiding fused within its deadline, and the output message
+//! (`msgs::NavSolution`: geodetic position, NED velocity and attitude, σ in NED, estimates).
+
+use super::*;
+
+/// Receiver clock estimate (tight coupling).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ClockEstimate {
+    /// Clock bias × c, m.
+    pub bias_m: f64,
+    /// Clock drift × c, m/s.
+    pub drift_m_s: f64,
+    /// 1-σ of the bias, m.
+    pub bias_sigma_m: f64,
+    /// 1-σ of the drift, m/s.
+    pub drift_sigma_m_s: f64,
+}
+
+impl Navigator {
+    pub(super) fn update_mode(&mut self, t: i64) {
+        let d = &self.config.deadlines;
+        let recent = |s: SensorId, dl: f64| -> bool {
+            self.last_fused_ns[sid(s)].is_some_and(|f| ((t - f) as f64) * 1e-9 <= dl)
+        };
+        let star = recent(SensorId::StarTracker, d.star_tracker_s);
+        let gnss = recent(SensorId::Gnss, d.gnss_s);
+        let odo = recent(SensorId::Odometer, d.odometer_s);
+        let baro = recent(SensorId::Baro, d.baro_s);
+        let zupt = self
+            .last_zupt
+            .is_some_and(|z| ((t - z) as f64) * 1e-9 <= 1.0)
+            && self.static_since.is_some();
+        let mut mask = 0u32;
+        for (on, s) in [
+            (star, SensorId::StarTracker),
+            (gnss, SensorId::Gnss),
+            (odo, SensorId::Odometer),
+            (baro, SensorId::Baro),
+        ] {
+            if on {
+                mask |= 1 << (s as u32);
+            }
+        }
+        self.aiding_mask = mask;
+        self.mode = match (gnss, star) {
+            (true, true) => NavMode::GnssAstroInertial,
+            (true, false) => NavMode::GnssInertial,
+            (false, true) => NavMode::AstroInertial,
+            (false, false) if odo || baro || zupt => NavMode::DeadReckoning,
+            _ => NavMode::FreeInertial,
+        };
+    }
+
+    pub(super) fn solution(&mut self, s: &ImuSample) -> NavSolution {
+        let geo = earth::ecef_to_geodetic(&self.ell, &self.nav.r_e);
+        let q_e_n = q_e_n(geo.lat_rad, geo.lon_rad);
+        let c_n_e = q_e_n.to_rotation_matrix().into_inner().transpose();
+        let q_n_b = q_e_n.inverse() * self.nav.q_e_b;
+        let v_ned = c_n_e * self.nav.v_e;
+        let rpy = rpy_from_q_n_b(&q_n_b);
+        let p = &self.ekf.p;
+        let sig = |k: usize| -> [f64; 3] {
+            let b: Matrix3<f64> = p.fixed_view::<3, 3>(k, k).into_owned();
+            let d = (c_n_e * b * c_n_e.transpose()).diagonal();
+            [
+                d.x.max(0.0).sqrt(),
+                d.y.max(0.0).sqrt(),
+                d.z.max(0.0).sqrt(),
+            ]
+        };
+        self.solutions += 1;
+        NavSolution {
+            header: Header {
+                time_ns: self.time_ns,
+                seq: self.solutions,
+                status: 0,
+                reserved: 0,
+                send_mono_ns: 0,
+            },
+            mode: self.mode as u32,
+            aiding_mask: self.aiding_mask,
+            lat_rad: geo.lat_rad,
+            lon_rad: geo.lon_rad,
+            height_m: geo.height_m,
+            pos_ecef_m: self.nav.r_e.into(),
+            vel_ned_m_s: v_ned.into(),
+            q_ned_body: quat_to_wire(&q_n_b),
+            roll_pitch_heading_rad: rpy.into(),
+            pos_sigma_ned_m: sig(idx::POS),
+            vel_sigma_ned_m_s: sig(idx::VEL),
+            att_sigma_ned_rad: sig(idx::ATT),
+            gyro_bias_rad_s: self.ekf.gyro_bias_rad_s.into(),
+            accel_bias_m_s2: self.ekf.accel_bias_m_s2.into(),
+            imu_send_mono_ns: s.header.send_mono_ns,
+            gyro_bias_sigma_rad_s: diag_sigma(p, idx::BG),
+            accel_bias_sigma_m_s2: diag_sigma(p, idx::BA),
+            gyro_scale_ppm: (self.ekf.gyro_scale * 1e6).into(),
+            accel_scale_ppm: (self.ekf.accel_scale * 1e6).into(),
+            boresight_rad: self.ekf.kappa_rad.into(),
+            boresight_sigma_rad: self.boresight_sigma().into(),
+            clock_bias_m: self.ekf.clock_bias_m,
+            clock_drift_m_s: self.ekf.clock_drift_m_s,
+            baro_bias_m: self.ekf.baro_bias_m,
+            odometer_scale: self.ekf.odo_scale,
+        }
+    }
+}
+
+/// 1-σ of three consecutive states from the covariance diagonal.
+pub(super) fn diag_sigma(p: &Covariance, k: usize) -> [f64; 3] {
+    [0, 1, 2].map(|i| p[(k + i, k + i)].max(0.0).sqrt())
+}

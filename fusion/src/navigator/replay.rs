@@ -1,0 +1,220 @@
+//! Delayed fusion at the time of validity (module docs of [`super`], "Delayed fusion"): the
+//! navigating IMU step, checkpoints of the replayable state, the rewind and replay when a
+//! late sample arrives, and the fusion of every queued sample whose epoch is reached.
+
+use super::*;
+
+/// Everything an IMU step or an update changes, at the end of one IMU epoch `t` (the
+/// replayable part of the navigator; health counters are not in it).
+#[derive(Debug, Clone)]
+pub(super) struct Checkpoint {
+    pub(super) t: i64,
+    pub(super) nav: NavState,
+    pub(super) ekf: ErrorStateEkf,
+    pub(super) strapdown: Strapdown,
+    pub(super) static_since: Option<i64>,
+    pub(super) last_zupt: Option<i64>,
+    pub(super) last_baro_fused: Option<i64>,
+    pub(super) last_odo: Option<(i64, f64)>,
+    pub(super) clock_initialized: bool,
+}
+
+impl Navigator {
+    /// One navigating IMU step (live or replayed): mechanization, transition accumulation,
+    /// covariance propagation at its interval, fusion of the aiding due, ZUPT, checkpoint.
+    pub(super) fn imu_step(&mut self, e: &ImuLogEntry) {
+        let t = e.t;
+        // The increment covers dt_s; after missing samples, stretch it over the gap.
+        let gap_s = e.prev_t.map_or(e.dt_s, |p| (t - p) as f64 * 1e-9);
+        let (scale, dt) = if gap_s > 1.5 * e.dt_s {
+            self.strapdown.reset_history();
+            (gap_s / e.dt_s, gap_s)
+        } else {
+            (1.0, e.dt_s)
+        };
+        let (dth_c, dv_c) = self
+            .ekf
+            .correct_increment(&(e.dth * scale), &(e.dv * scale), dt);
+        let inc = ImuIncrement {
+            dt_s: dt,
+            delta_angle_rad: dth_c,
+            delta_velocity_m_s: dv_c,
+        };
+        self.strapdown.step(&mut self.nav, &inc);
+        self.ekf
+            .accumulate(&self.nav, &(dv_c / dt), &(dth_c / dt), dt);
+        if self.ekf.pending_s() >= self.config.covariance_interval_s - 1e-9 {
+            self.ekf.propagate_covariance(&self.ell, &self.nav.r_e);
+        }
+        self.time_ns = t;
+        self.update_static_detector(t, &inc);
+        self.fuse_due(t);
+        self.maybe_zupt(t);
+        let last = if self.checkpoints.len > 0 {
+            self.checkpoints.get(self.checkpoints.len - 1).t
+        } else {
+            i64::MIN / 2
+        };
+        if t - last >= CHECKPOINT_PERIOD_NS {
+            self.take_checkpoint(t);
+        }
+    }
+
+    /// A sample queued at time of validity `ts`: if the inertial solution has already passed
+    /// it, the filter must rewind (done at the next IMU sample, once for a burst).
+    pub(super) fn note_arrival(&mut self, ts: i64) {
+        if self.phase == Phase::Navigating && ts <= self.time_ns {
+            self.rewind_to = Some(self.rewind_to.map_or(ts, |r| r.min(ts)));
+        }
+    }
+
+    pub(super) fn take_checkpoint(&mut self, t: i64) {
+        // The checkpoints are cleared only when navigation starts (and a replay keeps at least
+        // one), so the first one marks the start.
+        if self.checkpoints.len == 0 {
+            self.nav_start_ns = t;
+        }
+        self.checkpoints.push(Checkpoint {
+            t,
+            nav: self.nav,
+            ekf: self.ekf.clone(),
+            strapdown: self.strapdown.clone(),
+            static_since: self.static_since,
+            last_zupt: self.last_zupt,
+            last_baro_fused: self.last_baro_fused,
+            last_odo: self.last_odo,
+            clock_initialized: self.clock_initialized,
+        });
+    }
+
+    /// Fuse late samples at their time of validity exactly as if they had arrived in time
+    /// (module docs, "Delayed fusion"): restore the latest checkpoint before `ts`, put the
+    /// aiding fused since then back in the queues (flagged as already counted) and replay the
+    /// logged IMU steps, which fuse every sample — the late ones included — at the epoch and
+    /// with the state and covariance an in-time arrival would have met. No checkpoint is
+    /// before `ts` only when `ts` is at or before the start of navigation (the first
+    /// checkpoint; the ring holds more than the window): such samples belong to the alignment
+    /// period and `fuse_due` discards them. When the IMU log does not reach back to the
+    /// checkpoint (an IMU faster than `max_imu_rate_hz`), the replay is impossible: counted,
+    /// and the late samples are dropped ([`Self::drop_unreplayable`]).
+    pub(super) fn replay_from(&mut self, ts: i64) {
+        let mut k = self.checkpoints.len;
+        while k > 0 && self.checkpoints.get(k - 1).t >= ts {
+            k -= 1;
+        }
+        if k == 0 {
+            return;
+        }
+        let c = self.checkpoints.get(k - 1).clone();
+        // The IMU log must hold every step after the checkpoint epoch: its first entry is at
+        // or before it, or is the very step after it (the log starts with navigation, right
+        // after the checkpoint taken at the start).
+        let covered = self.imu_log.len > 0 && {
+            let first = self.imu_log.get(0);
+            first.t <= c.t || first.prev_t.is_some_and(|p| p <= c.t)
+        };
+        if !covered {
+            self.drop_unreplayable();
+            return;
+        }
+        self.checkpoints.truncate(k);
+        self.nav = c.nav;
+        self.ekf = c.ekf;
+        self.strapdown = c.strapdown;
+        self.static_since = c.static_since;
+        self.last_zupt = c.last_zupt;
+        self.last_baro_fused = c.last_baro_fused;
+        self.last_odo = c.last_odo;
+        self.clock_initialized = c.clock_initialized;
+        self.time_ns = c.t;
+        while let Some((t, v, _)) = self.gnss_done.pop_newer(c.t) {
+            self.gnss_q.insert_flagged(t, v, true);
+        }
+        while let Some((t, v, _)) = self.star_done.pop_newer(c.t) {
+            self.star_q.insert_flagged(t, v, true);
+        }
+        while let Some((t, v, _)) = self.odo_done.pop_newer(c.t) {
+            self.odo_q.insert_flagged(t, v, true);
+        }
+        while let Some((t, v, _)) = self.baro_done.pop_newer(c.t) {
+            self.baro_q.insert_flagged(t, v, true);
+        }
+        self.replaying = true;
+        for i in 0..self.imu_log.len {
+            let e = *self.imu_log.get(i);
+            if e.t > c.t {
+                self.imu_step(&e);
+            }
+        }
+        self.replaying = false;
+    }
+
+    /// A rewind the IMU log cannot serve: drop the samples the solution has passed (those
+    /// queued at or before the current epoch; the in-time ones stay), count them as late and
+    /// the event in `replays_impossible`.
+    pub(super) fn drop_unreplayable(&mut self) {
+        self.drop_queued_until(self.time_ns);
+        self.diagnostics.replays_impossible += 1;
+    }
+
+    /// Drop the queued aiding with time of validity ≤ `t`, counting each sample (once) in its
+    /// sensor's `dropped_late`.
+    pub(super) fn drop_queued_until(&mut self, t: i64) {
+        let mut dropped = [0u64; MAX_SENSORS];
+        while let Some((_, _, counted)) = self.gnss_q.pop_due(t) {
+            dropped[sid(SensorId::Gnss)] += u64::from(!counted);
+        }
+        while let Some((_, _, counted)) = self.star_q.pop_due(t) {
+            dropped[sid(SensorId::StarTracker)] += u64::from(!counted);
+        }
+        while let Some((_, _, counted)) = self.odo_q.pop_due(t) {
+            dropped[sid(SensorId::Odometer)] += u64::from(!counted);
+        }
+        while let Some((_, _, counted)) = self.baro_q.pop_due(t) {
+            dropped[sid(SensorId::Baro)] += u64::from(!counted);
+        }
+        for (h, d) in self.health.iter_mut().zip(dropped) {
+            h.dropped_late += d;
+        }
+    }
+
+    /// Fuse every queued sample with time of validity ≤ `t` (the current epoch) and keep it
+    /// for a possible replay.
+    pub(super) fn fuse_due(&mut self, t: i64) {
+        while let Some((ts, obs, counted)) = self.gnss_q.pop_due(t) {
+            // Alignment discards the aiding of its own period when it arrives in time
+            // (`consume_during_alignment`); arriving after the start, it is discarded too.
+            if ts <= self.nav_start_ns {
+                continue;
+            }
+            self.count_health = !counted;
+            self.fuse_gnss(ts, &obs);
+            self.gnss_done.insert_flagged(ts, obs, true);
+        }
+        while let Some((ts, obs, counted)) = self.star_q.pop_due(t) {
+            if ts <= self.nav_start_ns {
+                continue;
+            }
+            self.count_health = !counted;
+            self.fuse_star(ts, &obs);
+            self.star_done.insert_flagged(ts, obs, true);
+        }
+        while let Some((ts, speed, counted)) = self.odo_q.pop_due(t) {
+            if ts <= self.nav_start_ns {
+                continue;
+            }
+            self.count_health = !counted;
+            self.fuse_odometer(ts, speed);
+            self.odo_done.insert_flagged(ts, speed, true);
+        }
+        while let Some((ts, h, counted)) = self.baro_q.pop_due(t) {
+            if ts <= self.nav_start_ns {
+                continue;
+            }
+            self.count_health = !counted;
+            self.fuse_baro(ts, h);
+            self.baro_done.insert_flagged(ts, h, true);
+        }
+        self.count_health = true;
+    }
+}

@@ -1,0 +1,62 @@
+//! Star-tracker attitude updates (paper 000, [`crate::ekf::star_attitude`]) and the cached
+//! celestial transformation they need.
+
+use super::*;
+
+/// GCRS → ITRS for the star tracker with the expensive part cached.
+///
+/// `C_e_i = W(x_p, y_p, s') · R3(ERA) · C_cirs_gcrs` ([`crate::celestial::c_e_i`], IAU
+/// 2006/2000A, ~1 400 sin/cos pairs). Only `C_cirs_gcrs` (precession–nutation) is cached; it
+/// is recomputed when the sample is more than [`CelestialCache::REFRESH_NS`] from the cached
+/// epoch. Its largest rates are precession, 50.3″/yr ≈ 1.6·10⁻⁶ ″/s, and the short-period
+/// nutation terms (e.g. 0.23″ at 13.66 d: 2π·0.23″/13.66 d ≈ 1.2·10⁻⁶ ″/s), so over 60 s the
+/// cached matrix is off by < 0.2 mas — four orders below star-tracker noise (arcseconds). The
+/// Earth rotation angle and polar motion are evaluated exactly at every call.
+#[derive(Debug, Clone, Copy, Default)]
+pub(super) struct CelestialCache {
+    pub(super) epoch_ns: Option<i64>,
+    pub(super) c_cirs_gcrs: Matrix3<f64>,
+}
+
+impl CelestialCache {
+    /// Largest distance between a sample and the cached precession–nutation epoch, ns.
+    const REFRESH_NS: i64 = 60_000_000_000;
+
+    pub(super) fn c_e_i(&mut self, t: GpsTime, eop: &EarthOrientation) -> Matrix3<f64> {
+        use crate::celestial::{NutationModel, c_cirs_gcrs, era, polar_motion_matrix};
+        if self
+            .epoch_ns
+            .is_none_or(|e| (t.ns - e).abs() > Self::REFRESH_NS)
+        {
+            self.c_cirs_gcrs = c_cirs_gcrs(t, NutationModel::Iau2000A);
+            self.epoch_ns = Some(t.ns);
+        }
+        let (s, c) = era(t, eop.dut1_s).sin_cos();
+        let r3 = Matrix3::new(c, s, 0.0, -s, c, 0.0, 0.0, 0.0, 1.0);
+        let sp = crate::celestial::tio_locator_sp00(t.tt_centuries());
+        polar_motion_matrix(eop.xp_rad, eop.yp_rad, sp) * r3 * self.c_cirs_gcrs
+    }
+}
+
+impl Navigator {
+    pub(super) fn fuse_star(&mut self, ts: i64, obs: &StarObs) {
+        let id = sid(SensorId::StarTracker);
+        if !self.config.updates.star_tracker {
+            return;
+        }
+        let c_e_i = self.celestial.c_e_i(GpsTime { ns: ts }, &self.config.eop);
+        let q = quat_from_wire(&obs.q);
+        let m = ekf::star_attitude(
+            &self.nav,
+            &q,
+            &crate::frames::Rotation::from_dcm_unchecked(c_e_i),
+            &crate::frames::Rotation::from_dcm_unchecked(self.c_s_b),
+            &self.ekf.kappa_rad,
+            obs.sigma_cross,
+            obs.sigma_roll,
+        );
+        if self.run_update(Some(id), &m) {
+            self.mark_fused(id, ts);
+        }
+    }
+}

@@ -1,0 +1,603 @@
+//! Navigator tests on a synthetic static site ([`StaticSim`]).
+
+use super::*;
+use crate::strapdown::stationary_increment;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, Normal};
+
+const T0: i64 = 1_400_000_000_000_000_000;
+
+/// Synthetic static site: IMU increments from fusion::earth plus bias and white noise at
+/// the configured navigation-grade densities, GNSS fixes with white noise.
+pub struct StaticSim {
+    ell: Ellipsoid,
+    r_e: Vector3<f64>,
+    q_e_b: UnitQuaternion<f64>,
+    b_g: Vector3<f64>,
+    b_a: Vector3<f64>,
+    dt: f64,
+    k: i64,
+    rng: ChaCha8Rng,
+    n_g: Normal<f64>,
+    n_a: Normal<f64>,
+    gnss_sigma: f64,
+    imu_seq: u64,
+    gnss_seq: u64,
+}
+
+impl StaticSim {
+    pub fn new(seed: u64, rate_hz: f64) -> Self {
+        let ell = WGS84;
+        let g = Geodetic {
+            lat_rad: 55.655 * DEG,
+            lon_rad: 37.534 * DEG,
+            height_m: 180.0,
+        };
+        let q_n_b = crate::attitude::q_n_b_from_rpy(0.01, -0.02, 0.7);
+        let dt = 1.0 / rate_hz;
+        let spec = ImuSpec::default();
+        let pn = spec.process_noise();
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let unit = Normal::new(0.0, 1.0).unwrap();
+        let mut rv = |s: f64| {
+            Vector3::new(
+                unit.sample(&mut rng) * s,
+                unit.sample(&mut rng) * s,
+                unit.sample(&mut rng) * s,
+            )
+        };
+        let b_g = rv(spec.gyro_bias_rad_s());
+        let b_a = rv(spec.accel_bias_m_s2());
+        Self {
+            r_e: earth::geodetic_to_ecef(&ell, &g),
+            q_e_b: q_e_n(g.lat_rad, g.lon_rad) * q_n_b,
+            ell,
+            b_g,
+            b_a,
+            dt,
+            k: 0,
+            rng,
+            n_g: Normal::new(0.0, pn.arw_rad_sqrt_s * dt.sqrt()).unwrap(),
+            n_a: Normal::new(0.0, pn.vrw_m_s_sqrt_s * dt.sqrt()).unwrap(),
+            gnss_sigma: 2.0,
+            imu_seq: 0,
+            gnss_seq: 0,
+        }
+    }
+    fn time_ns(&self) -> i64 {
+        T0 + (self.k as f64 * self.dt * 1e9).round() as i64
+    }
+    pub fn next_imu(&mut self) -> ImuSample {
+        self.k += 1;
+        self.imu_seq += 1;
+        let inc =
+            stationary_increment(&self.ell, GravityModel::J2, &self.r_e, &self.q_e_b, self.dt);
+        let mut s = ImuSample::default();
+        s.header.time_ns = self.time_ns();
+        s.header.seq = self.imu_seq;
+        s.header.send_mono_ns = 42 + self.k as u64;
+        s.dt_s = self.dt;
+        for i in 0..3 {
+            s.delta_angle_rad[i] =
+                inc.delta_angle_rad[i] + self.b_g[i] * self.dt + self.n_g.sample(&mut self.rng);
+            s.delta_velocity_m_s[i] =
+                inc.delta_velocity_m_s[i] + self.b_a[i] * self.dt + self.n_a.sample(&mut self.rng);
+        }
+        s
+    }
+    pub fn gnss(&mut self) -> GnssSample {
+        self.gnss_seq += 1;
+        let n = Normal::new(0.0, self.gnss_sigma).unwrap();
+        let nv = Normal::new(0.0, 0.02).unwrap();
+        let mut g = GnssSample::default();
+        g.header.time_ns = self.time_ns();
+        g.header.seq = self.gnss_seq;
+        g.fix_valid = 1;
+        g.n_satellites = 8;
+        for i in 0..3 {
+            g.pos_ecef_m[i] = self.r_e[i] + n.sample(&mut self.rng);
+            g.vel_ecef_m_s[i] = nv.sample(&mut self.rng);
+            g.pos_cov_ecef_m2[4 * i] = self.gnss_sigma.powi(2);
+            g.vel_cov_ecef_m2_s2[4 * i] = 0.02f64.powi(2);
+        }
+        g
+    }
+}
+
+fn quick_config() -> NavigatorConfig {
+    NavigatorConfig {
+        alignment_s: 60.0,
+        ..NavigatorConfig::default()
+    }
+}
+
+/// Run a static scenario: IMU at `rate` Hz, GNSS at 1 Hz, for `seconds` in total.
+/// Returns the navigator and the simulator.
+fn run_static(seed: u64, rate: f64, seconds: f64, cfg: NavigatorConfig) -> (Navigator, StaticSim) {
+    let mut nav = Navigator::new(cfg).unwrap();
+    let mut sim = StaticSim::new(seed, rate);
+    let per_s = rate.round() as i64;
+    let steps = (seconds * rate).round() as i64;
+    for k in 1..=steps {
+        let imu = sim.next_imu();
+        if k % per_s == 0 {
+            // GNSS sample arrives just after the IMU sample of the same time.
+            nav.push_imu(&imu).unwrap();
+            let g = sim.gnss();
+            nav.push_gnss(&g).unwrap();
+        } else {
+            nav.push_imu(&imu).unwrap();
+        }
+    }
+    (nav, sim)
+}
+
+fn pos_error_and_nees(nav: &Navigator, sim: &StaticSim) -> (Vector3<f64>, f64) {
+    let e = nav.nav_state().r_e - sim.r_e;
+    let p: Matrix3<f64> = nav
+        .covariance()
+        .fixed_view::<3, 3>(idx::POS, idx::POS)
+        .into_owned();
+    let nees = e.dot(&(p.try_inverse().unwrap() * e));
+    (e, nees)
+}
+
+#[test]
+fn filter_toml_is_the_default_and_validates() {
+    let text = include_str!("../../../../config/filter.toml");
+    let cfg: NavigatorConfig = toml::from_str(text).unwrap();
+    assert_eq!(cfg, NavigatorConfig::default());
+    cfg.validate().unwrap();
+    let bad: Result<NavigatorConfig, _> = toml::from_str("alignment_s = 1.0\nbogus = 3\n");
+    assert!(bad.unwrap_err().to_string().contains("bogus"));
+    let mut c = NavigatorConfig::default();
+    c.aiding.zupt_sigma_m_s = -1.0;
+    let e = c.validate().unwrap_err().to_string();
+    assert!(e.contains("filter.aiding.zupt_sigma_m_s"), "{e}");
+    c = NavigatorConfig::default();
+    c.gate_probability = f64::NAN;
+    assert!(
+        c.validate()
+            .unwrap_err()
+            .to_string()
+            .contains("gate_probability")
+    );
+}
+
+#[test]
+fn cached_celestial_matrix_matches_full_model() {
+    // Within the refresh interval the cached GCRS → ITRS differs from the full IAU
+    // 2006/2000A matrix by < 0.2 mas (bound derived in CelestialCache's docs).
+    let eop = EarthOrientation {
+        dut1_s: 0.1,
+        xp_rad: 1e-6,
+        yp_rad: 2e-6,
+    };
+    let mut cache = CelestialCache::default();
+    let mas = 1e-3 / 3600.0 * DEG;
+    for k in 0..=8 {
+        let t = GpsTime {
+            ns: T0 + k * 15_000_000_000,
+        };
+        let full = crate::celestial::c_e_i(t, &eop);
+        let cached = cache.c_e_i(t, &eop);
+        let d = crate::celestial::dcm_angle_between(&full, &cached);
+        assert!(d < 0.2 * mas, "k {k}: {} mas", d / mas);
+    }
+    assert!(cache.epoch_ns.is_some_and(|e| e > T0));
+}
+
+#[test]
+fn aligns_then_navigates_with_gnss() {
+    let (nav, sim) = run_static(1, 100.0, 120.0, quick_config());
+    assert!(nav.is_navigating());
+    assert_eq!(nav.mode(), NavMode::GnssInertial as u32);
+    let h = nav.health();
+    let g = &h[SensorId::Gnss as usize];
+    assert_eq!(g.received, 120);
+    assert!(g.fused >= 55, "{g:?}");
+    assert_eq!(g.rejected_invalid, 0);
+    let (e, _) = pos_error_and_nees(&nav, &sim);
+    assert!(e.norm() < 3.0, "position error {e}");
+    // Heading from gyrocompassing + filter within a few tenths of a degree.
+    let q_n_b = nav.nav_state().q_n_b(&WGS84);
+    let rpy = rpy_from_q_n_b(&q_n_b);
+    assert!((rpy.z - 0.7).abs() < 0.2 * DEG, "heading {}", rpy.z / DEG);
+    assert!((rpy.x - 0.01).abs() < 0.02 * DEG);
+    assert!((rpy.y + 0.02).abs() < 0.02 * DEG);
+}
+
+#[test]
+fn static_gnss_run_averages_position_and_is_consistent() {
+    // Monte Carlo over independent seeds: position error at the end of a static run with
+    // 1 Hz GNSS (σ = 2 m) after N fixes is of order σ/√N, and the position NEES summed over
+    // the runs lies inside the two-sided 99.9 % chi-square bounds.
+    let runs = 6;
+    let mut nees_sum = 0.0;
+    let mut err_rms = 0.0;
+    let seconds = 360.0;
+    let n_fixes = seconds - 60.0;
+    for seed in 0..runs {
+        let (nav, sim) = run_static(100 + seed, 100.0, seconds, quick_config());
+        let (e, nees) = pos_error_and_nees(&nav, &sim);
+        nees_sum += nees;
+        err_rms += e.norm_squared();
+        let sigma_ned = nav
+            .covariance()
+            .fixed_view::<3, 3>(0, 0)
+            .diagonal()
+            .map(f64::sqrt);
+        eprintln!(
+            "seed {seed}: |e| = {:.3} m, NEES = {nees:.2}, σ = {sigma_ned:?}",
+            e.norm()
+        );
+    }
+    let err_rms = (err_rms / runs as f64 / 3.0).sqrt();
+    let dof = 3 * runs as u32;
+    let lo = ekf::chi2_quantile(dof, 0.0005);
+    let hi = ekf::chi2_quantile(dof, 0.9995);
+    eprintln!(
+        "per-axis RMS error {err_rms:.3} m (σ/√N = {:.3} m); NEES sum {nees_sum:.2} in [{lo:.2}, {hi:.2}]",
+        2.0 / n_fixes.sqrt()
+    );
+    assert!(err_rms < 5.0 * 2.0 / n_fixes.sqrt(), "RMS {err_rms}");
+    assert!(
+        nees_sum > lo && nees_sum < hi,
+        "NEES {nees_sum} outside [{lo}, {hi}]"
+    );
+}
+
+#[test]
+fn outlier_is_gated_and_counted() {
+    let (mut nav, mut sim) = run_static(7, 100.0, 80.0, quick_config());
+    let before = nav.nav_state().r_e;
+    let imu = sim.next_imu();
+    nav.push_imu(&imu).unwrap();
+    let mut g = sim.gnss();
+    g.pos_ecef_m[0] += 300.0;
+    nav.push_gnss(&g).unwrap();
+    let imu = sim.next_imu();
+    nav.push_imu(&imu).unwrap();
+    let h = nav.health()[SensorId::Gnss as usize];
+    assert!(h.rejected_gate >= 1, "{h:?}");
+    assert!(h.last_nis > ekf::chi2_quantile(3, 0.999));
+    assert!((nav.nav_state().r_e - before).norm() < 0.5);
+}
+
+#[test]
+fn invalid_inputs_are_rejected_without_touching_the_state() {
+    let (mut nav, mut sim) = run_static(9, 100.0, 65.0, quick_config());
+    let state = *nav.nav_state();
+    let p = *nav.covariance();
+    let mut imu = sim.next_imu();
+    let good = imu;
+    imu.delta_velocity_m_s[1] = f64::NAN;
+    assert!(nav.push_imu(&imu).is_err());
+    imu = good;
+    imu.dt_s = f64::INFINITY;
+    assert!(nav.push_imu(&imu).is_err());
+    imu = good;
+    imu.delta_angle_rad[0] = 1.0; // 100 rad/s
+    assert!(nav.push_imu(&imu).is_err());
+    assert_eq!(*nav.nav_state(), state);
+    assert_eq!(*nav.covariance(), p);
+    assert_eq!(nav.health()[SensorId::Imu as usize].rejected_invalid, 3);
+    // The good sample still goes through; then its duplicate and an older one do not.
+    nav.push_imu(&good).unwrap();
+    assert!(nav.push_imu(&good).is_err());
+    let mut older = good;
+    older.header.seq += 1;
+    older.header.time_ns -= 1;
+    assert!(matches!(
+        nav.push_imu(&older),
+        Err(Rejection {
+            reason: RejectReason::TimeNotIncreasing { .. },
+            ..
+        })
+    ));
+    assert_eq!(nav.health()[SensorId::Imu as usize].rejected_invalid, 5);
+    // GNSS with NaN, star tracker with a non-unit quaternion, baro with absurd pressure.
+    let mut g = sim.gnss();
+    g.pos_ecef_m[2] = f64::NAN;
+    assert!(nav.push_gnss(&g).is_err());
+    let mut st = StarTrackerSample::default();
+    st.header.time_ns = good.header.time_ns;
+    st.valid = 1;
+    st.q_sensor_icrf = [2.0, 0.0, 0.0, 0.0];
+    st.sigma_cross_rad = 1e-5;
+    st.sigma_roll_rad = 1e-4;
+    assert!(nav.push_star_tracker(&st).is_err());
+    let mut b = BaroSample::default();
+    b.header.time_ns = good.header.time_ns;
+    b.pressure_pa = f64::INFINITY;
+    assert!(nav.push_baro(&b).is_err());
+    let mut o = OdometerSample::default();
+    o.header.time_ns = good.header.time_ns;
+    o.dt_s = 0.01;
+    o.speed_m_s = f64::NAN;
+    assert!(nav.push_odometer(&o).is_err());
+    let h = nav.health();
+    for s in [
+        SensorId::Gnss,
+        SensorId::StarTracker,
+        SensorId::Baro,
+        SensorId::Odometer,
+    ] {
+        assert_eq!(h[s as usize].rejected_invalid, 1, "{:?}", s);
+    }
+    // Nothing of it reached the filter.
+    let next = sim.next_imu();
+    let sol = nav.push_imu(&next).unwrap().unwrap();
+    assert!(sol.pos_sigma_ned_m.iter().all(|s| s.is_finite()));
+    assert!((nav.nav_state().r_e - sim.r_e).norm() < 5.0);
+}
+
+#[test]
+fn late_gnss_sample_gives_the_in_time_update() {
+    // Two navigators see the same static-site stream (IMU 100 Hz, baro 10 Hz, GNSS 1 Hz).
+    // A gets each GNSS fix before the IMU sample of its time (in time); B gets the fix of
+    // t = 75 s only 0.3 s later, after 30 more IMU samples and 3 baro updates. B must
+    // rewind to its checkpoint before 75 s, re-fuse the baro samples and replay the IMU:
+    // the same floating-point operations in the same order, so the results agree to
+    // rounding — asserted at 1e-9 m / 1e-12 m/s / 1e-12 rad and 1e-9 relative for the
+    // covariance (the ops are identical; the bound only allows for a different
+    // summation order should the compiler choose one).
+    let cfg = quick_config();
+    let mut a = Navigator::new(cfg.clone()).unwrap();
+    let mut b = Navigator::new(cfg).unwrap();
+    let mut sim = StaticSim::new(31, 100.0);
+    let mut held: Option<(i64, GnssSample)> = None;
+    let late_at = T0 + 75_000_000_000;
+    let mut delayed = 0;
+    for k in 1..=(80 * 100) {
+        let imu = sim.next_imu();
+        let t = imu.header.time_ns;
+        if k % 10 == 0 {
+            let mut baro = BaroSample::default();
+            baro.header.time_ns = t;
+            baro.header.seq = k as u64;
+            baro.pressure_pa = crate::atmosphere::isa_pressure_pa(181.0);
+            baro.temperature_c = 15.0;
+            a.push_baro(&baro).unwrap();
+            b.push_baro(&baro).unwrap();
+        }
+        if k % 100 == 0 {
+            let g = sim.gnss();
+            a.push_gnss(&g).unwrap();
+            if t == late_at {
+                held = Some((t + 300_000_000, g));
+            } else {
+                b.push_gnss(&g).unwrap();
+            }
+        }
+        if let Some((when, g)) = held
+            && t >= when
+        {
+            assert!(
+                g.header.time_ns < b.time_ns(),
+                "the sample must really be late"
+            );
+            b.push_gnss(&g).unwrap();
+            held = None;
+            delayed += 1;
+        }
+        a.push_imu(&imu).unwrap();
+        b.push_imu(&imu).unwrap();
+    }
+    assert_eq!(delayed, 1);
+    let (na, nb) = (a.nav_state(), b.nav_state());
+    assert!(
+        (na.r_e - nb.r_e).norm() < 1e-9,
+        "{}",
+        (na.r_e - nb.r_e).norm()
+    );
+    assert!((na.v_e - nb.v_e).norm() < 1e-12);
+    assert!(na.q_e_b.angle_to(&nb.q_e_b) < 1e-12);
+    let dp = (a.covariance() - b.covariance()).abs().max() / a.covariance().abs().max();
+    assert!(dp < 1e-9, "covariance differs by {dp}");
+    // Every sample counted once, the late one included.
+    for s in [SensorId::Gnss, SensorId::Baro] {
+        let (ha, hb) = (a.health()[s as usize], b.health()[s as usize]);
+        assert_eq!(ha.fused, hb.fused, "{s:?}");
+        assert_eq!(ha.nis_count, hb.nis_count, "{s:?}");
+        assert_eq!(hb.dropped_late, 0);
+    }
+    // And the late fix did matter: without it the state differs.
+    let mut c = Navigator::new(quick_config()).unwrap();
+    let mut sim = StaticSim::new(31, 100.0);
+    for k in 1..=(80 * 100) {
+        let imu = sim.next_imu();
+        if k % 10 == 0 {
+            let mut baro = BaroSample::default();
+            baro.header.time_ns = imu.header.time_ns;
+            baro.header.seq = k as u64;
+            baro.pressure_pa = crate::atmosphere::isa_pressure_pa(181.0);
+            baro.temperature_c = 15.0;
+            c.push_baro(&baro).unwrap();
+        }
+        if k % 100 == 0 {
+            let g = sim.gnss();
+            if imu.header.time_ns != late_at {
+                c.push_gnss(&g).unwrap();
+            }
+        }
+        c.push_imu(&imu).unwrap();
+    }
+    assert!((c.nav_state().r_e - na.r_e).norm() > 1e-4);
+}
+
+/// Two navigators on the same 1 kHz static-site stream (baro 10 Hz, GNSS 1 Hz); B gets the
+/// GNSS fixes of t = 75 s and 76 s only at 76.5 s, i.e. 1.5 s and 0.5 s late (in order, so
+/// that the sensor's time still increases; never, with `deliver` false). Returns (A, B,
+/// the number of late pushes); boxed, a navigator holds its queues inline.
+fn late_fix_at_1_khz(cfg: NavigatorConfig, deliver: bool) -> (Box<Navigator>, Box<Navigator>, u32) {
+    let mut a = Box::new(Navigator::new(cfg.clone()).unwrap());
+    let mut b = Box::new(Navigator::new(cfg).unwrap());
+    let mut sim = StaticSim::new(33, 1000.0);
+    let mut held = Vec::new();
+    let late_at = T0 + 75_000_000_000;
+    let release = late_at + 1_500_000_000;
+    let mut delayed = 0;
+    for k in 1..=(78 * 1000) {
+        let imu = sim.next_imu();
+        let t = imu.header.time_ns;
+        if k % 100 == 0 {
+            let mut baro = BaroSample::default();
+            baro.header.time_ns = t;
+            baro.header.seq = k as u64;
+            baro.pressure_pa = crate::atmosphere::isa_pressure_pa(181.0);
+            baro.temperature_c = 15.0;
+            a.push_baro(&baro).unwrap();
+            b.push_baro(&baro).unwrap();
+        }
+        if k % 1000 == 0 {
+            let g = sim.gnss();
+            a.push_gnss(&g).unwrap();
+            if (late_at..release).contains(&t) {
+                held.push(g);
+            } else {
+                b.push_gnss(&g).unwrap();
+            }
+        }
+        if t == release && deliver {
+            assert_eq!(
+                held[0].header.time_ns + 1_500_000_000,
+                b.time_ns() + 1_000_000
+            );
+            for g in held.drain(..) {
+                b.push(Input::Gnss(&g)).unwrap();
+                delayed += 1;
+            }
+        }
+        a.push(Input::Imu(&imu)).unwrap();
+        b.push(Input::Imu(&imu)).unwrap();
+    }
+    (a, b, delayed)
+}
+
+#[test]
+fn late_gnss_sample_at_1_khz_gives_the_in_time_update() {
+    // As `late_gnss_sample_gives_the_in_time_update`, at 1 kHz with the longest window
+    // (2 s) and a fix 1.5 s late: the IMU log must hold 1.6 s of steps (1 600 entries).
+    let cfg = NavigatorConfig {
+        alignment_s: 60.0,
+        buffer_window_s: 2.0,
+        ..NavigatorConfig::default()
+    };
+    let (a, b, delayed) = late_fix_at_1_khz(cfg, true);
+    assert_eq!(delayed, 2);
+    assert_eq!(b.diagnostics().replays_impossible, 0);
+    let (na, nb) = (a.nav_state(), b.nav_state());
+    let dr = (na.r_e - nb.r_e).norm();
+    assert!(dr < 1e-9, "late fix changes the position by {dr} m");
+    assert!((na.v_e - nb.v_e).norm() < 1e-12);
+    assert!(na.q_e_b.angle_to(&nb.q_e_b) < 1e-12);
+    let dp = (a.covariance() - b.covariance()).abs().max() / a.covariance().abs().max();
+    assert!(dp < 1e-9, "covariance differs by {dp}");
+    for s in [SensorId::Gnss, SensorId::Baro] {
+        let (ha, hb) = (a.health()[s as usize], b.health()[s as usize]);
+        assert_eq!(ha.fused, hb.fused, "{s:?}");
+        assert_eq!(hb.dropped_late, 0, "{s:?}");
+    }
+}
+
+#[test]
+fn a_replay_the_imu_log_cannot_hold_is_counted_and_the_late_samples_dropped() {
+    // The log sized for 100 Hz (223 steps) holds 0.22 s of a 1 kHz IMU: the fixes 1.5 s
+    // and 0.5 s late cannot be replayed at their epoch. They must be dropped and counted
+    // (not fused at the current epoch, the old silent behaviour): B ends exactly where a
+    // navigator that never received them ends.
+    let cfg = NavigatorConfig {
+        alignment_s: 60.0,
+        buffer_window_s: 2.0,
+        max_imu_rate_hz: 100.0,
+        ..NavigatorConfig::default()
+    };
+    assert_eq!(cfg.imu_log_capacity(), 223);
+    let (a, b, delayed) = late_fix_at_1_khz(cfg.clone(), true);
+    let (_, c, _) = late_fix_at_1_khz(cfg, false);
+    assert_eq!(delayed, 2);
+    assert_eq!(b.diagnostics().replays_impossible, 1);
+    let (hb, hc) = (
+        b.health()[sid(SensorId::Gnss)],
+        c.health()[sid(SensorId::Gnss)],
+    );
+    assert_eq!(hb.dropped_late, 2);
+    assert_eq!(hb.fused, hc.fused);
+    assert_eq!(hb.fused + 2, a.health()[sid(SensorId::Gnss)].fused);
+    assert!((b.nav_state().r_e - c.nav_state().r_e).norm() < 1e-9);
+    assert_eq!(b.covariance(), c.covariance());
+}
+
+#[test]
+fn an_imu_rate_the_log_cannot_hold_is_a_configuration_error() {
+    let mut cfg = NavigatorConfig {
+        buffer_window_s: 2.0,
+        max_imu_rate_hz: 2000.0,
+        ..NavigatorConfig::default()
+    };
+    assert_eq!(cfg.imu_log_capacity(), 4402);
+    cfg.validate().unwrap();
+    cfg.max_imu_rate_hz = 40_000.0; // 88 000 steps
+    let e = cfg.validate().unwrap_err();
+    assert!(e.0.starts_with("filter.max_imu_rate_hz "), "{e}");
+    cfg.max_imu_rate_hz = f64::NAN;
+    assert!(Navigator::new(cfg).is_err());
+}
+
+#[test]
+fn all_aiding_lost_is_free_inertial_with_growing_covariance() {
+    // GNSS for 90 s, then nothing (no stars, baro or odometer in this sim; ZUPT off):
+    // once the GNSS deadline (2 s) has passed the mode is free inertial and the position
+    // covariance grows. Not monotonically per component — the Schuler loop trades
+    // position variance for velocity variance (cos² νt) — but over 10 min the unstable
+    // vertical channel alone (time constant √(R/2g) ≈ 570 s) and the horizontal drift make
+    // it grow several-fold; assert at least 2×.
+    let mut cfg = quick_config();
+    cfg.updates.zupt = false;
+    let (mut nav, mut sim) = run_static(41, 100.0, 90.0, cfg);
+    assert_eq!(nav.mode(), NavMode::GnssInertial as u32);
+    let trace = |n: &Navigator| {
+        n.covariance()
+            .fixed_view::<3, 3>(idx::POS, idx::POS)
+            .trace()
+    };
+    let at_loss = trace(&nav);
+    for _ in 0..(600 * 100) {
+        let imu = sim.next_imu();
+        nav.push_imu(&imu).unwrap();
+    }
+    assert_eq!(nav.mode(), NavMode::FreeInertial as u32);
+    let end = trace(&nav);
+    eprintln!("position variance trace {at_loss:.2} → {end:.2} m²");
+    assert!(end > 2.0 * at_loss && end.is_finite());
+}
+
+#[test]
+fn late_samples_are_dropped_and_solution_is_complete() {
+    let (mut nav, mut sim) = run_static(11, 100.0, 70.0, quick_config());
+    let stale = sim.gnss();
+    for _ in 0..200 {
+        let imu = sim.next_imu();
+        nav.push_imu(&imu).unwrap();
+    }
+    let mut stale = stale;
+    stale.header.seq = 1_000;
+    stale.header.time_ns = nav.time_ns() - 1_500_000_000;
+    // Time still increases for the sensor (the previous fix was even older).
+    let before = nav.health()[SensorId::Gnss as usize].dropped_late;
+    nav.push_gnss(&stale).unwrap_or(());
+    let imu = sim.next_imu();
+    let sol = nav.push_imu(&imu).unwrap().unwrap();
+    let h = nav.health()[SensorId::Gnss as usize];
+    assert!(h.dropped_late > before || h.rejected_invalid > 0, "{h:?}");
+    assert_eq!(sol.header.time_ns, imu.header.time_ns);
+    assert_eq!(sol.imu_send_mono_ns, imu.header.send_mono_ns);
+    assert!((sol.lat_rad - 55.655 * DEG).abs() < 1e-5);
+    assert!(sol.q_ned_body.iter().all(|x| x.is_finite()));
+    assert!(sol.att_sigma_ned_rad.iter().all(|x| *x > 0.0 && *x < 0.01));
+    assert!((sol.roll_pitch_heading_rad[2] - 0.7).abs() < 0.01);
+}
+
+mod baro;
