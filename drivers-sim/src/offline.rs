@@ -259,9 +259,9 @@ pub struct RunPoint {
     pub t_s: f64,
     /// Navigation mode (`msgs::NavMode` as u32).
     pub mode: u32,
-    /// Position error, ECEF, m.
+    /// Position error (truth − estimate), ECEF, m.
     pub pos_err_e_m: Vector3<f64>,
-    /// Velocity error, ECEF, m/s.
+    /// Velocity error (truth − estimate), ECEF, m/s.
     pub vel_err_e_m_s: Vector3<f64>,
     /// Attitude error ψ (rotation vector of `C_e_b,true · Ĉ_e_bᵀ`), ECEF, rad.
     pub att_err_e_rad: Vector3<f64>,

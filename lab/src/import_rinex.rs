@@ -31,6 +31,7 @@ use fusion::point_positioning::{Ionosphere, PointPositioningSettings, PointSolut
 use msgs::{GnssSample, GnssSatellite, Header, MAX_SATELLITES};
 use serde::Serialize;
 use sextant_rinex::measurements::{GpsCodes, MissingCode, epoch_measurements};
+use sextant_rinex::{NavigationFile, ObservationFile};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -158,27 +159,98 @@ pub fn sample_of(sol: &PointSolution, t_rx: fusion::time::GpsTime, seq: u64) -> 
     s
 }
 
-/// Import the files of `opts` into a recording.
-pub fn import_rinex(opts: &ImportOptions) -> Result<ImportSummary, ImportError> {
-    let obs = sextant_rinex::read_observation(&opts.observation)?;
-    let nav = sextant_rinex::read_navigation(&opts.navigation)?;
-    let l2 = matches!(opts.mode, ImportMode::IonoFree).then_some("C2W");
-    let codes = GpsCodes::select(&obs, "C1C", l2).map_err(|source| ImportError::Code {
-        path: opts.observation.clone(),
+/// The GNSS samples of every epoch of `obs` (the fix and its satellites, see the module
+/// comment; an epoch that cannot be fixed gives an invalid sample without satellites), with the
+/// import's counters. `obs_path` and `nav_path` name the files in errors.
+pub fn epoch_samples(
+    obs: &ObservationFile,
+    nav: &NavigationFile,
+    mode: ImportMode,
+    elevation_mask_deg: f64,
+    obs_path: &Path,
+    nav_path: &Path,
+) -> Result<(Vec<GnssSample>, ImportSummary), ImportError> {
+    let l2 = matches!(mode, ImportMode::IonoFree).then_some("C2W");
+    let codes = GpsCodes::select(obs, "C1C", l2).map_err(|source| ImportError::Code {
+        path: obs_path.to_path_buf(),
         source,
     })?;
-    let ionosphere = match opts.mode {
+    let ionosphere = match mode {
         ImportMode::L1 => Ionosphere::Klobuchar(
             nav.klobuchar
-                .ok_or_else(|| ImportError::NoKlobuchar(opts.navigation.clone()))?,
+                .ok_or_else(|| ImportError::NoKlobuchar(nav_path.to_path_buf()))?,
         ),
         ImportMode::IonoFree => Ionosphere::IonoFree,
     };
     let settings = PointPositioningSettings {
-        elevation_mask_rad: opts.elevation_mask_deg.to_radians(),
+        elevation_mask_rad: elevation_mask_deg.to_radians(),
         ionosphere,
         ..Default::default()
     };
+    let mut summary = ImportSummary {
+        marker: obs.header.marker_name.clone(),
+        epochs: obs.epochs.len(),
+        ephemerides: nav.gps.len(),
+        ..Default::default()
+    };
+    let mut sats_total = 0usize;
+    let mut samples = Vec::with_capacity(obs.epochs.len());
+    for (seq, e) in obs.epochs.iter().enumerate() {
+        let meas = epoch_measurements(e, &codes);
+        let sample = match solve_epoch(e.time, &meas, &nav.gps, &settings) {
+            Ok(sol) => {
+                summary.fixed += 1;
+                sats_total += sol.n_used;
+                sample_of(&sol, e.time, seq as u64)
+            }
+            Err(err) => {
+                summary.failed += 1;
+                summary
+                    .first_failure
+                    .get_or_insert_with(|| format!("epoch {} ns: {err}", e.time.ns));
+                GnssSample {
+                    header: Header {
+                        time_ns: e.time.ns,
+                        seq: seq as u64,
+                        send_mono_ns: e.time.ns.max(0) as u64,
+                        ..Default::default()
+                    },
+                    ..Default::default()
+                }
+            }
+        };
+        samples.push(sample);
+    }
+    summary.mean_satellites = if summary.fixed > 0 {
+        sats_total as f64 / summary.fixed as f64
+    } else {
+        0.0
+    };
+    Ok((samples, summary))
+}
+
+/// The antenna reference point of the observation file's marker, ECEF m: the header's
+/// `APPROX POSITION XYZ` plus `ANTENNA: DELTA H` along the ellipsoid normal (what a code
+/// solution without an antenna phase-centre model estimates); `None` without a position.
+pub fn antenna_reference_point(obs: &ObservationFile) -> Option<nalgebra::Vector3<f64>> {
+    use fusion::earth::{self, WGS84};
+    let marker = nalgebra::Vector3::from(obs.header.approx_position_m?);
+    let g = earth::ecef_to_geodetic(&WGS84, &marker);
+    Some(marker + obs.header.antenna_delta_hen_m[0] * earth::up_e(g.lat_rad, g.lon_rad))
+}
+
+/// Import the files of `opts` into a recording.
+pub fn import_rinex(opts: &ImportOptions) -> Result<ImportSummary, ImportError> {
+    let obs = sextant_rinex::read_observation(&opts.observation)?;
+    let nav = sextant_rinex::read_navigation(&opts.navigation)?;
+    let (samples, mut summary) = epoch_samples(
+        &obs,
+        &nav,
+        opts.mode,
+        opts.elevation_mask_deg,
+        &opts.observation,
+        &opts.navigation,
+    )?;
     let filter_toml = toml::to_string(&NavigatorConfig::default())
         .map_err(|e| ImportError::Config(e.to_string()))?;
     let mut config_meta = BTreeMap::new();
@@ -210,45 +282,10 @@ pub fn import_rinex(opts: &ImportOptions) -> Result<ImportSummary, ImportError> 
             ..Default::default()
         },
     )?;
-    let mut summary = ImportSummary {
-        marker: obs.header.marker_name.clone(),
-        epochs: obs.epochs.len(),
-        ephemerides: nav.gps.len(),
-        ..Default::default()
-    };
-    let mut sats_total = 0usize;
-    for (seq, e) in obs.epochs.iter().enumerate() {
-        let meas = epoch_measurements(e, &codes);
-        let sample = match solve_epoch(e.time, &meas, &nav.gps, &settings) {
-            Ok(sol) => {
-                summary.fixed += 1;
-                sats_total += sol.n_used;
-                sample_of(&sol, e.time, seq as u64)
-            }
-            Err(err) => {
-                summary.failed += 1;
-                summary
-                    .first_failure
-                    .get_or_insert_with(|| format!("epoch {} ns: {err}", e.time.ns));
-                GnssSample {
-                    header: Header {
-                        time_ns: e.time.ns,
-                        seq: seq as u64,
-                        send_mono_ns: e.time.ns.max(0) as u64,
-                        ..Default::default()
-                    },
-                    ..Default::default()
-                }
-            }
-        };
+    for sample in samples {
         let mono = sample.header.send_mono_ns;
         recorder.record_blocking(Record::Gnss(Box::new(sample)), mono);
     }
-    summary.mean_satellites = if summary.fixed > 0 {
-        sats_total as f64 / summary.fixed as f64
-    } else {
-        0.0
-    };
     let stats = recorder.finish()?;
     summary.written = stats.written;
     Ok(summary)

@@ -59,17 +59,20 @@ pub fn read_text(path: &Path) -> Result<String, FileError> {
         kind: e.kind(),
     };
     let raw = std::fs::read(path).map_err(io)?;
-    let bytes = if path
+    let gzip = path
         .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("gz"))
-    {
+        .is_some_and(|e| e.eq_ignore_ascii_case("gz"));
+    decode_text(&raw, gzip).map_err(io)
+}
+
+/// The text of a file's bytes (`gzip`: decompress first), as [`read_text`] reads it: for data
+/// held in memory, e.g. embedded in a binary.
+pub fn decode_text(raw: &[u8], gzip: bool) -> Result<String, std::io::Error> {
+    if gzip {
         let mut out = Vec::new();
-        flate2::read::MultiGzDecoder::new(&raw[..])
-            .read_to_end(&mut out)
-            .map_err(io)?;
-        out
+        flate2::read::MultiGzDecoder::new(raw).read_to_end(&mut out)?;
+        Ok(String::from_utf8_lossy(&out).into_owned())
     } else {
-        raw
-    };
-    Ok(String::from_utf8_lossy(&bytes).into_owned())
+        Ok(String::from_utf8_lossy(raw).into_owned())
+    }
 }

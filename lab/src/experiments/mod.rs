@@ -52,6 +52,7 @@ pub mod baseline_attitude;
 pub mod consistency;
 pub mod gnss_denied_astro;
 pub mod gravity;
+pub mod hybrid_esbc;
 pub mod inertial_budget;
 pub mod integrators;
 pub mod plot;
@@ -235,6 +236,7 @@ registry! {
     baseline_attitude::BaselineAttitude => BaselineAttitude,
     redundancy::Redundancy => Redundancy,
     inertial_budget::InertialBudget => InertialBudget,
+    hybrid_esbc::HybridEsbc => HybridEsbc,
 }
 
 fn unknown(name: &str) -> ExperimentError {
