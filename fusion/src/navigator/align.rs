@@ -68,7 +68,7 @@ impl Navigator {
         let s_head = s_head.max(self.config.initial.heading_sigma_min_deg * DEG);
         let q_e_n = q_e_n(geo.lat_rad, geo.lon_rad);
         let c_e_n = q_e_n.to_rotation_matrix().into_inner();
-        self.nav = NavState {
+        self.core.nav = NavState {
             r_e,
             v_e: Vector3::zeros(),
             q_e_b: q_e_n * a.q_n_b,
@@ -128,10 +128,10 @@ impl Navigator {
             p0[(idx::SA + k, idx::SA + k)] = sa * sa;
             p0[(idx::KAPPA + k, idx::KAPPA + k)] = sk * sk;
         }
-        self.ekf = ErrorStateEkf::new(p0, noise, self.active_states(false));
-        self.clock_initialized = false;
+        self.core.ekf = ErrorStateEkf::new(p0, noise, self.active_states(false));
+        self.core.clock_initialized = false;
         self.initialize_from_ls(t);
-        self.strapdown = Strapdown::new(self.config.mechanization());
+        self.core.strapdown = Strapdown::new(self.config.mechanization());
         self.phase = Phase::Navigating;
         self.time_ns = t;
         self.imu_log.clear();
@@ -190,12 +190,12 @@ impl Navigator {
         }
         let mut active = self.active_states(true);
         active.clock = true;
-        self.ekf.set_active(active);
+        self.core.ekf.set_active(active);
         let dt = (t - t_ls) as f64 * 1e-9;
         let qb = self.config.aiding.clock_bias_psd_m2_s;
         let qd = self.config.aiding.clock_drift_psd_m2_s3;
         let var_d = vel.var_clock_drift_m2_s2;
-        let p = &mut self.ekf.p;
+        let p = &mut self.core.ekf.p;
         for i in [idx::CLK, idx::CLK_DRIFT] {
             p.row_mut(i).fill(0.0);
             p.column_mut(i).fill(0.0);
@@ -212,9 +212,9 @@ impl Navigator {
                 p[(idx::CLK, idx::POS + k)] = fix.position.cov_r_clock_m2[k];
             }
         }
-        self.ekf.clock_drift_m_s = vel.clock_drift_m_s;
-        self.ekf.clock_bias_m = fix.position.clock_bias_m + vel.clock_drift_m_s * dt;
-        self.clock_initialized = true;
+        self.core.ekf.clock_drift_m_s = vel.clock_drift_m_s;
+        self.core.ekf.clock_bias_m = fix.position.clock_bias_m + vel.clock_drift_m_s * dt;
+        self.core.clock_initialized = true;
     }
 
     /// The state groups to estimate, from the configuration (clock only once initialised).

@@ -10,19 +10,19 @@ impl Navigator {
             return;
         }
         let min_dt = (self.config.aiding.baro_min_interval_s * 1e9) as i64;
-        if let Some(last) = self.last_baro_fused
+        if let Some(last) = self.core.last_baro_fused
             && ts - last < min_dt
         {
             return;
         }
         let m = ekf::baro_height(
-            &self.nav,
+            &self.core.nav,
             &self.ell,
             height_m,
-            self.ekf.baro_bias_m,
+            self.core.ekf.baro_bias_m,
             self.config.aiding.baro_sigma_m,
         );
-        self.last_baro_fused = Some(ts);
+        self.core.last_baro_fused = Some(ts);
         if self.run_update(Some(id), &m) {
             self.mark_fused(id, ts);
         }

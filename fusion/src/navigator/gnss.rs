@@ -16,14 +16,14 @@ impl Navigator {
         {
             return None;
         }
-        let obs = ba::PhaseObservations::from_sample(s, &self.nav.r_e).ok()?;
+        let obs = ba::PhaseObservations::from_sample(s, &self.core.nav.r_e).ok()?;
         let cfg = ba::BaselineConfig {
             baseline_length_m: s.baseline_length_m,
             wavelength_m: s.wavelength_m,
             sigma_phase_cycles: self.config.aiding.baseline_phase_sigma_cycles,
         };
-        let prior = self.nav.q_e_b.to_rotation_matrix().into_inner();
-        let sol = ba::solve(&obs, &cfg, &self.nav.r_e, Some(&prior)).ok()?;
+        let prior = self.core.nav.q_e_b.to_rotation_matrix().into_inner();
+        let sol = ba::solve(&obs, &cfg, &self.core.nav.r_e, Some(&prior)).ok()?;
         let finite = sol
             .c_e_b
             .iter()
@@ -37,7 +37,7 @@ impl Navigator {
         // First, before any update of this epoch: the least-squares cross-check.
         self.gnss_ls_cross_check(ts, obs);
         if let Some((c_e_b, cov)) = obs.attitude {
-            let m = ekf::gnss_baseline_attitude(&self.nav, &c_e_b, &cov);
+            let m = ekf::gnss_baseline_attitude(&self.core.nav, &c_e_b, &cov);
             if self.run_update(Some(id), &m) {
                 self.mark_fused(id, ts);
             }
@@ -55,12 +55,12 @@ impl Navigator {
         let mut fused = false;
         let mut nis = f64::NEG_INFINITY;
         if self.config.updates.gnss_position {
-            let m = ekf::gnss_position(&self.nav, &fix.pos, &fix.pos_cov);
+            let m = ekf::gnss_position(&self.core.nav, &fix.pos, &fix.pos_cov);
             fused |= self.run_update(Some(id), &m);
             nis = nis.max(self.health[id].last_nis);
         }
         if self.config.updates.gnss_velocity && fix.vel_valid {
-            let m = ekf::gnss_velocity(&self.nav, &fix.vel, &fix.vel_cov);
+            let m = ekf::gnss_velocity(&self.core.nav, &fix.vel, &fix.vel_cov);
             fused |= self.run_update(Some(id), &m);
             nis = nis.max(self.health[id].last_nis);
         }
@@ -81,7 +81,7 @@ impl Navigator {
         let id = sid(SensorId::Gnss);
         // The clock estimate is kept at the filter time; move it back to the sample's time.
         let back_s = (self.time_ns - ts) as f64 * 1e-9;
-        let (skip_pr, skip_rr) = if self.clock_initialized {
+        let (skip_pr, skip_rr) = if self.core.clock_initialized {
             (None, None)
         } else {
             self.initialize_clock(obs, back_s)
@@ -91,9 +91,9 @@ impl Navigator {
         let mut nis = f64::NEG_INFINITY;
         for (i, sat) in obs.sats.iter().take(obs.n_sats).enumerate() {
             if sat.has_pr && skip_pr != Some(i) {
-                let b = self.ekf.clock_bias_m - self.ekf.clock_drift_m_s * back_s;
+                let b = self.core.ekf.clock_bias_m - self.core.ekf.clock_drift_m_s * back_s;
                 let m = ekf::gnss_pseudorange(
-                    &self.nav,
+                    &self.core.nav,
                     &sat.pos,
                     sat.pseudorange_m,
                     b,
@@ -104,11 +104,11 @@ impl Navigator {
             }
             if sat.has_rr && self.config.updates.gnss_velocity && skip_rr != Some(i) {
                 let m = ekf::gnss_range_rate(
-                    &self.nav,
+                    &self.core.nav,
                     &sat.pos,
                     &sat.vel,
                     sat.range_rate_m_s,
-                    self.ekf.clock_drift_m_s,
+                    self.core.ekf.clock_drift_m_s,
                     sat.sigma_rr_m_s,
                 );
                 fused |= self.run_update(Some(id), &m);
@@ -153,17 +153,25 @@ impl Navigator {
         } else {
             None
         };
-        self.ekf.propagate_covariance(&self.ell, &self.nav.r_e);
+        self.core
+            .ekf
+            .propagate_covariance(&self.ell, &self.core.nav.r_e);
         let mut active = self.active_states(true);
         active.clock = true;
-        self.ekf.set_active(active);
+        self.core.ekf.set_active(active);
         let sk = &sats[k];
-        let m_b = ekf::gnss_pseudorange(&self.nav, &sk.pos, sk.pseudorange_m, 0.0, sk.sigma_pr_m);
+        let m_b = ekf::gnss_pseudorange(
+            &self.core.nav,
+            &sk.pos,
+            sk.pseudorange_m,
+            0.0,
+            sk.sigma_pr_m,
+        );
         let (d_hat, h_d, var_d) = match j {
             Some(j) => {
                 let sj = &sats[j];
                 let m_d = ekf::gnss_range_rate(
-                    &self.nav,
+                    &self.core.nav,
                     &sj.pos,
                     &sj.vel,
                     sj.range_rate_m_s,
@@ -187,10 +195,10 @@ impl Navigator {
             back_s * var_d,
             var_d,
         );
-        ekf::augment_covariance(&mut self.ekf.p, [idx::CLK, idx::CLK_DRIFT], &h, &r);
-        self.ekf.clock_drift_m_s = d_hat;
-        self.ekf.clock_bias_m = m_b.innovation[0] + d_hat * back_s;
-        self.clock_initialized = true;
+        ekf::augment_covariance(&mut self.core.ekf.p, [idx::CLK, idx::CLK_DRIFT], &h, &r);
+        self.core.ekf.clock_drift_m_s = d_hat;
+        self.core.ekf.clock_bias_m = m_b.innovation[0] + d_hat * back_s;
+        self.core.clock_initialized = true;
         (Some(k), j)
     }
 
@@ -256,17 +264,20 @@ impl Navigator {
     /// of disagreements is the operator's (or a supervisor's) signal to re-initialise.
     pub(super) fn gnss_ls_cross_check(&mut self, ts: i64, obs: &GnssObs) {
         let back_s = (self.time_ns - ts) as f64 * 1e-9;
-        let r_pred = self.nav.r_e - self.nav.v_e * back_s;
-        let b_guess = if self.clock_initialized {
-            self.ekf.clock_bias_m - self.ekf.clock_drift_m_s * back_s
+        let r_pred = self.core.nav.r_e - self.core.nav.v_e * back_s;
+        let b_guess = if self.core.clock_initialized {
+            self.core.ekf.clock_bias_m - self.core.ekf.clock_drift_m_s * back_s
         } else {
             0.0
         };
         let Some(fix) = self.ls_fix(obs, Some((r_pred, b_guess))) else {
             return;
         };
-        self.ekf.propagate_covariance(&self.ell, &self.nav.r_e);
+        self.core
+            .ekf
+            .propagate_covariance(&self.ell, &self.core.nav.r_e);
         let p_rr: Matrix3<f64> = self
+            .core
             .ekf
             .p
             .fixed_view::<3, 3>(idx::POS, idx::POS)

@@ -148,7 +148,7 @@ impl Navigator {
             return;
         }
         let g = (e.t - p) as f64 * 1e-9;
-        let c_e_b = self.nav.q_e_b.to_rotation_matrix().into_inner();
+        let c_e_b = self.core.nav.q_e_b.to_rotation_matrix().into_inner();
         let df = c_e_b * (e.dv / e.dt_s - prev.dv / prev.dt_s);
         let dw = c_e_b * (e.dth / e.dt_s - prev.dth / prev.dt_s);
         let mut v = nalgebra::SVector::<f64, 9>::zeros();
@@ -158,8 +158,8 @@ impl Navigator {
         v.fixed_rows_mut::<3>(idx::ATT).copy_from(&(dw * g));
         let mut add = v * v.transpose() / 3.0;
         let amp = (g * g / e.dt_s - g).max(0.0);
-        let sv2 = self.ekf.noise.vrw_m_s_sqrt_s.powi(2) * amp;
-        let sa2 = self.ekf.noise.arw_rad_sqrt_s.powi(2) * amp;
+        let sv2 = self.core.ekf.noise.vrw_m_s_sqrt_s.powi(2) * amp;
+        let sa2 = self.core.ekf.noise.arw_rad_sqrt_s.powi(2) * amp;
         for k in 0..3 {
             let (p, v, a) = (idx::POS + k, idx::VEL + k, idx::ATT + k);
             add[(v, v)] += sv2;
@@ -168,7 +168,7 @@ impl Navigator {
             add[(v, p)] += sv2 * 0.5 * g;
             add[(a, a)] += sa2;
         }
-        let mut blk = self.ekf.p.fixed_view_mut::<9, 9>(idx::POS, idx::POS);
+        let mut blk = self.core.ekf.p.fixed_view_mut::<9, 9>(idx::POS, idx::POS);
         blk += add;
     }
 }

@@ -110,6 +110,7 @@ mod baro;
 mod buffer;
 mod channels;
 mod config;
+mod core;
 mod gate;
 mod gnss;
 mod health;
@@ -123,6 +124,7 @@ mod star;
 mod update;
 mod zupt;
 
+use self::core::*;
 use buffer::*;
 pub use config::*;
 use gate::*;
@@ -133,7 +135,6 @@ use imu_time::*;
 use obs::*;
 use odometer::*;
 pub use output::ClockEstimate;
-use replay::*;
 use star::*;
 
 const DEG: f64 = std::f64::consts::PI / 180.0;
@@ -183,16 +184,14 @@ pub struct Navigator {
     phase: Phase,
     align: Accumulator,
     init_fix: Option<(Vector3<f64>, Matrix3<f64>)>,
-    strapdown: Strapdown,
-    nav: NavState,
-    ekf: ErrorStateEkf,
+    /// The replayable navigation state (a checkpoint is its copy with the time).
+    core: Core,
     time_ns: i64,
     last_seq: [Option<u64>; MAX_SENSORS],
     last_time: [Option<i64>; MAX_SENSORS],
     health: [SensorHealth; MAX_SENSORS],
     last_fused_ns: [Option<i64>; MAX_SENSORS],
     gnss_q: TimeQueue<GnssObs, GNSS_CAP>,
-    clock_initialized: bool,
     celestial: CelestialCache,
     star_q: TimeQueue<StarObs, STAR_CAP>,
     odo_q: TimeQueue<f64, ODO_CAP>,
@@ -212,10 +211,6 @@ pub struct Navigator {
     /// Whether the sample being fused counts in the health counters (false when it is
     /// re-fused during a replay).
     count_health: bool,
-    last_baro_fused: Option<i64>,
-    last_odo: Option<(i64, f64)>,
-    static_since: Option<i64>,
-    last_zupt: Option<i64>,
     zupt: ZuptHealth,
     solutions: u64,
     mode: NavMode,
@@ -248,11 +243,7 @@ impl Navigator {
     pub fn new(config: NavigatorConfig) -> Result<Self, ConfigError> {
         config.validate()?;
         let ell = config.ellipsoid.ellipsoid();
-        let nav = NavState {
-            r_e: Vector3::new(ell.a_m, 0.0, 0.0),
-            v_e: Vector3::zeros(),
-            q_e_b: UnitQuaternion::identity(),
-        };
+        let core = Core::new(&config, &ell);
         Ok(Self {
             gates: GateTable::new(config.gate_probability),
             // Nominal star-tracker mount (docs/ARCHITECTURE.md): 180° about body x.
@@ -260,20 +251,12 @@ impl Navigator {
             phase: Phase::Initializing,
             align: Accumulator::default(),
             init_fix: None,
-            strapdown: Strapdown::new(config.mechanization()),
-            nav,
-            ekf: ErrorStateEkf::new(
-                Covariance::identity(),
-                config.imu.process_noise(),
-                ActiveStates::ALL,
-            ),
             time_ns: 0,
             last_seq: [None; MAX_SENSORS],
             last_time: [None; MAX_SENSORS],
             health: [SensorHealth::default(); MAX_SENSORS],
             last_fused_ns: [None; MAX_SENSORS],
             gnss_q: TimeQueue::new(),
-            clock_initialized: false,
             celestial: CelestialCache::default(),
             star_q: TimeQueue::new(),
             odo_q: TimeQueue::new(),
@@ -283,18 +266,7 @@ impl Navigator {
                 CHECKPOINT_CAP,
                 Checkpoint {
                     t: 0,
-                    nav,
-                    ekf: ErrorStateEkf::new(
-                        Covariance::identity(),
-                        config.imu.process_noise(),
-                        ActiveStates::ALL,
-                    ),
-                    strapdown: Strapdown::new(config.mechanization()),
-                    static_since: None,
-                    last_zupt: None,
-                    last_baro_fused: None,
-                    last_odo: None,
-                    clock_initialized: false,
+                    core: core.clone(),
                 },
             ),
             gnss_done: TimeQueue::new(),
@@ -305,10 +277,7 @@ impl Navigator {
             nav_start_ns: i64::MIN,
             replaying: false,
             count_health: true,
-            last_baro_fused: None,
-            last_odo: None,
-            static_since: None,
-            last_zupt: None,
+            core,
             zupt: ZuptHealth::default(),
             solutions: 0,
             mode: NavMode::Initializing,
@@ -386,22 +355,22 @@ impl Navigator {
 
     /// Current inertial state (ECEF), valid once navigating.
     pub fn nav_state(&self) -> &NavState {
-        &self.nav
+        &self.core.nav
     }
 
     /// Current error-state covariance (layout in [`crate::ekf`]).
     pub fn covariance(&self) -> &Covariance {
-        &self.ekf.p
+        &self.core.ekf.p
     }
 
     /// Estimated gyro bias (body, rad/s) and accelerometer bias (body, m/s²).
     pub fn biases(&self) -> (Vector3<f64>, Vector3<f64>) {
-        (self.ekf.gyro_bias_rad_s, self.ekf.accel_bias_m_s2)
+        (self.core.ekf.gyro_bias_rad_s, self.core.ekf.accel_bias_m_s2)
     }
 
     /// Estimated baro height bias (`h_baro = h + b`), m.
     pub fn baro_bias_m(&self) -> f64 {
-        self.ekf.baro_bias_m
+        self.core.ekf.baro_bias_m
     }
 
     /// Estimated star-tracker boresight angles κ1..κ3 (paper 000) and their 1-σ relative to
@@ -410,26 +379,26 @@ impl Navigator {
     /// (`imu.misalignment_arcsec`), which no estimator that uses the IMU as its body
     /// reference can remove. 0 when the boresight group is off.
     pub fn boresight_rad(&self) -> (Vector3<f64>, Vector3<f64>) {
-        (self.ekf.kappa_rad, self.boresight_sigma())
+        (self.core.ekf.kappa_rad, self.boresight_sigma())
     }
 
     fn boresight_sigma(&self) -> Vector3<f64> {
-        if !self.ekf.is_active(idx::KAPPA) {
+        if !self.core.ekf.is_active(idx::KAPPA) {
             return Vector3::zeros();
         }
         let mis = self.config.imu.misalignment_arcsec / 3600.0 * DEG;
         Vector3::from_fn(|i, _| {
-            (self.ekf.p[(idx::KAPPA + i, idx::KAPPA + i)].max(0.0) + mis * mis).sqrt()
+            (self.core.ekf.p[(idx::KAPPA + i, idx::KAPPA + i)].max(0.0) + mis * mis).sqrt()
         })
     }
 
     /// Receiver clock: bias × c (m), drift × c (m/s) and their 1-σ; zeros before tight
     /// coupling has initialised the clock states.
     pub fn clock(&self) -> ClockEstimate {
-        let p = &self.ekf.p;
+        let p = &self.core.ekf.p;
         ClockEstimate {
-            bias_m: self.ekf.clock_bias_m,
-            drift_m_s: self.ekf.clock_drift_m_s,
+            bias_m: self.core.ekf.clock_bias_m,
+            drift_m_s: self.core.ekf.clock_drift_m_s,
             bias_sigma_m: p[(idx::CLK, idx::CLK)].max(0.0).sqrt(),
             drift_sigma_m_s: p[(idx::CLK_DRIFT, idx::CLK_DRIFT)].max(0.0).sqrt(),
         }
@@ -437,17 +406,17 @@ impl Navigator {
 
     /// Estimated gyro and accelerometer scale-factor errors per body axis (dimensionless).
     pub fn scale_factors(&self) -> (Vector3<f64>, Vector3<f64>) {
-        (self.ekf.gyro_scale, self.ekf.accel_scale)
+        (self.core.ekf.gyro_scale, self.core.ekf.accel_scale)
     }
 
     /// 1-σ of every error state (layout in [`crate::ekf`]); zero for inactive groups.
     pub fn state_sigma(&self) -> StateVector {
-        StateVector::from_fn(|i, _| self.ekf.p[(i, i)].max(0.0).sqrt())
+        StateVector::from_fn(|i, _| self.core.ekf.p[(i, i)].max(0.0).sqrt())
     }
 
     /// The error-state filter (covariance as of its last propagation, estimates).
     pub fn filter(&self) -> &ErrorStateEkf {
-        &self.ekf
+        &self.core.ekf
     }
 
     /// True once alignment is complete and the filter runs.

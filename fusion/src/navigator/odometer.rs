@@ -34,14 +34,14 @@ impl Navigator {
     /// below the prior's lateral-velocity spread) and would hide the speed's consistency.
     pub(super) fn fuse_odometer(&mut self, ts: i64, speed: f64) {
         let id = sid(SensorId::Odometer);
-        self.last_odo = Some((ts, speed));
+        self.core.last_odo = Some((ts, speed));
         if !self.config.updates.odometer {
             return;
         }
         let a = self.config.aiding;
         // The scale factor is a filter state (initial σ `odometer_scale_sigma`), so only the
         // white part of the odometer error is measurement noise.
-        let k = self.ekf.odo_scale;
+        let k = self.core.ekf.odo_scale;
         let body_vx = |nav: &NavState| (nav.q_e_b.inverse() * nav.v_e).x;
         let prev = self.odo_epoch.take();
         let spacing = prev.map(|p| ts - p.t);
@@ -51,23 +51,25 @@ impl Navigator {
                     && d <= 1_000_000_000
                     && p.spacing_ns.is_some_and(|s| (s - d).abs() <= 1_000) =>
             {
-                speed + (1.0 + k) * 0.5 * (body_vx(&self.nav) - p.v_x_m_s)
+                speed + (1.0 + k) * 0.5 * (body_vx(&self.core.nav) - p.v_x_m_s)
             }
             _ => speed,
         };
-        let m = ekf::odometer_speed(&self.nav, k, end_speed, a.odometer_sigma_m_s);
+        let m = ekf::odometer_speed(&self.core.nav, k, end_speed, a.odometer_sigma_m_s);
         if self.run_update(Some(id), &m) {
             self.mark_fused(id, ts);
         }
         if self.config.updates.nonholonomic {
-            let m3 = ekf::odometer_nhc(&self.nav, k, end_speed, 1.0, a.nhc_sigma_m_s);
+            let m3 = ekf::odometer_nhc(&self.core.nav, k, end_speed, 1.0, a.nhc_sigma_m_s);
             let m = Measurement::<2> {
                 innovation: m3.innovation.fixed_rows::<2>(1).into_owned(),
                 h: m3.h.fixed_rows::<2>(1).into_owned(),
                 r: m3.r.fixed_view::<2, 2>(1, 1).into_owned(),
             };
-            self.ekf.propagate_covariance(&self.ell, &self.nav.r_e);
-            let out = ekf::update(&self.ekf.p, &m, self.gates.threshold(2));
+            self.core
+                .ekf
+                .propagate_covariance(&self.ell, &self.core.nav.r_e);
+            let out = ekf::update(&self.core.ekf.p, &m, self.gates.threshold(2));
             if self.count_health {
                 let h = &mut self.nhc;
                 h.last_nis = out.residual.nis;
@@ -79,14 +81,14 @@ impl Navigator {
                 }
             }
             if !out.residual.rejected {
-                self.ekf.p = out.p;
+                self.core.ekf.p = out.p;
                 self.correct(&out.dx);
             }
         }
         self.odo_epoch = Some(OdometerEpoch {
             t: ts,
             spacing_ns: spacing,
-            v_x_m_s: body_vx(&self.nav),
+            v_x_m_s: body_vx(&self.core.nav),
         });
     }
 }

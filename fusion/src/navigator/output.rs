@@ -27,9 +27,10 @@ impl Navigator {
         let odo = recent(SensorId::Odometer, d.odometer_s);
         let baro = recent(SensorId::Baro, d.baro_s);
         let zupt = self
+            .core
             .last_zupt
             .is_some_and(|z| ((t - z) as f64) * 1e-9 <= 1.0)
-            && self.static_since.is_some();
+            && self.core.static_since.is_some();
         let mut mask = 0u32;
         for (on, s) in [
             (star, SensorId::StarTracker),
@@ -52,13 +53,13 @@ impl Navigator {
     }
 
     pub(super) fn solution(&mut self, s: &ImuSample) -> NavSolution {
-        let geo = earth::ecef_to_geodetic(&self.ell, &self.nav.r_e);
+        let geo = earth::ecef_to_geodetic(&self.ell, &self.core.nav.r_e);
         let q_e_n = q_e_n(geo.lat_rad, geo.lon_rad);
         let c_n_e = q_e_n.to_rotation_matrix().into_inner().transpose();
-        let q_n_b = q_e_n.inverse() * self.nav.q_e_b;
-        let v_ned = c_n_e * self.nav.v_e;
+        let q_n_b = q_e_n.inverse() * self.core.nav.q_e_b;
+        let v_ned = c_n_e * self.core.nav.v_e;
         let rpy = rpy_from_q_n_b(&q_n_b);
-        let p = &self.ekf.p;
+        let p = &self.core.ekf.p;
         let sig = |k: usize| -> [f64; 3] {
             let b: Matrix3<f64> = p.fixed_view::<3, 3>(k, k).into_owned();
             let d = (c_n_e * b * c_n_e.transpose()).diagonal();
@@ -82,26 +83,26 @@ impl Navigator {
             lat_rad: geo.lat_rad,
             lon_rad: geo.lon_rad,
             height_m: geo.height_m,
-            pos_ecef_m: self.nav.r_e.into(),
+            pos_ecef_m: self.core.nav.r_e.into(),
             vel_ned_m_s: v_ned.into(),
             q_ned_body: quat_to_wire(&q_n_b),
             roll_pitch_heading_rad: rpy.into(),
             pos_sigma_ned_m: sig(idx::POS),
             vel_sigma_ned_m_s: sig(idx::VEL),
             att_sigma_ned_rad: sig(idx::ATT),
-            gyro_bias_rad_s: self.ekf.gyro_bias_rad_s.into(),
-            accel_bias_m_s2: self.ekf.accel_bias_m_s2.into(),
+            gyro_bias_rad_s: self.core.ekf.gyro_bias_rad_s.into(),
+            accel_bias_m_s2: self.core.ekf.accel_bias_m_s2.into(),
             imu_send_mono_ns: s.header.send_mono_ns,
             gyro_bias_sigma_rad_s: diag_sigma(p, idx::BG),
             accel_bias_sigma_m_s2: diag_sigma(p, idx::BA),
-            gyro_scale_ppm: (self.ekf.gyro_scale * 1e6).into(),
-            accel_scale_ppm: (self.ekf.accel_scale * 1e6).into(),
-            boresight_rad: self.ekf.kappa_rad.into(),
+            gyro_scale_ppm: (self.core.ekf.gyro_scale * 1e6).into(),
+            accel_scale_ppm: (self.core.ekf.accel_scale * 1e6).into(),
+            boresight_rad: self.core.ekf.kappa_rad.into(),
             boresight_sigma_rad: self.boresight_sigma().into(),
-            clock_bias_m: self.ekf.clock_bias_m,
-            clock_drift_m_s: self.ekf.clock_drift_m_s,
-            baro_bias_m: self.ekf.baro_bias_m,
-            odometer_scale: self.ekf.odo_scale,
+            clock_bias_m: self.core.ekf.clock_bias_m,
+            clock_drift_m_s: self.core.ekf.clock_drift_m_s,
+            baro_bias_m: self.core.ekf.baro_bias_m,
+            odometer_scale: self.core.ekf.odo_scale,
         }
     }
 }

@@ -4,21 +4,6 @@
 
 use super::*;
 
-/// Everything an IMU step or an update changes, at the end of one IMU epoch `t` (the
-/// replayable part of the navigator; health counters are not in it).
-#[derive(Debug, Clone)]
-pub(super) struct Checkpoint {
-    pub(super) t: i64,
-    pub(super) nav: NavState,
-    pub(super) ekf: ErrorStateEkf,
-    pub(super) strapdown: Strapdown,
-    pub(super) static_since: Option<i64>,
-    pub(super) last_zupt: Option<i64>,
-    pub(super) last_baro_fused: Option<i64>,
-    pub(super) last_odo: Option<(i64, f64)>,
-    pub(super) clock_initialized: bool,
-}
-
 impl Navigator {
     /// One navigating IMU step (live or replayed): mechanization, transition accumulation,
     /// covariance propagation at its interval, fusion of the aiding due, ZUPT, checkpoint.
@@ -27,12 +12,13 @@ impl Navigator {
         // The increment covers dt_s; after missing samples, stretch it over the gap.
         let gap_s = e.prev_t.map_or(e.dt_s, |p| (t - p) as f64 * 1e-9);
         let (scale, dt) = if gap_s > 1.5 * e.dt_s {
-            self.strapdown.reset_history();
+            self.core.strapdown.reset_history();
             (gap_s / e.dt_s, gap_s)
         } else {
             (1.0, e.dt_s)
         };
         let (dth_c, dv_c) = self
+            .core
             .ekf
             .correct_increment(&(e.dth * scale), &(e.dv * scale), dt);
         let inc = ImuIncrement {
@@ -40,11 +26,14 @@ impl Navigator {
             delta_angle_rad: dth_c,
             delta_velocity_m_s: dv_c,
         };
-        self.strapdown.step(&mut self.nav, &inc);
-        self.ekf
-            .accumulate(&self.nav, &(dv_c / dt), &(dth_c / dt), dt);
-        if self.ekf.pending_s() >= self.config.covariance_interval_s - 1e-9 {
-            self.ekf.propagate_covariance(&self.ell, &self.nav.r_e);
+        self.core.strapdown.step(&mut self.core.nav, &inc);
+        self.core
+            .ekf
+            .accumulate(&self.core.nav, &(dv_c / dt), &(dth_c / dt), dt);
+        if self.core.ekf.pending_s() >= self.config.covariance_interval_s - 1e-9 {
+            self.core
+                .ekf
+                .propagate_covariance(&self.ell, &self.core.nav.r_e);
         }
         self.time_ns = t;
         self.update_static_detector(t, &inc);
@@ -76,14 +65,7 @@ impl Navigator {
         }
         self.checkpoints.push(Checkpoint {
             t,
-            nav: self.nav,
-            ekf: self.ekf.clone(),
-            strapdown: self.strapdown.clone(),
-            static_since: self.static_since,
-            last_zupt: self.last_zupt,
-            last_baro_fused: self.last_baro_fused,
-            last_odo: self.last_odo,
-            clock_initialized: self.clock_initialized,
+            core: self.core.clone(),
         });
     }
 
@@ -118,14 +100,7 @@ impl Navigator {
             return;
         }
         self.checkpoints.truncate(k);
-        self.nav = c.nav;
-        self.ekf = c.ekf;
-        self.strapdown = c.strapdown;
-        self.static_since = c.static_since;
-        self.last_zupt = c.last_zupt;
-        self.last_baro_fused = c.last_baro_fused;
-        self.last_odo = c.last_odo;
-        self.clock_initialized = c.clock_initialized;
+        self.core = c.core;
         self.time_ns = c.t;
         while let Some((t, v, _)) = self.gnss_done.pop_newer(c.t) {
             self.gnss_q.insert_flagged(t, v, true);

@@ -47,11 +47,11 @@ impl Navigator {
         let c_e_i = self.celestial.c_e_i(GpsTime { ns: ts }, &self.config.eop);
         let q = quat_from_wire(&obs.q);
         let m = ekf::star_attitude(
-            &self.nav,
+            &self.core.nav,
             &q,
             &crate::frames::Rotation::from_dcm_unchecked(c_e_i),
             &crate::frames::Rotation::from_dcm_unchecked(self.c_s_b),
-            &self.ekf.kappa_rad,
+            &self.core.ekf.kappa_rad,
             obs.sigma_cross,
             obs.sigma_roll,
         );

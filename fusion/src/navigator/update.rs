@@ -6,7 +6,7 @@ use super::*;
 impl Navigator {
     /// Apply an accepted correction to the current state and the error estimates.
     pub(super) fn correct(&mut self, dx: &StateVector) {
-        self.ekf.apply_correction(&mut self.nav, dx);
+        self.core.ekf.apply_correction(&mut self.core.nav, dx);
     }
 
     /// Run one gated update (health counters of sensor `id`, or the ZUPT counters for None);
@@ -17,8 +17,10 @@ impl Navigator {
         m: &Measurement<M>,
     ) -> bool {
         // The covariance must be at the current time before any update.
-        self.ekf.propagate_covariance(&self.ell, &self.nav.r_e);
-        let out = ekf::update(&self.ekf.p, m, self.gates.threshold(M));
+        self.core
+            .ekf
+            .propagate_covariance(&self.ell, &self.core.nav.r_e);
+        let out = ekf::update(&self.core.ekf.p, m, self.gates.threshold(M));
         if !self.count_health || (id.is_none() && self.replaying) {
             // Re-fused during a replay: counted the first time.
         } else if let Some(id) = id {
@@ -43,7 +45,7 @@ impl Navigator {
         if out.residual.rejected {
             return false;
         }
-        self.ekf.p = out.p;
+        self.core.ekf.p = out.p;
         self.correct(&out.dx);
         true
     }

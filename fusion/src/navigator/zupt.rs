@@ -7,13 +7,13 @@ impl Navigator {
         let a = &self.config.aiding;
         let w = inc.delta_angle_rad.norm() / inc.dt_s;
         let f = inc.delta_velocity_m_s.norm() / inc.dt_s;
-        let g = earth::gravity_ecef(&self.ell, self.config.gravity, &self.nav.r_e).norm();
+        let g = earth::gravity_ecef(&self.ell, self.config.gravity, &self.core.nav.r_e).norm();
         if w < a.zupt_max_rate_rad_s && (f - g).abs() < a.zupt_max_accel_dev_m_s2 {
-            if self.static_since.is_none() {
-                self.static_since = Some(t);
+            if self.core.static_since.is_none() {
+                self.core.static_since = Some(t);
             }
         } else {
-            self.static_since = None;
+            self.core.static_since = None;
         }
     }
 
@@ -22,29 +22,29 @@ impl Navigator {
         if !self.config.updates.zupt {
             return;
         }
-        let Some(since) = self.static_since else {
+        let Some(since) = self.core.static_since else {
             return;
         };
         if ((t - since) as f64) * 1e-9 < a.zupt_window_s {
             return;
         }
-        if let Some(last) = self.last_zupt
+        if let Some(last) = self.core.last_zupt
             && ((t - last) as f64) * 1e-9 < a.zupt_interval_s
         {
             return;
         }
-        if self.nav.v_e.norm() > a.zupt_max_speed_m_s {
+        if self.core.nav.v_e.norm() > a.zupt_max_speed_m_s {
             return;
         }
         // A recent odometer sample saying the vehicle moves vetoes the update.
-        if let Some((to, v)) = self.last_odo
+        if let Some((to, v)) = self.core.last_odo
             && ((t - to) as f64) * 1e-9 < 1.0
             && v.abs() > 0.02
         {
             return;
         }
-        self.last_zupt = Some(t);
-        let m = ekf::zero_velocity(&self.nav, a.zupt_sigma_m_s);
+        self.core.last_zupt = Some(t);
+        let m = ekf::zero_velocity(&self.core.nav, a.zupt_sigma_m_s);
         self.run_update(None, &m);
     }
 }

@@ -1,0 +1,65 @@
+//! The navigation core: everything an IMU step or a measurement update changes, as one `Clone`
+//! value — the inertial state, the error-state filter (bias, scale-factor, misalignment,
+//! boresight, clock and baro/odometer estimates with their covariance and pending transition),
+//! the strapdown integrator's history, and the schedules of the updates that look back at
+//! earlier epochs (ZUPT, baro rate limit, odometer veto). A delayed-fusion checkpoint is the
+//! time and a copy of it ([`Checkpoint`]), so a rewind restores all of it in one assignment
+//! (module docs of [`super`], "Delayed fusion"). Health counters, the mode and the time
+//! references of the inputs are not in it: they describe what arrived, not the solution.
+
+use super::*;
+
+/// The replayable navigation state at the end of one IMU epoch.
+#[derive(Debug, Clone)]
+pub(super) struct Core {
+    /// Inertial state (ECEF position, velocity, body attitude).
+    pub(super) nav: NavState,
+    /// Error-state filter: estimates and covariance (layout in [`crate::ekf`]).
+    pub(super) ekf: ErrorStateEkf,
+    /// Mechanization with its coning/sculling history.
+    pub(super) strapdown: Strapdown,
+    /// Start of the current static period (ZUPT detector), GPS ns.
+    pub(super) static_since: Option<i64>,
+    /// Time of the last zero-velocity update, GPS ns.
+    pub(super) last_zupt: Option<i64>,
+    /// Time of validity of the last fused baro sample, GPS ns (`aiding.baro_min_interval_s`).
+    pub(super) last_baro_fused: Option<i64>,
+    /// Time of validity and speed of the last odometer sample (ZUPT veto), GPS ns and m/s.
+    pub(super) last_odo: Option<(i64, f64)>,
+    /// Whether the receiver clock states have been started (tight coupling).
+    pub(super) clock_initialized: bool,
+}
+
+impl Core {
+    /// The state before alignment: at the equator on the prime meridian, at rest, identity
+    /// attitude, unit covariance (replaced when navigation starts).
+    pub(super) fn new(config: &NavigatorConfig, ell: &Ellipsoid) -> Self {
+        Self {
+            nav: NavState {
+                r_e: Vector3::new(ell.a_m, 0.0, 0.0),
+                v_e: Vector3::zeros(),
+                q_e_b: UnitQuaternion::identity(),
+            },
+            ekf: ErrorStateEkf::new(
+                Covariance::identity(),
+                config.imu.process_noise(),
+                ActiveStates::ALL,
+            ),
+            strapdown: Strapdown::new(config.mechanization()),
+            static_since: None,
+            last_zupt: None,
+            last_baro_fused: None,
+            last_odo: None,
+            clock_initialized: false,
+        }
+    }
+}
+
+/// A delayed-fusion checkpoint: the [`Core`] at the end of the IMU epoch `t` (GPS ns).
+#[derive(Debug, Clone)]
+pub(super) struct Checkpoint {
+    /// IMU epoch, GPS ns.
+    pub(super) t: i64,
+    /// The navigation core at that epoch.
+    pub(super) core: Core,
+}
