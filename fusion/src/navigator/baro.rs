@@ -4,7 +4,7 @@
 use super::*;
 
 impl Navigator {
-    pub(super) fn fuse_baro(&mut self, ts: i64, height_m: f64) {
+    pub(super) fn fuse_baro(&mut self, ts: i64, height_m: f64, tally: Tally) {
         let id = sid(SensorId::Baro);
         if !self.config.updates.baro {
             return;
@@ -23,8 +23,8 @@ impl Navigator {
             self.config.aiding.baro_sigma_m,
         );
         self.core.last_baro_fused = Some(ts);
-        if self.run_update(Some(id), &m) {
-            self.mark_fused(id, ts);
+        if self.run_update(Counter::Sensor(id), &m, tally).accepted() {
+            self.mark_fused(id, ts, tally);
         }
     }
 }

@@ -32,19 +32,19 @@ impl Navigator {
         finite.then_some((sol.c_e_b, sol.cov_e_rad2))
     }
 
-    pub(super) fn fuse_gnss(&mut self, ts: i64, obs: &GnssObs) {
+    pub(super) fn fuse_gnss(&mut self, ts: i64, obs: &GnssObs, tally: Tally) {
         let id = sid(SensorId::Gnss);
         // First, before any update of this epoch: the least-squares cross-check.
-        self.gnss_ls_cross_check(ts, obs);
+        self.gnss_ls_cross_check(ts, obs, tally);
         if let Some((c_e_b, cov)) = obs.attitude {
             let m = ekf::gnss_baseline_attitude(&self.core.nav, &c_e_b, &cov);
-            if self.run_update(Some(id), &m) {
-                self.mark_fused(id, ts);
+            if self.run_update(Counter::Sensor(id), &m, tally).accepted() {
+                self.mark_fused(id, ts, tally);
             }
         }
         if self.config.gnss_mode == GnssMode::Tight {
             if obs.n_sats > 0 {
-                self.fuse_gnss_tight(ts, obs);
+                self.fuse_gnss_tight(ts, obs, tally);
             }
             return;
         }
@@ -56,19 +56,21 @@ impl Navigator {
         let mut nis = f64::NEG_INFINITY;
         if self.config.updates.gnss_position {
             let m = ekf::gnss_position(&self.core.nav, &fix.pos, &fix.pos_cov);
-            fused |= self.run_update(Some(id), &m);
-            nis = nis.max(self.health[id].last_nis);
+            let v = self.run_update(Counter::Sensor(id), &m, tally);
+            fused |= v.accepted();
+            nis = nis.max(v.nis);
         }
         if self.config.updates.gnss_velocity && fix.vel_valid {
             let m = ekf::gnss_velocity(&self.core.nav, &fix.vel, &fix.vel_cov);
-            fused |= self.run_update(Some(id), &m);
-            nis = nis.max(self.health[id].last_nis);
+            let v = self.run_update(Counter::Sensor(id), &m, tally);
+            fused |= v.accepted();
+            nis = nis.max(v.nis);
         }
-        if nis.is_finite() || nis == f64::INFINITY {
+        if tally == Tally::Count && (nis.is_finite() || nis == f64::INFINITY) {
             self.health[id].last_nis = nis;
         }
         if fused {
-            self.mark_fused(id, ts);
+            self.mark_fused(id, ts, tally);
         }
     }
 
@@ -77,7 +79,7 @@ impl Navigator {
     /// epoch without clock states starts them by state augmentation from one pseudorange and
     /// one range rate ([`Self::initialize_clock`]); those two are consumed, the others fused.
     /// The sample's NIS is the largest one.
-    pub(super) fn fuse_gnss_tight(&mut self, ts: i64, obs: &GnssObs) {
+    pub(super) fn fuse_gnss_tight(&mut self, ts: i64, obs: &GnssObs, tally: Tally) {
         let id = sid(SensorId::Gnss);
         // The clock estimate is kept at the filter time; move it back to the sample's time.
         let back_s = (self.time_ns - ts) as f64 * 1e-9;
@@ -99,8 +101,9 @@ impl Navigator {
                     b,
                     sat.sigma_pr_m,
                 );
-                fused |= self.run_update(Some(id), &m);
-                nis = nis.max(self.health[id].last_nis);
+                let v = self.run_update(Counter::Sensor(id), &m, tally);
+                fused |= v.accepted();
+                nis = nis.max(v.nis);
             }
             if sat.has_rr && self.config.updates.gnss_velocity && skip_rr != Some(i) {
                 let m = ekf::gnss_range_rate(
@@ -111,15 +114,16 @@ impl Navigator {
                     self.core.ekf.clock_drift_m_s,
                     sat.sigma_rr_m_s,
                 );
-                fused |= self.run_update(Some(id), &m);
-                nis = nis.max(self.health[id].last_nis);
+                let v = self.run_update(Counter::Sensor(id), &m, tally);
+                fused |= v.accepted();
+                nis = nis.max(v.nis);
             }
         }
-        if nis > f64::NEG_INFINITY {
+        if tally == Tally::Count && nis > f64::NEG_INFINITY {
             self.health[id].last_nis = nis;
         }
         if fused {
-            self.mark_fused(id, ts);
+            self.mark_fused(id, ts, tally);
         }
     }
 
@@ -262,7 +266,7 @@ impl Navigator {
     /// epoch would, in the second case, lock the filter out of the only measurements that can
     /// bring it back. At 99.9 % a consistent filter disagrees on 0.1 % of the epochs; a run
     /// of disagreements is the operator's (or a supervisor's) signal to re-initialise.
-    pub(super) fn gnss_ls_cross_check(&mut self, ts: i64, obs: &GnssObs) {
+    pub(super) fn gnss_ls_cross_check(&mut self, ts: i64, obs: &GnssObs, tally: Tally) {
         let back_s = (self.time_ns - ts) as f64 * 1e-9;
         let r_pred = self.core.nav.r_e - self.core.nav.v_e * back_s;
         let b_guess = if self.core.clock_initialized {
@@ -288,7 +292,7 @@ impl Navigator {
             return;
         };
         let nis = d.dot(&chol.solve(&d));
-        if !self.count_health {
+        if tally == Tally::Skip {
             return; // re-fused during a replay: counted the first time
         }
         let dg = &mut self.diagnostics;

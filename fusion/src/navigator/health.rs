@@ -1,5 +1,72 @@
-//! Counters that are not per-sensor slots of `msgs::Status`: the pseudo-measurements (zero
-//! velocity, non-holonomic constraints) and the navigator's own diagnostics.
+//! Health counters folded from update outcomes: the per-sensor slots of `msgs::Status`, the
+//! pseudo-measurements (zero velocity, non-holonomic constraints) and the navigator's own
+//! diagnostics. Whether an outcome is counted is an argument ([`Tally`]), not a state of the
+//! navigator: a sample counts the first time it is fused, never again when a replay fuses it
+//! at its epoch once more (module docs of [`super`], "Delayed fusion").
+
+use msgs::SensorHealth;
+
+/// Whether the outcome of an update enters the health counters.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Tally {
+    /// First fusion of a sample, or a live zero-velocity update: counted.
+    Count,
+    /// A replay fusing again what was counted before: not counted twice.
+    Skip,
+}
+
+impl Tally {
+    /// The tally of a queued sample, from whether it was counted before (re-queued by a
+    /// rewind).
+    pub(super) fn first_time(counted_before: bool) -> Self {
+        if counted_before {
+            Self::Skip
+        } else {
+            Self::Count
+        }
+    }
+}
+
+/// Whose counters an update's outcome goes to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Counter {
+    /// The sensor slot (index = `msgs::SensorId`).
+    Sensor(usize),
+    /// The zero-velocity update counters ([`ZuptHealth`]).
+    Zupt,
+}
+
+/// What the counters keep of one gated update ([`crate::ekf::Residual`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct Verdict {
+    /// Normalized innovation squared.
+    pub(super) nis: f64,
+    /// Measurement dimension (the NIS's degrees of freedom).
+    pub(super) dof: u64,
+    /// Refused by the gate (or not usable): not fused.
+    pub(super) rejected: bool,
+}
+
+impl Verdict {
+    /// True when the update was fused.
+    pub(super) fn accepted(self) -> bool {
+        !self.rejected
+    }
+}
+
+/// Fold one update of a sensor into its slot: NIS of the last update, gate rejections, and
+/// over the accepted ones the NIS and dimension sums (mean NIS `nis_sum / nis_count` should be
+/// ≈ the mean dimension `nis_dof_sum / nis_count` for a consistent filter).
+pub(super) fn fold_sensor(h: &mut SensorHealth, v: Verdict) {
+    h.last_nis = v.nis;
+    if v.rejected {
+        h.rejected_gate += 1;
+    } else {
+        h.nis_sum += v.nis;
+        h.nis_count += 1;
+        h.nis_dof_sum += v.dof;
+    }
+}
 
 /// Counters of the zero-velocity updates (not a sensor slot of `msgs::Status`).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -10,6 +77,18 @@ pub struct ZuptHealth {
     pub rejected_gate: u64,
     /// NIS of the last one.
     pub last_nis: f64,
+}
+
+impl ZuptHealth {
+    /// Fold one zero-velocity update.
+    pub(super) fn fold(&mut self, v: Verdict) {
+        self.last_nis = v.nis;
+        if v.rejected {
+            self.rejected_gate += 1;
+        } else {
+            self.fused += 1;
+        }
+    }
 }
 
 /// Counters of the non-holonomic constraint updates (zero lateral and vertical body
@@ -24,6 +103,19 @@ pub struct NhcHealth {
     pub last_nis: f64,
     /// Sum of the NIS of the fused ones (mean NIS = nis_sum / fused, ≈ 2 if consistent).
     pub nis_sum: f64,
+}
+
+impl NhcHealth {
+    /// Fold one constraint update.
+    pub(super) fn fold(&mut self, v: Verdict) {
+        self.last_nis = v.nis;
+        if v.rejected {
+            self.rejected_gate += 1;
+        } else {
+            self.fused += 1;
+            self.nis_sum += v.nis;
+        }
+    }
 }
 
 /// Navigator counters that are not per-sensor (published on `msgs::Status`).

@@ -58,7 +58,7 @@ impl Navigator {
                     self.bridge_imu_gap(p, &e);
                 }
                 self.imu_log.push(e);
-                self.imu_step(&e);
+                self.imu_step(&e, Tally::Count);
                 self.health[id].fused += 1;
             }
         }

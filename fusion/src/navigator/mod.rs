@@ -101,7 +101,7 @@ use crate::strapdown::{ImuIncrement, Integrator, MechanizationConfig, NavState, 
 use crate::time::GpsTime;
 use msgs::{
     BaroSample, GnssSample, Header, ImuSample, MAX_IMU_CHANNELS, MAX_SATELLITES, MAX_SENSORS,
-    NavMode, NavSolution, OdometerSample, SensorHealth, SensorId, StarTrackerSample,
+    NavMode, NavSolution, OdometerSample, Record, SensorHealth, SensorId, StarTrackerSample,
 };
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
@@ -129,6 +129,7 @@ use buffer::*;
 pub use config::*;
 use gate::*;
 pub use gate::{RejectReason, Rejection};
+use health::*;
 pub use health::{NavigatorDiagnostics, NhcHealth, ZuptHealth};
 pub use imu_time::CONFIRM_SAMPLES;
 use imu_time::*;
@@ -174,6 +175,27 @@ pub enum Input<'a> {
     },
 }
 
+impl<'a> Input<'a> {
+    /// The navigator input a recorded message is: sensor samples and alive/dead transitions
+    /// (`msgs::SensorAliveEvent`); None for truth and the navigator's own outputs, which are
+    /// never inputs. The daemon, offline runs, the bench and replay all convert with this and
+    /// push the result ([`Navigator::push`]).
+    pub fn from_record(record: &'a Record) -> Option<Self> {
+        Some(match record {
+            Record::Imu(s) => Self::Imu(s),
+            Record::StarTracker(s) => Self::StarTracker(s),
+            Record::Gnss(s) => Self::Gnss(s),
+            Record::Odometer(s) => Self::Odometer(s),
+            Record::Baro(s) => Self::Baro(s),
+            Record::SensorAlive(e) => Self::SensorAlive {
+                sensor: e.sensor as usize,
+                alive: e.alive,
+            },
+            Record::Truth(_) | Record::Nav(_) | Record::Status(_) => return None,
+        })
+    }
+}
+
 /// The fusion engine.
 #[derive(Debug, Clone)]
 pub struct Navigator {
@@ -207,10 +229,6 @@ pub struct Navigator {
     /// Time of validity at which navigation started (the end of alignment), GPS ns: aiding
     /// up to it belongs to the alignment period, whenever it arrives (`fuse_due`).
     nav_start_ns: i64,
-    replaying: bool,
-    /// Whether the sample being fused counts in the health counters (false when it is
-    /// re-fused during a replay).
-    count_health: bool,
     zupt: ZuptHealth,
     solutions: u64,
     mode: NavMode,
@@ -275,8 +293,6 @@ impl Navigator {
             baro_done: TimeQueue::new(),
             rewind_to: None,
             nav_start_ns: i64::MIN,
-            replaying: false,
-            count_health: true,
             core,
             zupt: ZuptHealth::default(),
             solutions: 0,

@@ -32,7 +32,7 @@ impl Navigator {
     /// independent noises, and the odometer's NIS on `sextant/status` is then the speed's
     /// alone — the constraint's NIS is far below its dof whatever its σ (its innovations are
     /// below the prior's lateral-velocity spread) and would hide the speed's consistency.
-    pub(super) fn fuse_odometer(&mut self, ts: i64, speed: f64) {
+    pub(super) fn fuse_odometer(&mut self, ts: i64, speed: f64, tally: Tally) {
         let id = sid(SensorId::Odometer);
         self.core.last_odo = Some((ts, speed));
         if !self.config.updates.odometer {
@@ -56,8 +56,8 @@ impl Navigator {
             _ => speed,
         };
         let m = ekf::odometer_speed(&self.core.nav, k, end_speed, a.odometer_sigma_m_s);
-        if self.run_update(Some(id), &m) {
-            self.mark_fused(id, ts);
+        if self.run_update(Counter::Sensor(id), &m, tally).accepted() {
+            self.mark_fused(id, ts, tally);
         }
         if self.config.updates.nonholonomic {
             let m3 = ekf::odometer_nhc(&self.core.nav, k, end_speed, 1.0, a.nhc_sigma_m_s);
@@ -70,15 +70,12 @@ impl Navigator {
                 .ekf
                 .propagate_covariance(&self.ell, &self.core.nav.r_e);
             let out = ekf::update(&self.core.ekf.p, &m, self.gates.threshold(2));
-            if self.count_health {
-                let h = &mut self.nhc;
-                h.last_nis = out.residual.nis;
-                if out.residual.rejected {
-                    h.rejected_gate += 1;
-                } else {
-                    h.fused += 1;
-                    h.nis_sum += out.residual.nis;
-                }
+            if tally == Tally::Count {
+                self.nhc.fold(Verdict {
+                    nis: out.residual.nis,
+                    dof: 2,
+                    rejected: out.residual.rejected,
+                });
             }
             if !out.residual.rejected {
                 self.core.ekf.p = out.p;

@@ -7,7 +7,9 @@ use super::*;
 impl Navigator {
     /// One navigating IMU step (live or replayed): mechanization, transition accumulation,
     /// covariance propagation at its interval, fusion of the aiding due, ZUPT, checkpoint.
-    pub(super) fn imu_step(&mut self, e: &ImuLogEntry) {
+    /// `tally` is whether the step's own update (ZUPT) counts: `Count` live, `Skip` replayed
+    /// (a queued sample carries its own tally, [`Tally::first_time`]).
+    pub(super) fn imu_step(&mut self, e: &ImuLogEntry, tally: Tally) {
         let t = e.t;
         // The increment covers dt_s; after missing samples, stretch it over the gap.
         let gap_s = e.prev_t.map_or(e.dt_s, |p| (t - p) as f64 * 1e-9);
@@ -38,7 +40,7 @@ impl Navigator {
         self.time_ns = t;
         self.update_static_detector(t, &inc);
         self.fuse_due(t);
-        self.maybe_zupt(t);
+        self.maybe_zupt(t, tally);
         let last = if self.checkpoints.len > 0 {
             self.checkpoints.get(self.checkpoints.len - 1).t
         } else {
@@ -114,14 +116,12 @@ impl Navigator {
         while let Some((t, v, _)) = self.baro_done.pop_newer(c.t) {
             self.baro_q.insert_flagged(t, v, true);
         }
-        self.replaying = true;
         for i in 0..self.imu_log.len {
             let e = *self.imu_log.get(i);
             if e.t > c.t {
-                self.imu_step(&e);
+                self.imu_step(&e, Tally::Skip);
             }
         }
-        self.replaying = false;
     }
 
     /// A rewind the IMU log cannot serve: drop the samples the solution has passed (those
@@ -162,34 +162,29 @@ impl Navigator {
             if ts <= self.nav_start_ns {
                 continue;
             }
-            self.count_health = !counted;
-            self.fuse_gnss(ts, &obs);
+            self.fuse_gnss(ts, &obs, Tally::first_time(counted));
             self.gnss_done.insert_flagged(ts, obs, true);
         }
         while let Some((ts, obs, counted)) = self.star_q.pop_due(t) {
             if ts <= self.nav_start_ns {
                 continue;
             }
-            self.count_health = !counted;
-            self.fuse_star(ts, &obs);
+            self.fuse_star(ts, &obs, Tally::first_time(counted));
             self.star_done.insert_flagged(ts, obs, true);
         }
         while let Some((ts, speed, counted)) = self.odo_q.pop_due(t) {
             if ts <= self.nav_start_ns {
                 continue;
             }
-            self.count_health = !counted;
-            self.fuse_odometer(ts, speed);
+            self.fuse_odometer(ts, speed, Tally::first_time(counted));
             self.odo_done.insert_flagged(ts, speed, true);
         }
         while let Some((ts, h, counted)) = self.baro_q.pop_due(t) {
             if ts <= self.nav_start_ns {
                 continue;
             }
-            self.count_health = !counted;
-            self.fuse_baro(ts, h);
+            self.fuse_baro(ts, h, Tally::first_time(counted));
             self.baro_done.insert_flagged(ts, h, true);
         }
-        self.count_health = true;
     }
 }

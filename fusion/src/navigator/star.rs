@@ -39,7 +39,7 @@ impl CelestialCache {
 }
 
 impl Navigator {
-    pub(super) fn fuse_star(&mut self, ts: i64, obs: &StarObs) {
+    pub(super) fn fuse_star(&mut self, ts: i64, obs: &StarObs, tally: Tally) {
         let id = sid(SensorId::StarTracker);
         if !self.config.updates.star_tracker {
             return;
@@ -55,8 +55,8 @@ impl Navigator {
             obs.sigma_cross,
             obs.sigma_roll,
         );
-        if self.run_update(Some(id), &m) {
-            self.mark_fused(id, ts);
+        if self.run_update(Counter::Sensor(id), &m, tally).accepted() {
+            self.mark_fused(id, ts, tally);
         }
     }
 }

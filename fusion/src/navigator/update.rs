@@ -9,51 +9,42 @@ impl Navigator {
         self.core.ekf.apply_correction(&mut self.core.nav, dx);
     }
 
-    /// Run one gated update (health counters of sensor `id`, or the ZUPT counters for None);
-    /// returns whether it was accepted.
+    /// Run one gated update at the current epoch and fold its outcome into `counter`'s health
+    /// counters when `tally` says so; returns the outcome.
     pub(super) fn run_update<const M: usize>(
         &mut self,
-        id: Option<usize>,
+        counter: Counter,
         m: &Measurement<M>,
-    ) -> bool {
+        tally: Tally,
+    ) -> Verdict {
         // The covariance must be at the current time before any update.
         self.core
             .ekf
             .propagate_covariance(&self.ell, &self.core.nav.r_e);
         let out = ekf::update(&self.core.ekf.p, m, self.gates.threshold(M));
-        if !self.count_health || (id.is_none() && self.replaying) {
-            // Re-fused during a replay: counted the first time.
-        } else if let Some(id) = id {
-            self.health[id].last_nis = out.residual.nis;
-            if out.residual.rejected {
-                self.health[id].rejected_gate += 1;
-            } else {
-                // Mean NIS over accepted updates (nis_sum / nis_count) should be ≈ the mean
-                // dimension (nis_dof_sum / nis_count) for a consistent filter.
-                self.health[id].nis_sum += out.residual.nis;
-                self.health[id].nis_count += 1;
-                self.health[id].nis_dof_sum += M as u64;
-            }
-        } else {
-            self.zupt.last_nis = out.residual.nis;
-            if out.residual.rejected {
-                self.zupt.rejected_gate += 1;
-            } else {
-                self.zupt.fused += 1;
+        let v = Verdict {
+            nis: out.residual.nis,
+            dof: M as u64,
+            rejected: out.residual.rejected,
+        };
+        if tally == Tally::Count {
+            match counter {
+                Counter::Sensor(id) => fold_sensor(&mut self.health[id], v),
+                Counter::Zupt => self.zupt.fold(v),
             }
         }
-        if out.residual.rejected {
-            return false;
+        if v.accepted() {
+            self.core.ekf.p = out.p;
+            self.correct(&out.dx);
         }
-        self.core.ekf.p = out.p;
-        self.correct(&out.dx);
-        true
+        v
     }
 
-    pub(super) fn mark_fused(&mut self, id: usize, ts: i64) {
+    /// Note that sample `ts` of sensor `id` was fused (for the mode), counting it once.
+    pub(super) fn mark_fused(&mut self, id: usize, ts: i64, tally: Tally) {
         // A sample with several updates (baseline attitude + fix) counts once; sample times
         // strictly increase per sensor.
-        if self.count_health && self.last_fused_ns[id] != Some(ts) {
+        if tally == Tally::Count && self.last_fused_ns[id] != Some(ts) {
             self.health[id].fused += 1;
         }
         self.last_fused_ns[id] = Some(self.last_fused_ns[id].map_or(ts, |p| p.max(ts)));

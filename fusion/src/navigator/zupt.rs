@@ -17,7 +17,7 @@ impl Navigator {
         }
     }
 
-    pub(super) fn maybe_zupt(&mut self, t: i64) {
+    pub(super) fn maybe_zupt(&mut self, t: i64, tally: Tally) {
         let a = self.config.aiding;
         if !self.config.updates.zupt {
             return;
@@ -45,6 +45,6 @@ impl Navigator {
         }
         self.core.last_zupt = Some(t);
         let m = ekf::zero_velocity(&self.core.nav, a.zupt_sigma_m_s);
-        self.run_update(None, &m);
+        self.run_update(Counter::Zupt, &m, tally);
     }
 }
