@@ -9,7 +9,7 @@
 use crate::config::SystemConfig;
 use crate::recorder::{Recorder, RecorderError, RecorderOptions, RecorderStats};
 use fusion::Rejection;
-use fusion::navigator::Navigator;
+use fusion::navigator::{Input, Navigator};
 use iceoryx2::prelude::*;
 use msgs::ipc::{Bus, NodeError, PublisherError, Sub, SubscriberError, WaitSetError};
 use msgs::{
@@ -24,6 +24,22 @@ use std::time::{Duration, Instant};
 
 /// What the daemon needs from the fusion engine ([`Navigator`] implements it).
 pub trait NavEngine {
+    /// Feed one input; the solution an IMU sample produced once navigating. By default
+    /// dispatched to the per-sensor methods; the [`Navigator`] takes it whole
+    /// ([`Navigator::push`], its single entry point).
+    fn push(&mut self, input: Input<'_>) -> Result<Option<NavSolution>, Rejection> {
+        match input {
+            Input::Imu(s) => self.push_imu(s),
+            Input::StarTracker(s) => self.push_star_tracker(s).map(|()| None),
+            Input::Gnss(s) => self.push_gnss(s).map(|()| None),
+            Input::Odometer(s) => self.push_odometer(s).map(|()| None),
+            Input::Baro(s) => self.push_baro(s).map(|()| None),
+            Input::SensorAlive { sensor, alive } => {
+                self.set_sensor_alive(sensor, alive);
+                Ok(None)
+            }
+        }
+    }
     /// Feed an IMU sample; the solution once navigating.
     fn push_imu(&mut self, s: &ImuSample) -> Result<Option<NavSolution>, Rejection>;
     /// Queue a star-tracker sample.
@@ -83,6 +99,9 @@ pub fn engine_status<E: NavEngine>(engine: &E) -> Status {
 }
 
 impl NavEngine for Navigator {
+    fn push(&mut self, input: Input<'_>) -> Result<Option<NavSolution>, Rejection> {
+        Navigator::push(self, input)
+    }
     fn push_imu(&mut self, s: &ImuSample) -> Result<Option<NavSolution>, Rejection> {
         Navigator::push_imu(self, s)
     }
@@ -120,24 +139,16 @@ impl NavEngine for Navigator {
 
 /// Push one recorded input into the engine: the single code path by which both the live daemon
 /// and offline replay drive the engine, so that replaying a recording's inputs in file order
-/// reproduces the live solution bit for bit. Sensor samples go to their `push_*`, alive/dead
-/// transitions to `set_sensor_alive`; outputs and truth are not inputs and are ignored.
-/// Returns the solution an IMU sample produced.
+/// reproduces the live solution bit for bit. Sensor samples and alive/dead transitions go to
+/// [`NavEngine::push`] as a `fusion::navigator::Input` ([`Input::from_record`]); outputs and
+/// truth are not inputs and are ignored. Returns the solution an IMU sample produced.
 pub fn feed<E: NavEngine>(
     engine: &mut E,
     record: &Record,
 ) -> Result<Option<NavSolution>, Rejection> {
-    match record {
-        Record::Imu(s) => engine.push_imu(s),
-        Record::StarTracker(s) => engine.push_star_tracker(s).map(|()| None),
-        Record::Gnss(s) => engine.push_gnss(s).map(|()| None),
-        Record::Odometer(s) => engine.push_odometer(s).map(|()| None),
-        Record::Baro(s) => engine.push_baro(s).map(|()| None),
-        Record::SensorAlive(e) => {
-            engine.set_sensor_alive(e.sensor as usize, e.alive);
-            Ok(None)
-        }
-        Record::Truth(_) | Record::Nav(_) | Record::Status(_) => Ok(None),
+    match Input::from_record(record) {
+        Some(input) => engine.push(input),
+        None => Ok(None),
     }
 }
 

@@ -26,7 +26,7 @@ use crate::sources::{
 };
 use fusion::Rejection;
 use fusion::ekf::idx;
-use fusion::navigator::Navigator;
+use fusion::navigator::{Input, Navigator};
 use msgs::{Channel, GnssSample, GnssSatellite, NavSolution, Record, TruthSample};
 use nalgebra::{Matrix3, Vector3};
 
@@ -398,18 +398,7 @@ pub fn compare(nav: &Navigator, truth: &TruthSample, epoch_ns: i64) -> RunPoint 
 /// Push one message into the navigator (truth and outputs are ignored). Errors name the
 /// channel and time. Returns the solution an IMU sample produced.
 pub fn feed(nav: &mut Navigator, msg: &Record) -> Result<Option<NavSolution>, OfflineError> {
-    let r = match msg {
-        Record::Imu(m) => nav.push_imu(m),
-        Record::StarTracker(m) => nav.push_star_tracker(m).map(|()| None),
-        Record::Gnss(m) => nav.push_gnss(m).map(|()| None),
-        Record::Odometer(m) => nav.push_odometer(m).map(|()| None),
-        Record::Baro(m) => nav.push_baro(m).map(|()| None),
-        Record::SensorAlive(e) => {
-            nav.set_sensor_alive(e.sensor as usize, e.alive);
-            Ok(None)
-        }
-        Record::Truth(_) | Record::Nav(_) | Record::Status(_) => Ok(None),
-    };
+    let r = Input::from_record(msg).map_or(Ok(None), |input| nav.push(input));
     r.map_err(|source| OfflineError::Rejected {
         topic: msg.topic(),
         time_ns: msg.time_ns(),
