@@ -81,12 +81,14 @@
 //! - `imu_time`: IMU time continuity (bridged gaps, confirmed discontinuities).
 //! - `channels`: redundant IMU channels with fault detection (paper 004).
 //! - `align`: coarse alignment and the start of navigation.
+//! - `core`: the replayable state as one `Clone` value; a checkpoint is `(time, Core)`.
 //! - `buffer`, `obs`: the delayed-fusion queues and logs, and the observations they hold.
 //! - `replay`: the navigating IMU step, checkpoints and the replay of late samples.
 //! - `update`: one gated measurement update and the counters folded from it.
 //! - `gnss`, `star`, `odometer`, `baro`, `zupt`: the aiding updates per sensor.
 //! - `output`: navigation mode and the `msgs::NavSolution`.
-//! - `health`: counters that are not per-sensor slots.
+//! - `health`: update outcomes folded into the counters, with an explicit tally (a sample
+//!   counts the first time it is fused, not again in a replay).
 
 use crate::ConfigError;
 use crate::alignment::{self, Accumulator};
