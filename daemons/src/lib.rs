@@ -1,19 +1,25 @@
 //! Sextant's real-time runtime: the fusion daemon (filter thread and recorder), its
 //! configuration, the recording format and reader, and the process glue around them.
 //!
+//! - [`bus_check`]: one bus per prefix (who is on it; is the prefix valid).
 //! - [`config`]: the system configuration (`config/sextant.toml`) and the filter tuning file.
 //! - [`daemon`]: the fusion daemon's WaitSet loop.
 //! - [`recorder`]: the MCAP writer thread.
 //! - [`recording`]: the bounded, corruption-tolerant reader of those recordings.
+//! - [`exit_report`]: the fusion daemon's final counters, read by `sextant run`.
 //! - [`foxglove`]: the solution on Foxglove's well-known schemas.
 //! - [`signals`]: SIGINT/SIGTERM to a stop flag.
+//! - [`logging`]: the processes' log, whose failed writes are never fatal.
 //! - [`supervisor`]: `sextant run`'s process supervisor (start, restart, ordered stop, status).
 //!
 //! The offline lab (experiments, reports, analysis, plots) is the `sextant-lab` crate.
 
+pub mod bus_check;
 pub mod config;
 pub mod daemon;
+pub mod exit_report;
 pub mod foxglove;
+pub mod logging;
 pub mod recorder;
 pub mod recording;
 pub mod signals;

@@ -24,8 +24,17 @@ pub struct SignalError {
     pub source: nix::Error,
 }
 
-/// Install the SIGINT and SIGTERM handlers; returns the flag they set.
+/// Install the SIGINT and SIGTERM handlers, and ignore SIGXFSZ (a write beyond the file-size
+/// limit then fails with EFBIG, which the recorder handles like a full disk, instead of killing
+/// the process); returns the flag the handlers set.
 pub fn install() -> Result<&'static AtomicBool, SignalError> {
+    // SAFETY: SIG_IGN installs no code.
+    unsafe { nix::sys::signal::signal(Signal::SIGXFSZ, SigHandler::SigIgn) }.map_err(|source| {
+        SignalError {
+            signal: "SIGXFSZ",
+            source,
+        }
+    })?;
     let action = SigAction::new(
         SigHandler::Handler(on_signal),
         SaFlags::empty(),

@@ -88,14 +88,31 @@ pub fn sleep_until_mono(target_ns: u64) -> bool {
     }
 }
 
-/// Log to stderr, filter from `RUST_LOG` (default `info`).
+/// Log to stderr, filter from `RUST_LOG` (default `info`). A failed write (the log file on a
+/// full disk) is dropped, never fatal: `tracing-subscriber` would report it with `eprintln!`,
+/// which panics when stderr is the failing file.
 pub fn init_logging() {
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
     let _ = tracing_subscriber::fmt()
         .with_env_filter(filter)
-        .with_writer(std::io::stderr)
+        .with_writer(|| LossyStderr)
+        .log_internal_errors(false)
         .try_init();
+}
+
+/// stderr whose write errors are ignored (reported as success).
+struct LossyStderr;
+
+impl std::io::Write for LossyStderr {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let _ = std::io::stderr().write_all(buf);
+        Ok(buf.len())
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        let _ = std::io::stderr().flush();
+        Ok(())
+    }
 }
 
 /// What a driver run did.

@@ -19,7 +19,10 @@
 //! Foxglove conversion, signals, supervisor) are those of `sextant-daemons`, re-exported here under the
 //! same names.
 
-pub use sextant_daemons::{config, daemon, foxglove, recorder, recording, signals, supervisor};
+pub use sextant_daemons::{
+    bus_check, config, daemon, exit_report, foxglove, logging, recorder, recording, signals,
+    supervisor,
+};
 
 pub mod analysis;
 pub mod bench;
