@@ -25,6 +25,19 @@ pub enum ReportError {
     /// The recording could not be opened.
     #[error(transparent)]
     Recording(#[from] RecordingError),
+    /// The file is a readable MCAP but holds no Sextant message (another program's recording,
+    /// or an empty one): there is nothing to report on.
+    #[error(
+        "{path} holds no Sextant message ({messages} messages on other topics{topics}): not a Sextant recording, or an empty one"
+    )]
+    NotSextant {
+        /// The file.
+        path: PathBuf,
+        /// Messages it holds on topics Sextant does not know.
+        messages: u64,
+        /// `: a, b, …` — the first of those topics, or empty.
+        topics: String,
+    },
     /// Writing an output file failed.
     #[error("cannot write {path}: {detail}")]
     Write {
@@ -267,6 +280,8 @@ pub fn report(path: &Path, out_dir: &Path) -> Result<ReportSummary, ReportError>
     let mut times: [Vec<i64>; MAX_SENSORS] = Default::default();
     let mut alive: Vec<(i64, u32, bool)> = Vec::new();
     let mut t_start = i64::MAX;
+    let (mut sextant_records, mut foreign) = (0u64, 0u64);
+    let mut foreign_topics: Vec<String> = Vec::new();
     for e in &mut rec {
         let e = match e {
             Ok(e) => e,
@@ -276,7 +291,14 @@ pub fn report(path: &Path, out_dir: &Path) -> Result<ReportSummary, ReportError>
                 break;
             }
         };
-        let Some(r) = e.record else { continue };
+        let Some(r) = e.record else {
+            foreign += 1;
+            if foreign_topics.len() < 5 && !foreign_topics.iter().any(|t| **t == *e.topic) {
+                foreign_topics.push(e.topic.to_string());
+            }
+            continue;
+        };
+        sextant_records += 1;
         let t = r.header().time_ns;
         if t > 0 {
             t_start = t_start.min(t);
@@ -297,6 +319,17 @@ pub fn report(path: &Path, out_dir: &Path) -> Result<ReportSummary, ReportError>
         }
     }
     s.recording_complete = rec.is_complete();
+    if sextant_records == 0 {
+        return Err(ReportError::NotSextant {
+            path: path.to_path_buf(),
+            messages: foreign,
+            topics: if foreign_topics.is_empty() {
+                String::new()
+            } else {
+                format!(": {}", foreign_topics.join(", "))
+            },
+        });
+    }
     if t_start == i64::MAX {
         t_start = 0;
     }
