@@ -199,7 +199,7 @@ pub struct DaemonOptions {
 }
 
 /// Totals of a finished run.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct DaemonReport {
     /// IMU samples received.
     pub imu_received: u64,
@@ -209,6 +209,8 @@ pub struct DaemonReport {
     pub solutions_published: u64,
     /// Recorder totals.
     pub recorder: RecorderStats,
+    /// Files of the recording, in order (more than one when writing failed and resumed).
+    pub segments: Vec<PathBuf>,
 }
 
 struct State<'a, E: NavEngine> {
@@ -501,12 +503,14 @@ pub fn run<E: NavEngine>(
     st.publish_status();
     let report_base = (st.imu_received, st.solutions, st.published);
     let State { recorder, .. } = st;
+    let segments = recorder.segments();
     let recorder = recorder.finish()?;
     Ok(DaemonReport {
         imu_received: report_base.0,
         solutions: report_base.1,
         solutions_published: report_base.2,
         recorder,
+        segments,
     })
 }
 

@@ -18,6 +18,14 @@
 //! - zstd chunks, closed at the chunk size and at least every `flush_interval`, so that after a
 //!   crash everything up to the last complete chunk is readable (read with
 //!   `mcap::read::Options::IgnoreEndMagic`).
+//!
+//! A write that fails (full disk, I/O error) ends the current file: the MCAP writer's state is
+//! undefined after an I/O error, and what reached the disk stays readable up to its last
+//! complete chunk. The recorder then counts every record as dropped and, at most once per
+//! [`RESUME_RETRY`], tries to open the next **segment** ([`segment_path`]:
+//! `recording.part2.mcap`, `recording.part3.mcap`, …; each a complete MCAP with the metadata,
+//! schemas and channels of the first), so that the recording resumes by itself when space
+//! returns. [`Recorder::segments`] lists the files written.
 
 use crate::foxglove;
 use mcap::{WriteOptions, Writer};
@@ -28,9 +36,9 @@ use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError, sync_channel};
+use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
@@ -117,11 +125,41 @@ impl Default for RecorderOptions {
     }
 }
 
+/// After a failed write, how often the recorder tries to open the next segment (wall time).
+pub const RESUME_RETRY: Duration = Duration::from_secs(1);
+
+/// The `n`-th segment of the recording `path` (n from 1): `path` itself, then
+/// `<stem>.part<n>.<ext>` (`recording.mcap` → `recording.part2.mcap`), written after a failed
+/// write once the disk accepts data again.
+pub fn segment_path(path: &Path, n: usize) -> PathBuf {
+    if n <= 1 {
+        return path.to_path_buf();
+    }
+    let stem = path
+        .file_stem()
+        .map_or_else(String::new, |s| s.to_string_lossy().into_owned());
+    let name = match path.extension() {
+        Some(ext) => format!("{stem}.part{n}.{}", ext.to_string_lossy()),
+        None => format!("{stem}.part{n}"),
+    };
+    path.with_file_name(name)
+}
+
 #[derive(Default)]
 struct Counters {
     written: AtomicU64,
     dropped: AtomicU64,
     errors: AtomicU64,
+    /// Segments opened, in order.
+    segments: Mutex<Vec<PathBuf>>,
+}
+
+impl Counters {
+    fn add_segment(&self, path: &Path) {
+        if let Ok(mut v) = self.segments.lock() {
+            v.push(path.to_path_buf());
+        }
+    }
 }
 
 /// Totals of a finished recording.
@@ -167,14 +205,34 @@ struct Sink {
 
 impl Sink {
     fn create(path: &Path, opts: &RecorderOptions) -> Result<Self, RecorderError> {
-        let mcap_err = |e: mcap::McapError| RecorderError::Mcap {
-            path: path.to_path_buf(),
-            detail: error_chain(&e),
-        };
         let file = File::create(path).map_err(|source| RecorderError::Create {
             path: path.to_path_buf(),
             source,
         })?;
+        Self::with_file(file, path, opts)
+    }
+
+    /// Open a further segment: a new file only (never one that exists), removed again when its
+    /// header cannot be written (the disk is still full), so that failed attempts leave nothing.
+    fn create_segment(path: &Path, opts: &RecorderOptions) -> Result<Self, RecorderError> {
+        let file = File::options()
+            .write(true)
+            .create_new(true)
+            .open(path)
+            .map_err(|source| RecorderError::Create {
+                path: path.to_path_buf(),
+                source,
+            })?;
+        Self::with_file(file, path, opts).inspect_err(|_| {
+            let _ = std::fs::remove_file(path);
+        })
+    }
+
+    fn with_file(file: File, path: &Path, opts: &RecorderOptions) -> Result<Self, RecorderError> {
+        let mcap_err = |e: mcap::McapError| RecorderError::Mcap {
+            path: path.to_path_buf(),
+            detail: error_chain(&e),
+        };
         let mut writer = WriteOptions::new()
             .profile("")
             .library(concat!("sextant-daemons ", env!("CARGO_PKG_VERSION")))
@@ -372,23 +430,74 @@ impl Sink {
 }
 
 /// Count a write failure: the failing record and every message still in the unflushed chunk
-/// are lost. After the first failure the sink is abandoned (the MCAP writer's state is undefined
-/// after an I/O error); everything that follows is counted as dropped.
+/// are lost. The sink is then abandoned (the MCAP writer's state is undefined after an I/O
+/// error); everything that follows is counted as dropped until a new segment opens.
 fn count_failure(counters: &Counters, lost: u64, e: &RecorderError) {
     counters.errors.fetch_add(1, Ordering::Relaxed);
     counters.dropped.fetch_add(lost, Ordering::Relaxed);
-    tracing::error!("recorder: {e}; recording stopped, further records are counted as dropped");
+    tracing::error!(
+        "recorder: {e}; recording interrupted, records are counted as dropped until a new segment can be written"
+    );
+}
+
+/// Where the writer thread opens its next segment after a failure.
+struct Resume {
+    /// The recording's first segment.
+    path: PathBuf,
+    opts: RecorderOptions,
+    /// Number of the next segment to try.
+    next: usize,
+    last_attempt: Instant,
+    /// Records dropped when the current outage began (for the message on resuming).
+    dropped_at_failure: u64,
+    /// Segments are regular files next to the first: not when the recording is a device
+    /// (`/dev/full`, a pipe), whose directory is no place for new files.
+    enabled: bool,
+}
+
+impl Resume {
+    /// Try the next free segment name, at most once per [`RESUME_RETRY`].
+    fn attempt(&mut self, counters: &Counters) -> Option<Sink> {
+        if !self.enabled || self.last_attempt.elapsed() < RESUME_RETRY {
+            return None;
+        }
+        self.last_attempt = Instant::now();
+        while segment_path(&self.path, self.next).exists() {
+            self.next += 1;
+        }
+        let p = segment_path(&self.path, self.next);
+        match Sink::create_segment(&p, &self.opts) {
+            Ok(sink) => {
+                self.next += 1;
+                counters.add_segment(&p);
+                let lost = counters.dropped.load(Ordering::Relaxed) - self.dropped_at_failure;
+                tracing::warn!(
+                    "recorder: recording resumed in {} ({lost} records dropped while it could not write)",
+                    p.display()
+                );
+                Some(sink)
+            }
+            Err(e) => {
+                tracing::debug!("recorder: still cannot write: {e}");
+                None
+            }
+        }
+    }
 }
 
 fn run(
-    sink: Sink,
+    sink: Option<Sink>,
     rx: Receiver<Item>,
     counters: Arc<Counters>,
-    flush_interval: Duration,
+    mut resume: Resume,
 ) -> Result<(), RecorderError> {
+    let flush_interval = resume.opts.flush_interval;
     let mut last_flush = Instant::now();
-    let mut sink = Some(sink);
+    let mut sink = sink;
     loop {
+        if sink.is_none() {
+            sink = resume.attempt(&counters);
+        }
         match rx.recv_timeout(flush_interval) {
             Ok(item) => match sink.as_mut() {
                 Some(sk) => match sk.write(&item) {
@@ -397,6 +506,8 @@ fn run(
                     }
                     Err(e) => {
                         count_failure(&counters, 1 + sk.unflushed, &e);
+                        resume.dropped_at_failure = counters.dropped.load(Ordering::Relaxed);
+                        resume.last_attempt = Instant::now();
                         sink = None;
                     }
                 },
@@ -413,63 +524,97 @@ fn run(
                 && let Err(e) = sk.flush()
             {
                 count_failure(&counters, sk.unflushed, &e);
+                resume.dropped_at_failure = counters.dropped.load(Ordering::Relaxed);
+                resume.last_attempt = Instant::now();
                 sink = None;
             }
         }
     }
-    match sink {
-        Some(sk) => {
-            let unflushed = sk.unflushed;
-            sk.finish()
-                .inspect_err(|e| count_failure(&counters, unflushed, e))
+    // A failure to finish is one more failed write: counted (records lost, error), not
+    // raised, so that the caller still gets the totals.
+    if let Some(sk) = sink {
+        let unflushed = sk.unflushed;
+        if let Err(e) = sk.finish() {
+            count_failure(&counters, unflushed, &e);
         }
-        None => Ok(()),
     }
+    Ok(())
 }
 
 impl Recorder {
     /// Create the MCAP file at `path` (header, schemas, channels) and start the writer thread.
     pub fn start(path: &Path, opts: &RecorderOptions) -> Result<Self, RecorderError> {
         let sink = Sink::create(path, opts)?;
-        Self::spawn(sink, path, opts)
+        let counters = Arc::new(Counters::default());
+        counters.add_segment(path);
+        Self::spawn(Some(sink), counters, path, opts, None)
     }
 
     /// Like [`Recorder::start`], but when the recording cannot be created (unwritable path, full
-    /// disk) log the error and return a recorder that counts every record as dropped, so that
-    /// the fusion keeps navigating without a recording. [`Recorder::failure`] tells why.
+    /// disk) log the error and return a recorder that counts every record as dropped and keeps
+    /// trying to open a segment (`recording.part2.mcap`, …) once per [`RESUME_RETRY`], so that
+    /// the fusion keeps navigating without a recording and records again when it can.
+    /// [`Recorder::failure`] tells why it could not start.
     pub fn start_or_degrade(path: &Path, opts: &RecorderOptions) -> Self {
-        match Sink::create(path, opts).and_then(|sink| Self::spawn(sink, path, opts)) {
+        let counters = Arc::new(Counters::default());
+        let (sink, failure) = match Sink::create(path, opts) {
+            Ok(sink) => {
+                counters.add_segment(path);
+                (Some(sink), None)
+            }
+            Err(e) => {
+                tracing::error!(
+                    "{e}; navigating without a recording (records counted as dropped) until a segment can be written"
+                );
+                counters.errors.fetch_add(1, Ordering::Relaxed);
+                (None, Some(e.to_string()))
+            }
+        };
+        match Self::spawn(sink, counters.clone(), path, opts, failure.clone()) {
             Ok(r) => r,
             Err(e) => {
                 tracing::error!("{e}; navigating without a recording (records counted as dropped)");
-                let counters = Arc::new(Counters::default());
-                counters.errors.fetch_add(1, Ordering::Relaxed);
+                if failure.is_none() {
+                    counters.errors.fetch_add(1, Ordering::Relaxed);
+                }
                 Self {
                     tx: None,
                     counters,
                     thread: None,
                     path: path.to_path_buf(),
-                    failure: Some(e.to_string()),
+                    failure: Some(failure.unwrap_or_else(|| e.to_string())),
                 }
             }
         }
     }
 
-    fn spawn(sink: Sink, path: &Path, opts: &RecorderOptions) -> Result<Self, RecorderError> {
+    fn spawn(
+        sink: Option<Sink>,
+        counters: Arc<Counters>,
+        path: &Path,
+        opts: &RecorderOptions,
+        failure: Option<String>,
+    ) -> Result<Self, RecorderError> {
         let (tx, rx) = sync_channel(opts.queue_capacity);
-        let counters = Arc::new(Counters::default());
         let c = counters.clone();
-        let flush = opts.flush_interval;
+        let resume = Resume {
+            path: path.to_path_buf(),
+            opts: opts.clone(),
+            next: 2,
+            last_attempt: Instant::now(),
+            dropped_at_failure: 0,
+            enabled: std::fs::metadata(path).map_or(true, |m| m.is_file()),
+        };
         let thread = std::thread::Builder::new()
             .name("recorder".into())
-            .spawn(move || run(sink, rx, c, flush))
+            .spawn(move || run(sink, rx, c, resume))
             .map_err(|e| RecorderError::Thread(e.to_string()))?;
         Ok(Self {
             tx: Some(tx),
             counters,
             thread: Some(thread),
             path: path.to_path_buf(),
-            failure: None,
+            failure,
         })
     }
 
@@ -527,9 +672,19 @@ impl Recorder {
         self.failure.as_deref()
     }
 
-    /// The recording's path.
+    /// The recording's path (its first segment).
     pub fn path(&self) -> &Path {
         &self.path
+    }
+
+    /// The segments opened so far, in order (the first is [`Recorder::path`] unless it could
+    /// not be created).
+    pub fn segments(&self) -> Vec<PathBuf> {
+        self.counters
+            .segments
+            .lock()
+            .map(|v| v.clone())
+            .unwrap_or_default()
     }
 
     /// Write what is queued, finish the file (summary and index) and stop the thread.

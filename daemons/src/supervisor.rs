@@ -9,17 +9,17 @@
 //! The policy is in plain functions ([`on_exit`], [`driver_args`], [`fusion_args`],
 //! [`recording_path`]); [`supervise`] is the event loop that applies it to real processes.
 
+use crate::exit_report::ExitReport;
 use msgs::ipc::Bus;
 use msgs::{NavMode, SensorId, Status};
 use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
 use std::collections::HashMap;
 use std::future::Future;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::{ExitStatus, Stdio};
-use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 use tokio::sync::mpsc;
 
@@ -86,6 +86,9 @@ pub struct RunOutcome {
     pub driver_restarts: Vec<(String, u32)>,
     /// Recordings written, in order: the first fusion daemon's, then one per restart.
     pub recordings: Vec<PathBuf>,
+    /// The exit reports of the fusion daemons that reported (one per clean exit, in order);
+    /// a daemon that crashed left none.
+    pub fusion_reports: Vec<ExitReport>,
 }
 
 impl RunOutcome {
@@ -251,6 +254,30 @@ struct Slot {
     restarts: u32,
     finished: bool,
     pid: Option<i32>,
+    /// For the fusion daemon: its stdout is read (and copied into its log) for the exit
+    /// reports of each of its runs ([`crate::exit_report`]).
+    reports: Option<Arc<Mutex<Vec<ExitReport>>>>,
+}
+
+/// Copy a child's stdout into its log file line by line, keeping its exit reports. A failed
+/// write to the log (full disk) loses that line only: the reports stay in memory.
+fn read_reports(
+    pipe: std::io::PipeReader,
+    mut log: std::fs::File,
+    reports: Arc<Mutex<Vec<ExitReport>>>,
+) -> std::thread::JoinHandle<()> {
+    std::thread::spawn(move || {
+        use std::io::{BufRead, Write};
+        for line in std::io::BufReader::new(pipe).lines() {
+            let Ok(line) = line else { break };
+            if let Some(r) = ExitReport::parse(&line)
+                && let Ok(mut v) = reports.lock()
+            {
+                v.push(r);
+            }
+            let _ = writeln!(log, "{line}");
+        }
+    })
 }
 
 fn spawn(idx: usize, slot: &mut Slot, tx: &Exits) -> Result<(), SuperviseError> {
@@ -267,10 +294,26 @@ fn spawn(idx: usize, slot: &mut Slot, tx: &Exits) -> Result<(), SuperviseError> 
         path: spec.log.clone(),
         source,
     })?;
+    // The fusion daemon's stdout goes through a pipe (its exit report), the rest to the log.
+    let mut reader = None;
+    let stdout = match &slot.reports {
+        Some(reports) => {
+            let (r, w) = std::io::pipe().map_err(|source| SuperviseError::Spawn {
+                program: spec.program.clone(),
+                source,
+            })?;
+            reader = Some((r, reports.clone()));
+            Stdio::from(w)
+        }
+        None => Stdio::from(log.try_clone().map_err(|source| SuperviseError::Log {
+            path: spec.log.clone(),
+            source,
+        })?),
+    };
     let mut cmd = tokio::process::Command::new(&spec.program);
     cmd.args(&spec.args)
         .stdin(Stdio::null())
-        .stdout(log)
+        .stdout(stdout)
         .stderr(log_err)
         // Own process group: a terminal Ctrl-C reaches only `sextant`, which stops the children
         // in order (drivers, then fusion, so that the recorder sees everything).
@@ -286,11 +329,18 @@ fn spawn(idx: usize, slot: &mut Slot, tx: &Exits) -> Result<(), SuperviseError> 
         program: spec.program.clone(),
         source,
     })?;
+    // The pipe's write end lives on in the child only: EOF when it exits.
+    drop(cmd);
+    let copier = reader.map(|(r, reports)| read_reports(r, log, reports));
     slot.pid = child.id().map(|p| p as i32);
     tracing::debug!("started {} (pid {:?})", spec.name, slot.pid);
     let tx = tx.clone();
     tokio::spawn(async move {
         let r = child.wait().await;
+        // The exit is reported once its stdout is read to the end (the exit report with it).
+        if let Some(c) = copier {
+            let _ = tokio::task::spawn_blocking(move || c.join()).await;
+        }
         let _ = tx.send((idx, r));
     });
     Ok(())
@@ -394,14 +444,12 @@ fn status_thread(prefix: String, stop: Arc<AtomicBool>) -> std::thread::JoinHand
                     last = Some(st);
                 }
                 if let Some(st) = last {
-                    let mut err = std::io::stderr().lock();
-                    let _ = write!(err, "{}", status_line(&st));
-                    let _ = err.flush();
+                    crate::logging::stderr_text(&status_line(&st));
                     printed = true;
                 }
             }
             if printed {
-                eprintln!();
+                crate::logging::stderr_text("\n");
             }
             Ok(())
         };
@@ -425,10 +473,15 @@ pub async fn supervise(
         restarts: 0,
         finished: false,
         pid: None,
+        reports: None,
     };
     let mut slots: Vec<Slot> = plan.drivers.iter().map(new_slot).collect();
     let fusion_idx = slots.len();
-    slots.push(new_slot(&plan.fusion));
+    let fusion_reports = Arc::new(Mutex::new(Vec::new()));
+    slots.push(Slot {
+        reports: Some(fusion_reports.clone()),
+        ..new_slot(&plan.fusion)
+    });
     let driver_idx: Vec<usize> = (0..fusion_idx).collect();
 
     let (tx, mut rx) = mpsc::unbounded_channel();
@@ -501,7 +554,7 @@ pub async fn supervise(
                     }
                     slot.restarts += 1;
                     let next = recording_path(&plan.out, slot.restarts as usize);
-                    eprintln!();
+                    crate::logging::stderr_text("\n");
                     tracing::warn!(
                         "sextant-fusion died ({r:?}): restart {}/{max}, new recording {} ({} stays readable up to its last chunk)",
                         slot.restarts, next.display(),
@@ -527,7 +580,7 @@ pub async fn supervise(
                     }
                     ExitAction::Restart(delay) => {
                         slot.restarts += 1;
-                        eprintln!();
+                        crate::logging::stderr_text("\n");
                         tracing::warn!("{} died ({r:?}): restart {}/{max} in {delay:?}", slot.spec.name, slot.restarts);
                         let respawn_tx = respawn_tx.clone();
                         tokio::spawn(async move {
@@ -548,7 +601,7 @@ pub async fn supervise(
         }
     };
     if end != End::Completed {
-        eprintln!();
+        crate::logging::stderr_text("\n");
         tracing::info!("stopping ({end:?})");
     }
     // Drivers first, then the fusion daemon (which drains, finishes the recording and exits).
@@ -586,6 +639,7 @@ pub async fn supervise(
             .map(|s| (s.spec.name.clone(), s.restarts))
             .collect(),
         recordings,
+        fusion_reports: fusion_reports.lock().map(|v| v.clone()).unwrap_or_default(),
     })
 }
 

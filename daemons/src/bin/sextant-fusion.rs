@@ -1,9 +1,11 @@
 //! The fusion daemon: `sextant-fusion --config FILE --prefix P --out FILE.mcap [--speed X]`.
-//! Runs until SIGINT/SIGTERM, then finishes the recording and exits 0.
+//! Runs until SIGINT/SIGTERM, then finishes the recording, prints its final counters as one
+//! line on stdout (`sextant_daemons::exit_report`) and exits 0. It never overwrites an existing
+//! recording.
 
 use anyhow::Context;
 use clap::Parser;
-use sextant_daemons::{config, daemon, signals};
+use sextant_daemons::{bus_check, config, daemon, exit_report, logging, signals};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
@@ -26,13 +28,8 @@ struct Args {
 }
 
 fn main() -> anyhow::Result<()> {
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
-        )
-        .with_writer(std::io::stderr)
-        .init();
+    // A failed log write (full disk) is never fatal.
+    logging::init();
     // iceoryx2's own log: warnings and errors only unless IOX2_LOG_LEVEL says otherwise.
     iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
     let args = Args::parse();
@@ -44,6 +41,14 @@ fn main() -> anyhow::Result<()> {
     let prefix = args
         .prefix
         .unwrap_or_else(|| cfg.system.system.prefix.clone());
+    bus_check::validate_prefix(&prefix).with_context(|| format!("--prefix {prefix:?}"))?;
+    // Never overwrite a recording (another run's, or one still open by another process).
+    if std::fs::metadata(&args.out).is_ok_and(|m| m.is_file() && m.len() > 0) {
+        anyhow::bail!(
+            "{} exists: a recording is never overwritten; remove it or give another --out",
+            args.out.display()
+        );
+    }
     if let Some(dir) = args.out.parent()
         && !dir.as_os_str().is_empty()
     {
@@ -76,7 +81,7 @@ fn main() -> anyhow::Result<()> {
         report.recorder.written,
         report.recorder.dropped
     );
-    if report.recorder.errors > 0 {
+    if report.recorder.errors > 0 || report.recorder.dropped > 0 {
         tracing::error!(
             "the recording {} is incomplete: {} write errors, {} records dropped",
             opts.out.display(),
@@ -84,6 +89,18 @@ fn main() -> anyhow::Result<()> {
             report.recorder.dropped
         );
     }
+    let exit = exit_report::ExitReport {
+        recording: opts.out.clone(),
+        imu_received: report.imu_received,
+        solutions: report.solutions,
+        solutions_published: report.solutions_published,
+        records_written: report.recorder.written,
+        records_dropped: report.recorder.dropped,
+        recorder_errors: report.recorder.errors,
+        segments: report.segments.clone(),
+        log_lines_lost: logging::lost_lines(),
+    };
+    logging::stdout_line(&exit.line());
     Ok(())
 }
 

@@ -187,16 +187,21 @@ enum CalibrateWhat {
     },
 }
 
+/// `println!` that never panics: a failed write to stdout (full disk, closed pipe) is ignored.
+macro_rules! out {
+    ($($t:tt)*) => { sextant_lab::logging::stdout_line(&format!($($t)*)) };
+}
+
+/// `eprintln!` that never panics: a failed write to stderr (the log on a full disk) is counted.
+macro_rules! err {
+    ($($t:tt)*) => { sextant_lab::logging::stderr_text(&(format!($($t)*) + "\n")) };
+}
+
 const DEFAULT_CONFIG: &str = "config/sextant.toml";
 
 fn main() -> anyhow::Result<()> {
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
-        )
-        .with_writer(std::io::stderr)
-        .init();
+    // A failed log write (full disk) is never fatal.
+    sextant_lab::logging::init();
     // iceoryx2's own log: warnings and errors only unless IOX2_LOG_LEVEL says otherwise.
     iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
     let cli = Cli::parse();
@@ -227,8 +232,8 @@ fn main() -> anyhow::Result<()> {
                 window_s: window,
             };
             let s = sextant_lab::calibrate::boresight(&opts)?;
-            println!("{}", sextant_lab::calibrate::table(&s));
-            println!("summary.json and plot in {}", out.display());
+            out!("{}", sextant_lab::calibrate::table(&s));
+            out!("summary.json and plot in {}", out.display());
             Ok(())
         }
         Command::Import(ImportArgs {
@@ -252,13 +257,13 @@ fn main() -> anyhow::Result<()> {
                 elevation_mask_deg: elevation_mask,
             };
             let s = sextant_lab::import_rinex::import_rinex(&opts)?;
-            println!("{}", sextant_lab::import_rinex::format_table(&s, &out));
+            out!("{}", sextant_lab::import_rinex::format_table(&s, &out));
             Ok(())
         }
         Command::Report(args) => {
             let s = sextant_lab::report::report(&args.recording, &args.out)?;
-            println!("{}", sextant_lab::report::format_table(&s));
-            println!(
+            out!("{}", sextant_lab::report::format_table(&s));
+            out!(
                 "REPORT.md, summary.json and plots in {}",
                 args.out.display()
             );
@@ -293,7 +298,7 @@ fn ensure_binaries(bin_dir: &Path, names: &[String]) -> anyhow::Result<()> {
     ) {
         // The directory of the `dev` profile is called `debug`.
         let profile = if profile == "debug" { "dev" } else { profile };
-        eprintln!(
+        err!(
             "sextant: building the process binaries first ({}): cargo build --workspace --bins --profile {profile}",
             first.join(", ")
         );
@@ -351,8 +356,8 @@ fn bench(args: BenchArgs) -> anyhow::Result<()> {
         quick: args.quick,
     };
     let summary = bench::run(&opts)?;
-    println!("{}", bench::table(&summary));
-    println!("summary and histogram in {}", args.out.display());
+    out!("{}", bench::table(&summary));
+    out!("summary and histogram in {}", args.out.display());
     Ok(())
 }
 
@@ -382,8 +387,8 @@ fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
         .unwrap_or_else(|| PathBuf::from("out/experiment").join(&args.name));
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     let summary = experiments::run_by_name(&args.name, &out, true)?;
-    println!("{}", summary.table());
-    println!("summary and plots in {}", out.display());
+    out!("{}", summary.table());
+    out!("summary and plots in {}", out.display());
     Ok(())
 }
 
@@ -404,14 +409,140 @@ fn load_config(args: &RunArgs, out: &Path) -> anyhow::Result<config::LoadedConfi
     Ok(config::load(&path)?)
 }
 
+/// Files of an earlier run in `dir` (its recording or summary), when there is one.
+fn earlier_run(dir: &Path) -> Option<PathBuf> {
+    let rd = std::fs::read_dir(dir).ok()?;
+    rd.flatten().map(|e| e.path()).find(|p| {
+        let name = p
+            .file_name()
+            .map(|n| n.to_string_lossy())
+            .unwrap_or_default();
+        name == "summary.json" || (name.starts_with("recording") && name.ends_with(".mcap"))
+    })
+}
+
+/// Name of the lock file that a run holds in its output directory.
+const OUT_LOCK: &str = ".sextant-run.lock";
+
+/// Take the output directory of a run: create it and hold its lock file for the whole run. An
+/// earlier run's files are never removed: when `out` holds one (or another run holds its
+/// lock), a `--out` given explicitly is refused, and the default is replaced by the first free
+/// `OUT-2`, `OUT-3`, … (printed).
+fn claim_out_dir(out: &Path, explicit: bool) -> anyhow::Result<(PathBuf, Option<std::fs::File>)> {
+    for k in 1..=1000 {
+        let dir = if k == 1 {
+            out.to_path_buf()
+        } else {
+            let name = out
+                .file_name()
+                .map(|n| n.to_string_lossy())
+                .unwrap_or_default();
+            out.with_file_name(format!("{name}-{k}"))
+        };
+        let busy = match earlier_run(&dir) {
+            Some(f) => Some(format!("it holds an earlier run ({})", f.display())),
+            None => {
+                std::fs::create_dir_all(&dir)
+                    .with_context(|| format!("create {}", dir.display()))?;
+                match std::fs::File::options()
+                    .create(true)
+                    .truncate(false)
+                    .write(true)
+                    .open(dir.join(OUT_LOCK))
+                {
+                    Ok(f) => match f.try_lock() {
+                        Ok(()) => {
+                            if k > 1 {
+                                tracing::warn!(
+                                    "{} holds an earlier run, which is kept: this run writes to {}",
+                                    out.display(),
+                                    dir.display()
+                                );
+                            }
+                            return Ok((dir, Some(f)));
+                        }
+                        Err(_) => Some("another sextant run is writing into it".to_string()),
+                    },
+                    // Cannot even create an empty file (e.g. read-only): run without the lock;
+                    // the fusion reports the unwritable recording and keeps navigating.
+                    Err(e) => {
+                        tracing::warn!("cannot create {}: {e}", dir.join(OUT_LOCK).display());
+                        return Ok((dir, None));
+                    }
+                }
+            }
+        };
+        if explicit {
+            bail!(
+                "--out {}: {}; it is kept — give another --out or remove it first",
+                dir.display(),
+                busy.unwrap_or_default()
+            );
+        }
+    }
+    bail!("no free output directory next to {}", out.display())
+}
+
+/// Hold the lock of a service prefix for the whole run (a file in the temporary directory), so
+/// that two runs started at the same moment cannot both find the prefix free.
+fn lock_prefix(prefix: &str) -> anyhow::Result<Option<std::fs::File>> {
+    let name: String = prefix
+        .chars()
+        .map(|c| if c == '/' { '%' } else { c })
+        .collect();
+    let path = std::env::temp_dir().join(format!("sextant-prefix-{name}.lock"));
+    let f = match std::fs::File::options()
+        .create(true)
+        .truncate(false)
+        .write(true)
+        .open(&path)
+    {
+        Ok(f) => f,
+        Err(e) => {
+            tracing::warn!("cannot create {}: {e}", path.display());
+            return Ok(None);
+        }
+    };
+    if f.try_lock().is_err() {
+        bail!(
+            "service prefix {prefix:?} is in use by another sextant run (it holds {}); give another --prefix",
+            path.display()
+        );
+    }
+    Ok(Some(f))
+}
+
+/// Write `text` to `path` atomically: a temporary file renamed over it, so that a full disk
+/// leaves no empty or half-written file (the temporary file is removed on failure).
+fn write_atomically(path: &Path, text: &str) -> std::io::Result<()> {
+    let tmp = path.with_extension("json.tmp");
+    let r = std::fs::write(&tmp, text).and_then(|()| std::fs::rename(&tmp, path));
+    if r.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    r
+}
+
+/// Exit status of `sextant run` when the run itself went well but its recording is incomplete
+/// (records dropped, write errors, or no final counters from the fusion daemon).
+const EXIT_RECORDING_INCOMPLETE: i32 = 3;
+
 async fn run(args: RunArgs) -> anyhow::Result<i32> {
     let wall_start = Instant::now();
+    // A file-size limit (ulimit -f) makes the summary's write fail with EFBIG, handled below,
+    // instead of killing the command by SIGXFSZ.
+    // SAFETY: SIG_IGN installs no code.
+    unsafe {
+        nix::sys::signal::signal(
+            nix::sys::signal::Signal::SIGXFSZ,
+            nix::sys::signal::SigHandler::SigIgn,
+        )
+    }?;
     // The output directory is needed before the config only for the embedded fallback, whose
     // default is the built-in `out/run`.
     let pre_out = args.out.clone().unwrap_or_else(|| PathBuf::from("out/run"));
     let cfg = load_config(&args, &pre_out)?;
     let rc = &cfg.system.run;
-    let out = args.out.clone().unwrap_or_else(|| rc.out.clone());
     let duration = args.duration.unwrap_or(rc.duration_s);
     if !(duration.is_finite() && duration > 0.0 && duration <= rc.max_duration_s) {
         bail!(
@@ -433,17 +564,8 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
         .prefix
         .clone()
         .unwrap_or_else(|| cfg.system.system.prefix.clone());
-    std::fs::create_dir_all(out.join("logs"))
-        .with_context(|| format!("create {}", out.display()))?;
-    let recording = out.join("recording.mcap");
-    // Recordings of an earlier run in this directory: recording.mcap and, after fusion restarts,
-    // recording.1.mcap, recording.2.mcap, ... (see `supervisor::recording_path`).
-    for k in 0..=64 {
-        let old = supervisor::recording_path(&out, k);
-        if old.exists() {
-            std::fs::remove_file(&old).with_context(|| format!("remove old {}", old.display()))?;
-        }
-    }
+    // A prefix that cannot name the services would make every process fail at start-up.
+    sextant_lab::bus_check::validate_prefix(&prefix).context("--prefix")?;
     if !(args.restart_delay.is_finite() && (0.0..=600.0).contains(&args.restart_delay)) {
         bail!(
             "--restart-delay must be within [0, 600] s, got {}",
@@ -452,10 +574,29 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
     }
     let restart_delay = Duration::from_secs_f64(args.restart_delay);
 
+    // One bus per prefix: remove what crashed processes left, then refuse when live processes
+    // still use the prefix (they would fuse each other's samples).
     let cleaned = msgs::ipc::cleanup_dead_nodes()?;
     if cleaned > 0 {
         tracing::info!("removed the shared memory of {cleaned} dead node(s) of an earlier run");
     }
+    let _prefix_lock = lock_prefix(&prefix)?;
+    let users = sextant_lab::bus_check::live_nodes_on(&prefix)?;
+    if !users.is_empty() {
+        let names: Vec<String> = users.iter().map(ToString::to_string).collect();
+        bail!(
+            "service prefix {prefix:?} is in use by live processes: {}; give another --prefix or stop them",
+            names.join(", ")
+        );
+    }
+
+    let (out, _out_lock) = claim_out_dir(
+        &args.out.clone().unwrap_or_else(|| rc.out.clone()),
+        args.out.is_some(),
+    )?;
+    std::fs::create_dir_all(out.join("logs"))
+        .with_context(|| format!("create {}", out.join("logs").display()))?;
+    let recording = out.join("recording.mcap");
 
     let bin_dir = std::env::current_exe()?
         .parent()
@@ -497,7 +638,7 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
         status_prefix: Some(prefix.clone()),
     };
 
-    eprintln!(
+    err!(
         "sextant run: scenario {} ({}), {duration} s at {speed}x, prefix {prefix}, output {}",
         scenario_path.display(),
         scen.name,
@@ -515,14 +656,57 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
     }
 
     let wall_s = wall_start.elapsed().as_secs_f64();
-    // The summary is of the last fusion's recording (the whole run when it never crashed).
+    // The counters are the fusion daemons' own (their exit reports), summed over restarts;
+    // the recording's last status predates a full disk or a crash. A daemon killed and
+    // restarted leaves no report (its recording is readable up to its last chunk, by design);
+    // the last one must report.
+    let reports = &outcome.fusion_reports;
+    let report_of = |rec: &Path| reports.iter().find(|r| r.recording == rec);
+    let last_reported = outcome
+        .recordings
+        .last()
+        .is_some_and(|r| report_of(r).is_some());
+    let sum = |f: fn(&sextant_lab::exit_report::ExitReport) -> u64| -> u64 {
+        reports.iter().map(f).sum()
+    };
+    let records_dropped = sum(|r| r.records_dropped);
+    let recorder_errors = sum(|r| r.recorder_errors);
+    let complete = last_reported && reports.iter().all(|r| r.recording_complete());
+    // Every file written: each fusion daemon's segments (several after a failed write).
+    let files: Vec<PathBuf> = outcome
+        .recordings
+        .iter()
+        .flat_map(|first| match report_of(first) {
+            Some(r) => r.segments.clone(),
+            None => vec![first.clone()],
+        })
+        .filter(|p| p.exists())
+        .collect();
+    // The table is of the last fusion's recording (the whole run when it never crashed).
     let recording = outcome.recordings.last().cloned().unwrap_or(recording);
-    if !recording.exists() {
-        bail!("no recording was written ({})", recording.display());
-    }
-    let a = analysis::analyze(&recording, &scen.gnss_outages)?;
-    println!("{}", analysis::format_table(&a.summary));
-    let mut json = serde_json::to_value(&a.summary)?;
+    let analysis = if recording.exists() {
+        match analysis::analyze(&recording, &scen.gnss_outages) {
+            Ok(a) => Some(a),
+            Err(e) => {
+                tracing::error!("analysis of {}: {e}", recording.display());
+                None
+            }
+        }
+    } else {
+        tracing::error!("no recording was written ({})", recording.display());
+        None
+    };
+    let mut json = match &analysis {
+        Some(a) => {
+            let mut summary = a.summary.clone();
+            if last_reported {
+                summary.records_dropped = records_dropped;
+            }
+            out!("{}", analysis::format_table(&summary));
+            serde_json::to_value(&summary)?
+        }
+        None => serde_json::json!({}),
+    };
     if let Some(m) = json.as_object_mut() {
         m.insert("run_wall_time_s".into(), wall_s.into());
         m.insert(
@@ -543,6 +727,13 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
                 .collect(),
         );
         m.insert(
+            "recording_files".into(),
+            files
+                .iter()
+                .map(|p| serde_json::Value::from(p.display().to_string()))
+                .collect(),
+        );
+        m.insert(
             "analysed_recording".into(),
             recording.display().to_string().into(),
         );
@@ -556,22 +747,74 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
                     .collect(),
             ),
         );
+        m.insert("recording_complete".into(), complete.into());
+        m.insert(
+            "counters_source".into(),
+            format!(
+                "exit reports of {} of {} fusion daemons",
+                reports.len(),
+                outcome.recordings.len()
+            )
+            .into(),
+        );
+        if last_reported {
+            m.insert("records_dropped".into(), records_dropped.into());
+            m.insert("records_written".into(), sum(|r| r.records_written).into());
+            m.insert("recorder_errors".into(), recorder_errors.into());
+            m.insert("solutions_computed".into(), sum(|r| r.solutions).into());
+            m.insert("log_lines_lost".into(), sum(|r| r.log_lines_lost).into());
+        }
     }
     let summary_path = out.join("summary.json");
-    std::fs::write(&summary_path, serde_json::to_string_pretty(&json)? + "\n")
-        .with_context(|| format!("write {}", summary_path.display()))?;
-    match plots::write_plots(&out, &a.series) {
-        Ok(files) => {
-            for f in files {
-                println!("  plot: {}", f.display());
+    let text = serde_json::to_string_pretty(&json)? + "\n";
+    let summary_written = match write_atomically(&summary_path, &text) {
+        Ok(()) => true,
+        Err(e) => {
+            tracing::error!(
+                "cannot write {}: {e}; the summary follows on stdout",
+                summary_path.display()
+            );
+            out!("{text}");
+            false
+        }
+    };
+    if let Some(a) = &analysis {
+        match plots::write_plots(&out, &a.series) {
+            Ok(files) => {
+                for f in files {
+                    out!("  plot: {}", f.display());
+                }
+            }
+            Err(e) => tracing::warn!("{e}"),
+        }
+    }
+    if summary_written {
+        out!("  summary: {}", summary_path.display());
+    }
+    out!("  run time: {wall_s:.1} s wall");
+    if !complete {
+        tracing::error!(
+            "the recording is incomplete: {}; files: {}",
+            if last_reported {
+                format!("{records_dropped} records dropped, {recorder_errors} write errors")
+            } else {
+                "the fusion daemon ended without reporting its counters".to_string()
+            },
+            files
+                .iter()
+                .map(|p| p.display().to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
+    Ok(match end {
+        End::Completed | End::Interrupted(_) if fusion_ok => {
+            if complete && summary_written && analysis.is_some() {
+                0
+            } else {
+                EXIT_RECORDING_INCOMPLETE
             }
         }
-        Err(e) => tracing::warn!("{e}"),
-    }
-    println!("  summary: {}", summary_path.display());
-    println!("  run time: {wall_s:.1} s wall");
-    Ok(match end {
-        End::Completed | End::Interrupted(_) if fusion_ok => 0,
         _ => 1,
     })
 }
@@ -586,11 +829,11 @@ fn replay(args: ReplayArgs) -> anyhow::Result<()> {
             config: args.config,
             progress: true,
         })?;
-        println!("{}", rp::format_offline_table(&s));
+        out!("{}", rp::format_offline_table(&s));
         let replayed = std::path::Path::new(&s.replayed_recording);
         let analysis = analysis::analyze(replayed, &[]).ok();
         if let Some(a) = &analysis {
-            println!("{}", analysis::format_table(&a.summary));
+            out!("{}", analysis::format_table(&a.summary));
             let _ = plots::write_plots(&args.out, &a.series);
         }
         let summary = serde_json::json!({
@@ -600,7 +843,7 @@ fn replay(args: ReplayArgs) -> anyhow::Result<()> {
         let path = args.out.join("summary.json");
         std::fs::write(&path, serde_json::to_string_pretty(&summary)?)
             .with_context(|| format!("writing {}", path.display()))?;
-        println!("summary in {}", path.display());
+        out!("summary in {}", path.display());
         if s.config_source == "embedded" && !s.bit_exact {
             bail!("the replay did not reproduce the recorded solution bit for bit");
         }
@@ -621,6 +864,6 @@ fn replay(args: ReplayArgs) -> anyhow::Result<()> {
         },
         stop,
     )?;
-    println!("{}", serde_json::to_string_pretty(&s)?);
+    out!("{}", serde_json::to_string_pretty(&s)?);
     Ok(())
 }
