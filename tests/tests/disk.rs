@@ -373,7 +373,21 @@ fn run_on_small_fs(
         }
     };
     let mut child = cmd.current_dir(&root).spawn().unwrap();
-    // Watch the live status (the shared memory is the host's, whatever the mounts).
+    // Watch the live status (the shared memory is the host's, whatever the mounts), once the
+    // run has started: before, the test's node would be a live user of the prefix, and the run
+    // would refuse to start.
+    let t0 = Instant::now();
+    while !processes_matching(&prefix)
+        .iter()
+        .any(|(_, c)| c.contains("sextant-fusion"))
+    {
+        assert!(
+            t0.elapsed() < Duration::from_secs(30),
+            "the run did not start"
+        );
+        assert!(child.try_wait().unwrap().is_none(), "the run ended at once");
+        std::thread::sleep(Duration::from_millis(20));
+    }
     let bus = Bus::new(&prefix, "smallfs-test").unwrap();
     let status = bus.subscriber::<Status>().unwrap();
     let mut live_dropped_max = 0;

@@ -459,7 +459,9 @@ fn readme_python_recipe_reads_a_crashed_recording() {
     std::fs::write(&path, &bytes[..bytes.len() * 2 / 3]).unwrap();
     // The recipe exactly as the README gives it, on that file.
     let readme = std::fs::read_to_string(repo_root().join("README.md")).unwrap();
-    let start = readme.find("from mcap.reader import NonSeekingReader").expect("recipe");
+    let start = readme
+        .find("from mcap.reader import NonSeekingReader")
+        .expect("recipe");
     let end = start + readme[start..].find("```").unwrap();
     let recipe: String = readme[start..end]
         .lines()
@@ -467,9 +469,16 @@ fn readme_python_recipe_reads_a_crashed_recording() {
         .collect::<Vec<_>>()
         .join("\n")
         .replace("out/run/recording.mcap", &path.display().to_string());
-    let o = Command::new("python3").args(["-c", &recipe]).output().unwrap();
+    let o = Command::new("python3")
+        .args(["-c", &recipe])
+        .output()
+        .unwrap();
     let out = String::from_utf8_lossy(&o.stdout);
-    assert!(o.status.success(), "{out}{}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        o.status.success(),
+        "{out}{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
     let solutions = out.lines().filter(|l| l.starts_with("14000")).count();
     assert!(solutions > 500, "{solutions} solutions read\n{out}");
     assert!(out.contains("recording ends early"), "{out}");
