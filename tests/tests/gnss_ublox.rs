@@ -297,13 +297,20 @@ fn ublox_and_nmea_bytes_through_a_pty_are_fused_and_the_faults_counted() {
         master.write_all(&bytes).unwrap();
     }
     // Hang up once the driver has read everything: it ends its input like a closed port.
+    // The kernel moves bytes from the master to the slave's input queue asynchronously, so an
+    // empty queue right after a write proves nothing: it must stay empty for half a second.
+    termios::tcdrain(master.as_fd()).unwrap();
     let t0 = Instant::now();
-    while unread(&pty.slave) > 0 {
+    let mut empty_since = Instant::now();
+    while empty_since.elapsed() < Duration::from_millis(500) {
         assert!(
-            t0.elapsed() < Duration::from_secs(10),
+            t0.elapsed() < Duration::from_secs(20),
             "the driver does not read"
         );
-        std::thread::sleep(Duration::from_millis(20));
+        if unread(&pty.slave) > 0 {
+            empty_since = Instant::now();
+        }
+        std::thread::sleep(Duration::from_millis(10));
     }
     drop(master);
     drop(pty.slave);
