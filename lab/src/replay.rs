@@ -25,13 +25,19 @@
 //! end of alignment was discarded when in time but fused when late, and a sample late in the
 //! first 100 ms of navigation was fused at the next epoch instead of at its time — and left a
 //! start-up difference of centimetres that decayed over tens of seconds. The "up to 0.70 σ"
-//! reported then was the largest difference over all epochs, i.e. a pending update. Open: with
-//! the navigator changes later a run showed a 0.2 mm difference at an epoch with
-//! nothing pending (0.8 s after the start): some input of the start still depends on the
-//! arrival order (suspect: the alignment now keeps the latest GNSS fix, so a fix stamped in its
-//! last IMU interval is used when in time and discarded when late). With the working tree of
-//! 06:00 (other helpers' navigator work in progress) it was much larger: 209 of 3549 such epochs
-//! bit-identical, largest difference 1.95 m = 1.33 σ at 3.1 s.
+//! reported then was the largest difference over all epochs, i.e. a pending update. Open: a run
+//! showed a 0.2 mm difference at an epoch with nothing pending (0.8 s after the start): some
+//! input of the start still depends on the arrival order (suspect: the alignment keeps the
+//! latest GNSS fix, so a fix stamped in its last IMU interval is used when in time and
+//! discarded when late).
+//!
+//! **Hybrid runs** ([`LiveClock::FollowBus`], `replay --live REC --only gnss --follow-bus`):
+//! only the chosen channels are republished (e.g. real GNSS recorded by `sextant import rinex`),
+//! scheduled on the clock of a system already running on the prefix — the time of validity and
+//! monotonic send time of the first IMU sample seen on the bus map GPS time to wall time, so
+//! that a real sample stamped t goes out when the simulated drivers send their samples of t.
+//! Samples more than [`FOLLOW_MAX_LATE_S`] older than the bus's time at the start are skipped
+//! (counted), younger late ones are sent at once and the navigator's delayed fusion takes them.
 
 use crate::config;
 use crate::daemon::{engine_status, feed, stamp_solution};
@@ -79,6 +85,9 @@ pub enum ReplayError {
     /// Live replay could not send a message.
     #[error(transparent)]
     Send(#[from] msgs::ipc::SendError),
+    /// Live replay could not follow the running system's clock.
+    #[error(transparent)]
+    Follow(#[from] FollowError),
 }
 
 /// Settings of an offline replay.
@@ -468,9 +477,33 @@ pub struct LiveOptions {
     pub start_delay_s: f64,
     /// Republish the truth too (so the live fusion records it for analysis).
     pub with_truth: bool,
+    /// Republish only these channels (empty: every sensor channel, and the truth with
+    /// `with_truth`).
+    pub only: Vec<msgs::Channel>,
+    /// Whose clock schedules the samples.
+    pub clock: LiveClock,
     /// Show a progress bar.
     pub progress: bool,
 }
+
+/// The clock a live replay schedules by.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum LiveClock {
+    /// The recording's own: its first sample after `start_delay_s`, the others at their
+    /// recorded distance from it divided by the speed-up.
+    Recording,
+    /// A running system's: wait (at most `timeout_s` of wall time) for an IMU sample on the
+    /// prefix, then send a sample of time t at the IMU sample's send time + (t − its time) /
+    /// speed (see the module comment).
+    FollowBus {
+        /// Wall time to wait for the first IMU sample, s.
+        timeout_s: f64,
+    },
+}
+
+/// How much older than the followed bus's time a sample may be and still be sent (the
+/// navigator's delayed fusion takes it), simulated s.
+pub const FOLLOW_MAX_LATE_S: f64 = 1.0;
 
 /// Figures of a live replay.
 #[derive(Debug, Clone, Default, Serialize, PartialEq)]
@@ -487,6 +520,54 @@ pub struct LiveSummary {
     pub recording_error: Option<String>,
     /// True when stopped by the stop flag before the end.
     pub interrupted: bool,
+    /// Following a bus: GPS time (ns) of the IMU sample the schedule was taken from.
+    pub followed_bus_time_ns: Option<i64>,
+    /// Following a bus: samples skipped as older than the bus's time at the start.
+    pub skipped_before_bus: u64,
+}
+
+/// Why a live replay could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum FollowError {
+    /// No IMU sample was seen on the prefix in time.
+    #[error(
+        "no IMU sample on {prefix}/imu within {timeout_s} s: start the system (`sextant run --prefix {prefix}`) first"
+    )]
+    NoBus {
+        /// The prefix.
+        prefix: String,
+        /// The wait, s.
+        timeout_s: f64,
+    },
+    /// Subscribing or receiving failed.
+    #[error(transparent)]
+    Subscriber(#[from] msgs::ipc::SubscriberError),
+    /// Receiving failed.
+    #[error(transparent)]
+    Receive(#[from] msgs::ipc::ReceiveError),
+}
+
+/// Wait for an IMU sample on `bus`: its (time of validity, monotonic send time), ns.
+fn follow_bus(
+    bus: &msgs::ipc::Bus,
+    timeout_s: f64,
+    stop: &AtomicBool,
+) -> Result<Option<(i64, u64)>, FollowError> {
+    let sub = bus.subscriber::<msgs::ImuSample>()?;
+    let start = Instant::now();
+    while start.elapsed().as_secs_f64() < timeout_s {
+        if stop.load(Ordering::SeqCst) {
+            return Ok(None);
+        }
+        if let Some(m) = sub.receive()? {
+            return Ok(Some((m.header.time_ns, m.header.send_mono_ns)));
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    Err(FollowError::NoBus {
+        prefix: bus.prefix().to_string(),
+        timeout_s,
+    })
 }
 
 /// Republish a recording's sensor channels live; see the module documentation.
@@ -509,9 +590,23 @@ pub fn replay_live(opts: &LiveOptions, stop: &AtomicBool) -> Result<LiveSummary,
     let mut odo = bus.publisher::<msgs::OdometerSample>()?;
     let mut baro = bus.publisher::<msgs::BaroSample>()?;
     let mut truth = bus.publisher::<msgs::TruthSample>()?;
-    std::thread::sleep(Duration::from_secs_f64(opts.start_delay_s.max(0.0)));
-    let pb = progress_bar(file_len, opts.progress, "live replay");
     let mut s = LiveSummary::default();
+    // GPS time (ns) → monotonic time (ns) of the followed bus.
+    let followed = match opts.clock {
+        LiveClock::Recording => {
+            std::thread::sleep(Duration::from_secs_f64(opts.start_delay_s.max(0.0)));
+            None
+        }
+        LiveClock::FollowBus { timeout_s } => match follow_bus(&bus, timeout_s, stop)? {
+            Some(m) => Some(m),
+            None => {
+                s.interrupted = true;
+                return Ok(s);
+            }
+        },
+    };
+    s.followed_bus_time_ns = followed.map(|f| f.0);
+    let pb = progress_bar(file_len, opts.progress, "live replay");
     let start = Instant::now();
     let mut t0: Option<u64> = None;
     for entry in rec {
@@ -536,15 +631,34 @@ pub fn replay_live(opts: &LiveOptions, stop: &AtomicBool) -> Result<LiveSummary,
                 | Record::Odometer(_)
                 | Record::Baro(_)
         ) || (opts.with_truth && matches!(r, Record::Truth(_)));
-        if !is_sensor {
+        let chosen = opts.only.is_empty() || r.channel().is_some_and(|c| opts.only.contains(&c));
+        if !is_sensor || !chosen {
             continue;
         }
         // Schedule by time of validity, like the drivers; keep the file order (never send a
         // sample before one recorded earlier).
         let t = e.log_time_ns;
-        let base = *t0.get_or_insert(t);
-        let due = Duration::from_secs_f64(t.saturating_sub(base) as f64 * 1e-9 / opts.speed);
-        let now = start.elapsed();
+        let (due, now) = match followed {
+            None => {
+                let base = *t0.get_or_insert(t);
+                let due =
+                    Duration::from_secs_f64(t.saturating_sub(base) as f64 * 1e-9 / opts.speed);
+                (due, start.elapsed())
+            }
+            Some((bus_t_ns, bus_mono_ns)) => {
+                let dt_s = (r.time_ns() - bus_t_ns) as f64 * 1e-9;
+                if dt_s < -FOLLOW_MAX_LATE_S {
+                    s.skipped_before_bus += 1;
+                    continue;
+                }
+                let due_mono = bus_mono_ns as f64 + dt_s.max(0.0) / opts.speed * 1e9;
+                let now_mono = msgs::monotonic_ns();
+                (
+                    Duration::from_nanos(due_mono.max(0.0) as u64),
+                    Duration::from_nanos(now_mono),
+                )
+            }
+        };
         if due > now {
             std::thread::sleep(due - now);
         } else {

@@ -104,6 +104,22 @@ struct ReplayArgs {
     /// Do not republish the truth (live).
     #[arg(long)]
     no_truth: bool,
+    /// Republish only these channels (live; comma-separated: imu, star_tracker, gnss,
+    /// odometer, baro, truth), e.g. `--only gnss` to play real GNSS into a simulated system.
+    #[arg(long, value_delimiter = ',', value_parser = parse_channel)]
+    only: Vec<msgs::Channel>,
+    /// Schedule on the clock of the system already running on the prefix (live): wait for its
+    /// first IMU sample and send each sample when the drivers send theirs of the same time.
+    #[arg(long)]
+    follow_bus: bool,
+}
+
+/// A channel name of `--only`.
+fn parse_channel(s: &str) -> Result<msgs::Channel, String> {
+    msgs::Channel::from_name(s).ok_or_else(|| {
+        let known: Vec<&str> = msgs::Channel::ALL.iter().map(|c| c.name()).collect();
+        format!("unknown channel {s:?}; known: {}", known.join(", "))
+    })
 }
 
 #[derive(Debug, clap::Args)]
@@ -860,6 +876,12 @@ fn replay(args: ReplayArgs) -> anyhow::Result<()> {
             speed: args.speed,
             start_delay_s: 1.0,
             with_truth: !args.no_truth,
+            only: args.only,
+            clock: if args.follow_bus {
+                rp::LiveClock::FollowBus { timeout_s: 60.0 }
+            } else {
+                rp::LiveClock::Recording
+            },
             progress: true,
         },
         stop,
