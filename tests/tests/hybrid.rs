@@ -134,7 +134,7 @@ fn real_gnss_played_into_a_simulated_bench_is_fused() {
 /// The ESBC antenna reference point from the RINEX header: APPROX POSITION XYZ plus the
 /// 0.216 m antenna height along the ellipsoid normal, ECEF m.
 fn esbc_reference() -> Vector3<f64> {
-    let marker = Vector3::new(3_582_105.291, 532_589.7313, 5_232_754.8054);
+    let marker = Vector3::new(3582105.2910, 532589.7313, 5232754.8054);
     let g = earth::ecef_to_geodetic(&WGS84, &marker);
     marker + 0.216 * earth::up_e(g.lat_rad, g.lon_rad)
 }
