@@ -426,7 +426,7 @@ where
         }
         match &msg {
             Record::Truth(t) => {
-                if nav.is_navigating() && nav.time_ns() == t.header.time_ns {
+                if nav.is_navigating() && nav.time().ns == t.header.time_ns {
                     each(&compare(nav, t, epoch_ns));
                     counts.compared += 1;
                 }

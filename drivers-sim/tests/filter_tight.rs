@@ -282,7 +282,7 @@ fn first_single_satellite_epoch_only_starts_the_clock() {
         }
     }
     assert_eq!(tight.health()[gnss].fused, 1, "no tight epoch");
-    assert_eq!(tight.time_ns(), free.time_ns());
+    assert_eq!(tight.time(), free.time());
     let u = (sat.expect("a satellite") - tight.nav_state().r_e).normalize();
     let (pt, pf) = (tight.covariance(), free.covariance());
     let p_rr = |p: &fusion::ekf::Covariance| p.fixed_view::<3, 3>(idx::POS, idx::POS).into_owned();

@@ -78,7 +78,7 @@ fn run(scn: &Scenario, nav: &mut Navigator, edit: impl Fn(f64, &ImuSample) -> Ed
         let t_s = (msg.time_ns() - epoch) as f64 * 1e-9;
         match msg {
             Record::Truth(tr) => {
-                if nav.is_navigating() && nav.time_ns() == tr.header.time_ns {
+                if nav.is_navigating() && nav.time().ns == tr.header.time_ns {
                     let p = compare(nav, &tr, epoch);
                     if !was_navigating {
                         out.nav_starts.push(p);

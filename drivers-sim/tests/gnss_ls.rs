@@ -169,7 +169,7 @@ fn cross_check_run(mode: fusion::navigator::GnssMode, spoof: bool) -> CrossCheck
                 .expect("fixes during alignment");
             out.start_offset_m = (fix.position.r_e_m - r).norm();
             if mode == GnssMode::Tight {
-                let dt = (nav.time_ns() - t_ls) as f64 * 1e-9;
+                let dt = (nav.time().ns - t_ls) as f64 * 1e-9;
                 let v = fix.velocity.expect("Doppler on every satellite");
                 let b = fix.position.clock_bias_m + v.clock_drift_m_s * dt;
                 out.start_clock_offset_m = Some(nav.clock().bias_m - b);

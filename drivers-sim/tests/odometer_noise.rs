@@ -42,7 +42,7 @@ fn run(cfg: NavigatorConfig, duration_s: f64) -> OdoRun {
     let (mut h2, mut v2, mut a2, mut n) = (0.0, 0.0, 0.0, 0.0);
     for msg in sim {
         if let Record::Truth(t) = &msg {
-            if nav.is_navigating() && nav.time_ns() == t.header.time_ns {
+            if nav.is_navigating() && nav.time().ns == t.header.time_ns {
                 let p = compare(&nav, t, epoch);
                 if p.t_s >= 120.0 {
                     let e = p.pos_err_ned_m();

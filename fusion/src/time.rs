@@ -40,6 +40,94 @@ pub struct GpsTime {
     pub ns: i64,
 }
 
+/// A signed span of time in integer nanoseconds: the difference of two [`GpsTime`]s (GPS, TAI
+/// and TT seconds are the same length, so it is a span in any of them).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Default)]
+pub struct Duration {
+    /// Nanoseconds.
+    pub ns: i64,
+}
+
+impl Duration {
+    /// No time.
+    pub const ZERO: Self = Self { ns: 0 };
+
+    /// A span of `ns` nanoseconds.
+    pub const fn from_ns(ns: i64) -> Self {
+        Self { ns }
+    }
+
+    /// A span of a whole number of seconds.
+    pub const fn from_seconds(s: i64) -> Self {
+        Self { ns: s * NS_PER_S }
+    }
+
+    /// A span of `s` seconds, truncated toward zero to whole nanoseconds (Rust's `as i64`:
+    /// saturating at the `i64` bounds, NaN gives zero). Truncation rather than rounding keeps
+    /// spans configured in seconds (buffer windows, minimum intervals) at or below the
+    /// configured value.
+    pub fn from_seconds_f64(s: f64) -> Self {
+        Self {
+            ns: (s * 1e9) as i64,
+        }
+    }
+
+    /// The span in seconds (`ns · 10⁻⁹`; exact below 2⁵³ ns ≈ 104 days).
+    pub fn seconds_f64(self) -> f64 {
+        self.ns as f64 * 1e-9
+    }
+
+    /// The absolute value.
+    pub const fn abs(self) -> Self {
+        Self { ns: self.ns.abs() }
+    }
+}
+
+impl core::ops::Sub for GpsTime {
+    type Output = Duration;
+    /// The span from `rhs` to `self`.
+    fn sub(self, rhs: GpsTime) -> Duration {
+        Duration {
+            ns: self.ns - rhs.ns,
+        }
+    }
+}
+
+impl core::ops::Add<Duration> for GpsTime {
+    type Output = GpsTime;
+    fn add(self, d: Duration) -> GpsTime {
+        GpsTime { ns: self.ns + d.ns }
+    }
+}
+
+impl core::ops::Sub<Duration> for GpsTime {
+    type Output = GpsTime;
+    fn sub(self, d: Duration) -> GpsTime {
+        GpsTime { ns: self.ns - d.ns }
+    }
+}
+
+impl core::ops::Add for Duration {
+    type Output = Duration;
+    fn add(self, d: Duration) -> Duration {
+        Duration { ns: self.ns + d.ns }
+    }
+}
+
+impl core::ops::Sub for Duration {
+    type Output = Duration;
+    fn sub(self, d: Duration) -> Duration {
+        Duration { ns: self.ns - d.ns }
+    }
+}
+
+impl core::ops::Neg for Duration {
+    type Output = Duration;
+    fn neg(self) -> Duration {
+        Duration { ns: -self.ns }
+    }
+}
+
 /// Nanoseconds per second.
 pub const NS_PER_S: i64 = 1_000_000_000;
 /// Nanoseconds per day of 86 400 s.
@@ -201,6 +289,9 @@ fn seconds_to_ns(s: f64) -> i64 {
 }
 
 impl GpsTime {
+    /// The GPS epoch, 1980-01-06T00:00:00 UTC.
+    pub const EPOCH: GpsTime = GpsTime { ns: 0 };
+
     /// GPS time from nanoseconds since the GPS epoch.
     pub const fn from_ns(ns: i64) -> Self {
         Self { ns }
@@ -369,7 +460,15 @@ impl GpsTime {
 
     /// Seconds from `earlier` to `self` (GPS/TAI/TT seconds are the same length).
     pub fn seconds_since(&self, earlier: GpsTime) -> f64 {
-        (self.ns - earlier.ns) as f64 * 1e-9
+        (*self - earlier).seconds_f64()
+    }
+
+    /// The span from `earlier` to `self`, clamped to the range of [`Duration`] instead of
+    /// overflowing (for comparing corrupt time stamps, which may lie anywhere in `i64`).
+    pub const fn saturating_since(&self, earlier: GpsTime) -> Duration {
+        Duration {
+            ns: self.ns.saturating_sub(earlier.ns),
+        }
     }
 
     /// This time plus `ns` nanoseconds.
@@ -391,6 +490,28 @@ fn split_jd(ns: i64, extra_s: f64) -> (f64, f64) {
 mod tests {
     use super::*;
     use proptest::prelude::*;
+
+    #[test]
+    fn durations_are_differences_of_times() {
+        let t0 = GpsTime::from_ns(1_000);
+        let t1 = GpsTime::from_ns(2_500_000_001_000);
+        let d = t1 - t0;
+        assert_eq!(d, Duration::from_ns(2_500_000_000_000));
+        assert_eq!(t0 + d, t1);
+        assert_eq!(t1 - d, t0);
+        assert_eq!(t0 - t1, -d);
+        assert_eq!((-d).abs(), d);
+        assert_eq!(d.seconds_f64(), t1.seconds_since(t0));
+        assert_eq!(Duration::from_seconds(3).seconds_f64(), 3.0);
+        // Truncation toward zero, as `as i64`: −1.5 ns is −1 ns, not −2.
+        assert_eq!(Duration::from_seconds_f64(0.3).ns, 300_000_000);
+        assert_eq!(Duration::from_seconds_f64(-1.5e-9).ns, -1);
+        assert_eq!(Duration::from_seconds_f64(f64::NAN), Duration::ZERO);
+        // Corrupt time stamps anywhere in i64 compare without overflow.
+        let far = GpsTime::from_ns(i64::MAX);
+        assert_eq!(far.saturating_since(GpsTime::from_ns(-1)).ns, i64::MAX);
+        assert_eq!(GpsTime::EPOCH.saturating_since(far).ns, -i64::MAX);
+    }
 
     #[test]
     fn gps_epoch_is_zero() {

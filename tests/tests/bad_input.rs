@@ -481,7 +481,7 @@ proptest! {
         // A good IMU sample after the last accepted one still gives a finite solution (unless
         // an accepted arbitrary sample moved the IMU time far ahead).
         last.header.seq = last.header.seq.wrapping_add(1_000_003);
-        last.header.time_ns = nav.time_ns().max(last.header.time_ns) + 5_000_000;
+        last.header.time_ns = nav.time().ns.max(last.header.time_ns) + 5_000_000;
         if let Ok(Some(sol)) = nav.push_imu(&last) {
             prop_assert!(sol.pos_ecef_m.iter().all(|v| v.is_finite()));
         }

@@ -5,7 +5,7 @@
 use super::*;
 
 impl Navigator {
-    pub(super) fn consume_during_alignment(&mut self, t: i64) {
+    pub(super) fn consume_during_alignment(&mut self, t: GpsTime) {
         while let Some((ts, obs, _)) = self.gnss_q.pop_due(t) {
             self.alignment_gnss(ts, &obs);
         }
@@ -15,7 +15,7 @@ impl Navigator {
         while self.baro_q.pop_due(t).is_some() {}
     }
 
-    pub(super) fn try_finish_alignment(&mut self, t: i64) {
+    pub(super) fn try_finish_alignment(&mut self, t: GpsTime) {
         if self.align.duration_s() + 1e-9 < self.config.alignment_s {
             return;
         }
@@ -133,7 +133,7 @@ impl Navigator {
         self.initialize_from_ls(t);
         self.core.strapdown = Strapdown::new(self.config.mechanization());
         self.phase = Phase::Navigating;
-        self.time_ns = t;
+        self.time = t;
         self.imu_log.clear();
         self.checkpoints.clear();
         self.rewind_to = None;
@@ -145,7 +145,7 @@ impl Navigator {
     /// During alignment: keep the latest least-squares fix of the raw pseudoranges (the
     /// initial position and clock, [`Self::initialize_from_ls`]); without raw observations,
     /// the first receiver fix as before.
-    pub(super) fn alignment_gnss(&mut self, ts: i64, obs: &GnssObs) {
+    pub(super) fn alignment_gnss(&mut self, ts: GpsTime, obs: &GnssObs) {
         let guess = self
             .init_ls
             .map(|(_, f)| (f.position.r_e_m, f.position.clock_bias_m));
@@ -178,7 +178,7 @@ impl Navigator {
     /// pseudoranges of that epoch are not fused again (the alignment queue is dropped).
     /// Without a velocity fix the clock starts at the first tight epoch
     /// ([`Self::initialize_clock`]).
-    pub(super) fn initialize_from_ls(&mut self, t: i64) {
+    pub(super) fn initialize_from_ls(&mut self, t: GpsTime) {
         let Some((t_ls, fix)) = self.init_ls.take() else {
             return;
         };
@@ -191,7 +191,7 @@ impl Navigator {
         let mut active = self.active_states(true);
         active.clock = true;
         self.core.ekf.set_active(active);
-        let dt = (t - t_ls) as f64 * 1e-9;
+        let dt = (t - t_ls).seconds_f64();
         let qb = self.config.aiding.clock_bias_psd_m2_s;
         let qd = self.config.aiding.clock_drift_psd_m2_s3;
         let var_d = vel.var_clock_drift_m2_s2;

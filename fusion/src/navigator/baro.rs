@@ -4,12 +4,12 @@
 use super::*;
 
 impl Navigator {
-    pub(super) fn fuse_baro(&mut self, ts: i64, height_m: f64, tally: Tally) {
+    pub(super) fn fuse_baro(&mut self, ts: GpsTime, height_m: f64, tally: Tally) {
         let id = sid(SensorId::Baro);
         if !self.config.updates.baro {
             return;
         }
-        let min_dt = (self.config.aiding.baro_min_interval_s * 1e9) as i64;
+        let min_dt = Duration::from_seconds_f64(self.config.aiding.baro_min_interval_s);
         if let Some(last) = self.core.last_baro_fused
             && ts - last < min_dt
         {

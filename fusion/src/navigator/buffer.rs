@@ -9,7 +9,7 @@ use super::*;
 #[derive(Debug, Clone)]
 pub(super) struct TimeQueue<T: Copy + Default, const CAP: usize> {
     /// (time of validity, value, already counted in the health counters).
-    pub(super) buf: [(i64, T, bool); CAP],
+    pub(super) buf: [(GpsTime, T, bool); CAP],
     pub(super) head: usize,
     pub(super) len: usize,
 }
@@ -17,7 +17,7 @@ pub(super) struct TimeQueue<T: Copy + Default, const CAP: usize> {
 impl<T: Copy + Default, const CAP: usize> TimeQueue<T, CAP> {
     pub(super) fn new() -> Self {
         Self {
-            buf: [(0, T::default(), false); CAP],
+            buf: [(GpsTime::EPOCH, T::default(), false); CAP],
             head: 0,
             len: 0,
         }
@@ -26,11 +26,16 @@ impl<T: Copy + Default, const CAP: usize> TimeQueue<T, CAP> {
         (self.head + i) % CAP
     }
     /// Insert keeping time order; when full, the oldest entry is evicted and returned.
-    pub(super) fn insert(&mut self, t: i64, v: T) -> Option<(i64, T, bool)> {
+    pub(super) fn insert(&mut self, t: GpsTime, v: T) -> Option<(GpsTime, T, bool)> {
         self.insert_flagged(t, v, false)
     }
     /// Insert with the "already counted" flag (samples re-queued for a replay).
-    pub(super) fn insert_flagged(&mut self, t: i64, v: T, counted: bool) -> Option<(i64, T, bool)> {
+    pub(super) fn insert_flagged(
+        &mut self,
+        t: GpsTime,
+        v: T,
+        counted: bool,
+    ) -> Option<(GpsTime, T, bool)> {
         let evicted = if self.len == CAP {
             let e = self.buf[self.head];
             self.head = (self.head + 1) % CAP;
@@ -51,7 +56,7 @@ impl<T: Copy + Default, const CAP: usize> TimeQueue<T, CAP> {
         evicted
     }
     /// Remove and return the newest entry if its time is > `t`.
-    pub(super) fn pop_newer(&mut self, t: i64) -> Option<(i64, T, bool)> {
+    pub(super) fn pop_newer(&mut self, t: GpsTime) -> Option<(GpsTime, T, bool)> {
         if self.len > 0 {
             let s = self.slot(self.len - 1);
             if self.buf[s].0 > t {
@@ -62,7 +67,7 @@ impl<T: Copy + Default, const CAP: usize> TimeQueue<T, CAP> {
         None
     }
     /// Remove and return the oldest entry if its time is ≤ `t`.
-    pub(super) fn pop_due(&mut self, t: i64) -> Option<(i64, T, bool)> {
+    pub(super) fn pop_due(&mut self, t: GpsTime) -> Option<(GpsTime, T, bool)> {
         if self.len > 0 && self.buf[self.head].0 <= t {
             let e = self.buf[self.head];
             self.head = (self.head + 1) % CAP;
@@ -80,8 +85,10 @@ impl<T: Copy + Default, const CAP: usize> TimeQueue<T, CAP> {
 /// One navigating IMU step as logged for replay (validated, channels already combined).
 #[derive(Debug, Clone, Copy, Default)]
 pub(super) struct ImuLogEntry {
-    pub(super) t: i64,
-    pub(super) prev_t: Option<i64>,
+    /// Time of validity of the step's end.
+    pub(super) t: GpsTime,
+    /// Time of validity of the step before (None for the first after alignment).
+    pub(super) prev_t: Option<GpsTime>,
     pub(super) dth: Vector3<f64>,
     pub(super) dv: Vector3<f64>,
     pub(super) dt_s: f64,
@@ -125,8 +132,8 @@ impl<T: Clone> Ring<T> {
     }
 }
 
-/// Checkpoints are taken at this period of IMU time, ns.
-pub(super) const CHECKPOINT_PERIOD_NS: i64 = 100_000_000;
+/// Checkpoints are taken at this period of IMU time (0.1 s).
+pub(super) const CHECKPOINT_PERIOD: Duration = Duration::from_ns(100_000_000);
 
 /// Checkpoints kept: the 2 s longest buffer window plus margin, at the period above.
 pub(super) const CHECKPOINT_CAP: usize = 32;

@@ -588,7 +588,7 @@ impl NavigatorConfig {
     /// before it, the rewind one IMU step after the arrival) to now, at `max_imu_rate_hz`, with
     /// a second checkpoint period and two steps of margin.
     pub fn imu_log_capacity(&self) -> usize {
-        let period_s = CHECKPOINT_PERIOD_NS as f64 * 1e-9;
+        let period_s = CHECKPOINT_PERIOD.seconds_f64();
         let steps = (self.max_imu_rate_hz * (self.buffer_window_s + 2.0 * period_s)).ceil();
         // Saturating: an absurd rate fails the IMU_LOG_MAX_CAP check, never overflows.
         if steps.is_finite() && steps < IMU_LOG_MAX_CAP as f64 {

@@ -18,14 +18,14 @@ pub(super) struct Core {
     pub(super) ekf: ErrorStateEkf,
     /// Mechanization with its coning/sculling history.
     pub(super) strapdown: Strapdown,
-    /// Start of the current static period (ZUPT detector), GPS ns.
-    pub(super) static_since: Option<i64>,
-    /// Time of the last zero-velocity update, GPS ns.
-    pub(super) last_zupt: Option<i64>,
-    /// Time of validity of the last fused baro sample, GPS ns (`aiding.baro_min_interval_s`).
-    pub(super) last_baro_fused: Option<i64>,
-    /// Time of validity and speed of the last odometer sample (ZUPT veto), GPS ns and m/s.
-    pub(super) last_odo: Option<(i64, f64)>,
+    /// Start of the current static period (ZUPT detector).
+    pub(super) static_since: Option<GpsTime>,
+    /// Time of the last zero-velocity update.
+    pub(super) last_zupt: Option<GpsTime>,
+    /// Time of validity of the last fused baro sample (`aiding.baro_min_interval_s`).
+    pub(super) last_baro_fused: Option<GpsTime>,
+    /// Time of validity and speed (m/s) of the last odometer sample (ZUPT veto).
+    pub(super) last_odo: Option<(GpsTime, f64)>,
     /// Whether the receiver clock states have been started (tight coupling).
     pub(super) clock_initialized: bool,
 }
@@ -55,11 +55,11 @@ impl Core {
     }
 }
 
-/// A delayed-fusion checkpoint: the [`Core`] at the end of the IMU epoch `t` (GPS ns).
+/// A delayed-fusion checkpoint: the [`Core`] at the end of the IMU epoch `t`.
 #[derive(Debug, Clone)]
 pub(super) struct Checkpoint {
-    /// IMU epoch, GPS ns.
-    pub(super) t: i64,
+    /// IMU epoch.
+    pub(super) t: GpsTime,
     /// The navigation core at that epoch.
     pub(super) core: Core,
 }

@@ -112,11 +112,11 @@ pub struct Rejection {
 }
 
 impl Rejection {
-    /// A rejection of `sensor`'s sample valid at GPS `time_ns`.
-    pub const fn new(sensor: SensorId, time_ns: i64, reason: RejectReason) -> Self {
+    /// A rejection of `sensor`'s sample valid at `time`.
+    pub const fn new(sensor: SensorId, time: GpsTime, reason: RejectReason) -> Self {
         Self {
             sensor,
-            time: GpsTime { ns: time_ns },
+            time,
             reason,
         }
     }
@@ -144,7 +144,7 @@ pub(super) fn matrix_from_row_major(a: &[f64; 9]) -> Matrix3<f64> {
 
 /// Check a GNSS sample; Ok(None) when it carries no valid fix (not an error).
 pub(super) fn validate_gnss(s: &GnssSample) -> Result<Option<GnssFix>, Rejection> {
-    let bad = |r| Rejection::new(SensorId::Gnss, s.header.time_ns, r);
+    let bad = |r| Rejection::new(SensorId::Gnss, GpsTime::from_ns(s.header.time_ns), r);
     if s.n_satellites as usize > MAX_SATELLITES {
         return Err(bad(RejectReason::TooManySatellites));
     }
@@ -195,7 +195,11 @@ mod tests {
 
     #[test]
     fn rejection_is_small_copy_and_reads_like_before() {
-        let r = Rejection::new(SensorId::Gnss, 5, RejectReason::NonFiniteFix);
+        let r = Rejection::new(
+            SensorId::Gnss,
+            GpsTime::from_ns(5),
+            RejectReason::NonFiniteFix,
+        );
         assert!(std::mem::size_of::<Rejection>() <= 32);
         assert_eq!(
             r.to_string(),
@@ -203,7 +207,7 @@ mod tests {
         );
         let t = Rejection::new(
             SensorId::Imu,
-            5,
+            GpsTime::from_ns(5),
             RejectReason::TimeNotIncreasing {
                 previous: GpsTime { ns: 7 },
             },

@@ -32,7 +32,7 @@ impl Navigator {
         finite.then_some((sol.c_e_b, sol.cov_e_rad2))
     }
 
-    pub(super) fn fuse_gnss(&mut self, ts: i64, obs: &GnssObs, tally: Tally) {
+    pub(super) fn fuse_gnss(&mut self, ts: GpsTime, obs: &GnssObs, tally: Tally) {
         let id = sid(SensorId::Gnss);
         // First, before any update of this epoch: the least-squares cross-check.
         self.gnss_ls_cross_check(ts, obs, tally);
@@ -79,10 +79,10 @@ impl Navigator {
     /// epoch without clock states starts them by state augmentation from one pseudorange and
     /// one range rate ([`Self::initialize_clock`]); those two are consumed, the others fused.
     /// The sample's NIS is the largest one.
-    pub(super) fn fuse_gnss_tight(&mut self, ts: i64, obs: &GnssObs, tally: Tally) {
+    pub(super) fn fuse_gnss_tight(&mut self, ts: GpsTime, obs: &GnssObs, tally: Tally) {
         let id = sid(SensorId::Gnss);
         // The clock estimate is kept at the filter time; move it back to the sample's time.
-        let back_s = (self.time_ns - ts) as f64 * 1e-9;
+        let back_s = (self.time - ts).seconds_f64();
         let (skip_pr, skip_rr) = if self.core.clock_initialized {
             (None, None)
         } else {
@@ -266,8 +266,8 @@ impl Navigator {
     /// epoch would, in the second case, lock the filter out of the only measurements that can
     /// bring it back. At 99.9 % a consistent filter disagrees on 0.1 % of the epochs; a run
     /// of disagreements is the operator's (or a supervisor's) signal to re-initialise.
-    pub(super) fn gnss_ls_cross_check(&mut self, ts: i64, obs: &GnssObs, tally: Tally) {
-        let back_s = (self.time_ns - ts) as f64 * 1e-9;
+    pub(super) fn gnss_ls_cross_check(&mut self, ts: GpsTime, obs: &GnssObs, tally: Tally) {
+        let back_s = (self.time - ts).seconds_f64();
         let r_pred = self.core.nav.r_e - self.core.nav.v_e * back_s;
         let b_guess = if self.core.clock_initialized {
             self.core.ekf.clock_bias_m - self.core.ekf.clock_drift_m_s * back_s

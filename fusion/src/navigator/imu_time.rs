@@ -5,16 +5,16 @@
 use super::*;
 
 /// IMU samples that continued consistently from a time discontinuity (a jump of the time of
-/// validity by more than [`MAX_BRIDGED_GAP_NS`] forward, or any step backward) and were held.
+/// validity by more than [`MAX_BRIDGED_GAP`] forward, or any step backward) and were held.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(super) struct ImuTimeJump {
-    /// Time of validity of the latest sample on the new time base, GPS ns.
-    pub(super) last_t: i64,
+    /// Time of validity of the latest sample on the new time base.
+    pub(super) last_t: GpsTime,
     /// Consecutive samples on the new time base so far.
     pub(super) count: u32,
 }
 
-/// Longest IMU gap bridged by one stretched increment, ns.
+/// Longest IMU gap bridged by one stretched increment (1 s).
 ///
 /// Policy for a gap `g` between consecutive IMU samples (nominal interval `dt`):
 /// - `g ≤ 1.5·dt`: a normal step.
@@ -36,7 +36,7 @@ pub(super) struct ImuTimeJump {
 /// the gap, the added velocity σ is ≤ 10·1/√3 ≈ 6 m/s — large, but the filter stays linear
 /// and the next GNSS epoch pulls it back; beyond that the inflation, not the data, would
 /// carry the solution.
-pub(super) const MAX_BRIDGED_GAP_NS: i64 = 1_000_000_000;
+pub(super) const MAX_BRIDGED_GAP: Duration = Duration::from_seconds(1);
 
 /// Consecutive IMU samples on a new time base that confirm a real gap (0.1 s at 200 Hz). A
 /// corrupt time stamp is one sample (or a burst of unrelated ones); twenty samples, each
@@ -46,7 +46,7 @@ pub(super) const MAX_BRIDGED_GAP_NS: i64 = 1_000_000_000;
 pub const CONFIRM_SAMPLES: u32 = 20;
 
 impl Navigator {
-    /// IMU time continuity (policy: [`MAX_BRIDGED_GAP_NS`]). Ok for a normal step, a
+    /// IMU time continuity (policy: [`MAX_BRIDGED_GAP`]). Ok for a normal step, a
     /// bridgeable gap, and the sample that confirms a time discontinuity (the navigator has
     /// then been re-initialised and this sample starts the new alignment). Err for a sample
     /// that steps backward or jumps more than 1 s ahead: it is held as a candidate new time
@@ -56,15 +56,18 @@ impl Navigator {
         let Some(prev) = self.last_time[id] else {
             return Ok(());
         };
-        let t = h.time_ns;
-        let step = t.saturating_sub(prev);
-        if step > 0 && step <= MAX_BRIDGED_GAP_NS {
+        let t = GpsTime::from_ns(h.time_ns);
+        let step = t.saturating_since(prev);
+        if step > Duration::ZERO && step <= MAX_BRIDGED_GAP {
             // Back on the old time base: a held candidate was a wild time stamp.
             self.imu_time_jump = None;
             return Ok(());
         }
         let jump = match self.imu_time_jump {
-            Some(j) if (1..=MAX_BRIDGED_GAP_NS).contains(&t.saturating_sub(j.last_t)) => {
+            Some(j)
+                if (Duration::from_ns(1)..=MAX_BRIDGED_GAP)
+                    .contains(&t.saturating_since(j.last_t)) =>
+            {
                 ImuTimeJump {
                     last_t: t,
                     count: j.count + 1,
@@ -80,10 +83,8 @@ impl Navigator {
             return Ok(());
         }
         self.imu_time_jump = Some(jump);
-        let reason = if step <= 0 {
-            RejectReason::TimeNotIncreasing {
-                previous: GpsTime { ns: prev },
-            }
+        let reason = if step <= Duration::ZERO {
+            RejectReason::TimeNotIncreasing { previous: prev }
         } else {
             RejectReason::ImuTimeJumpHeld
         };
@@ -115,7 +116,7 @@ impl Navigator {
         *self = fresh;
     }
 
-    /// Bridge an IMU gap `(p, e.t]` shorter than [`MAX_BRIDGED_GAP_NS`]: drop the aiding
+    /// Bridge an IMU gap `(p, e.t]` shorter than [`MAX_BRIDGED_GAP`]: drop the aiding
     /// whose epoch fell inside it, and add the unknown motion over it to the covariance.
     ///
     /// `imu_step` stretches the sample after the gap over the gap, i.e. uses its rate ω₁ and
@@ -136,9 +137,9 @@ impl Navigator {
     /// 20 µg/√Hz, ten times the white-noise value.
     ///
     /// Not re-applied if a late sample older than the gap makes the filter replay across it.
-    pub(super) fn bridge_imu_gap(&mut self, p: i64, e: &ImuLogEntry) {
+    pub(super) fn bridge_imu_gap(&mut self, p: GpsTime, e: &ImuLogEntry) {
         // Aiding more than one IMU interval inside the gap: its epoch was never navigated.
-        let inside = e.t - (e.dt_s * 1e9) as i64 - 1;
+        let inside = e.t - Duration::from_seconds_f64(e.dt_s) - Duration::from_ns(1);
         self.drop_queued_until(inside);
         if self.imu_log.len == 0 {
             return; // first step after alignment: nothing to compare with
@@ -147,7 +148,7 @@ impl Navigator {
         if prev.t != p || prev.dt_s <= 0.0 {
             return;
         }
-        let g = (e.t - p) as f64 * 1e-9;
+        let g = (e.t - p).seconds_f64();
         let c_e_b = self.core.nav.q_e_b.to_rotation_matrix().into_inner();
         let df = c_e_b * (e.dv / e.dt_s - prev.dv / prev.dt_s);
         let dw = c_e_b * (e.dth / e.dt_s - prev.dth / prev.dt_s);

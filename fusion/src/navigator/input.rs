@@ -21,21 +21,21 @@ impl Navigator {
         }
         let prev_t = self.last_time[id];
         self.accept_header(id, &s.header);
-        let t = s.header.time_ns;
+        let t = GpsTime::from_ns(s.header.time_ns);
         // Paper 004: redundant channels combined with fault detection and exclusion.
         let (dth, dv) = self.imu_increments(s);
         match self.phase {
             Phase::Initializing => {
                 self.phase = Phase::Aligning;
                 self.mode = NavMode::Aligning;
-                self.time_ns = t;
+                self.time = t;
                 self.align.add(&dth, &dv, s.dt_s);
                 self.health[id].fused += 1;
                 self.consume_during_alignment(t);
                 self.try_finish_alignment(t);
             }
             Phase::Aligning => {
-                self.time_ns = t;
+                self.time = t;
                 self.align.add(&dth, &dv, s.dt_s);
                 self.health[id].fused += 1;
                 self.consume_during_alignment(t);
@@ -53,7 +53,7 @@ impl Navigator {
                     dt_s: s.dt_s,
                 };
                 if let Some(p) = prev_t
-                    && (t - p) as f64 * 1e-9 > 1.5 * s.dt_s
+                    && (t - p).seconds_f64() > 1.5 * s.dt_s
                 {
                     self.bridge_imu_gap(p, &e);
                 }
@@ -73,10 +73,11 @@ impl Navigator {
     pub fn push_star_tracker(&mut self, s: &StarTrackerSample) -> Result<(), Rejection> {
         let id = sid(SensorId::StarTracker);
         self.health[id].received += 1;
+        let ts = GpsTime::from_ns(s.header.time_ns);
         if let Err(e) = self
             .validate_header(SensorId::StarTracker, &s.header)
             .and_then(|_| {
-                let bad = |r| Rejection::new(SensorId::StarTracker, s.header.time_ns, r);
+                let bad = |r| Rejection::new(SensorId::StarTracker, ts, r);
                 if !s.q_sensor_icrf.iter().all(|x| x.is_finite()) {
                     return Err(bad(RejectReason::NonFiniteQuaternion));
                 }
@@ -105,12 +106,10 @@ impl Navigator {
                 sigma_cross: s.sigma_cross_rad,
                 sigma_roll: s.sigma_roll_rad,
             };
-            if self.too_late(s.header.time_ns)
-                || self.star_q.insert(s.header.time_ns, obs).is_some()
-            {
+            if self.too_late(ts) || self.star_q.insert(ts, obs).is_some() {
                 self.health[id].dropped_late += 1;
             } else {
-                self.note_arrival(s.header.time_ns);
+                self.note_arrival(ts);
             }
         }
         Ok(())
@@ -144,10 +143,11 @@ impl Navigator {
             n_sats,
             sats,
         };
-        if self.too_late(s.header.time_ns) || self.gnss_q.insert(s.header.time_ns, obs).is_some() {
+        let ts = GpsTime::from_ns(s.header.time_ns);
+        if self.too_late(ts) || self.gnss_q.insert(ts, obs).is_some() {
             self.health[id].dropped_late += 1;
         } else {
-            self.note_arrival(s.header.time_ns);
+            self.note_arrival(ts);
         }
         Ok(())
     }
@@ -156,10 +156,11 @@ impl Navigator {
     pub fn push_odometer(&mut self, s: &OdometerSample) -> Result<(), Rejection> {
         let id = sid(SensorId::Odometer);
         self.health[id].received += 1;
+        let ts = GpsTime::from_ns(s.header.time_ns);
         if let Err(e) = self
             .validate_header(SensorId::Odometer, &s.header)
             .and_then(|_| {
-                let bad = |r| Rejection::new(SensorId::Odometer, s.header.time_ns, r);
+                let bad = |r| Rejection::new(SensorId::Odometer, ts, r);
                 if !(s.dt_s.is_finite() && s.dt_s > 0.0 && s.dt_s <= 10.0) {
                     return Err(bad(RejectReason::OdometerInterval));
                 }
@@ -176,12 +177,10 @@ impl Navigator {
             return Err(e);
         }
         self.accept_header(id, &s.header);
-        if self.too_late(s.header.time_ns)
-            || self.odo_q.insert(s.header.time_ns, s.speed_m_s).is_some()
-        {
+        if self.too_late(ts) || self.odo_q.insert(ts, s.speed_m_s).is_some() {
             self.health[id].dropped_late += 1;
         } else {
-            self.note_arrival(s.header.time_ns);
+            self.note_arrival(ts);
         }
         Ok(())
     }
@@ -190,10 +189,11 @@ impl Navigator {
     pub fn push_baro(&mut self, s: &BaroSample) -> Result<(), Rejection> {
         let id = sid(SensorId::Baro);
         self.health[id].received += 1;
+        let ts = GpsTime::from_ns(s.header.time_ns);
         if let Err(e) = self
             .validate_header(SensorId::Baro, &s.header)
             .and_then(|_| {
-                let bad = |r| Rejection::new(SensorId::Baro, s.header.time_ns, r);
+                let bad = |r| Rejection::new(SensorId::Baro, ts, r);
                 if !(s.pressure_pa.is_finite() && (1_000.0..=120_000.0).contains(&s.pressure_pa)) {
                     return Err(bad(RejectReason::Pressure));
                 }
@@ -213,33 +213,32 @@ impl Navigator {
             self.health[id].rejected_invalid += 1;
             return Err(Rejection::new(
                 SensorId::Baro,
-                s.header.time_ns,
+                ts,
                 RejectReason::NoIsaAltitude,
             ));
         }
-        if self.too_late(s.header.time_ns) || self.baro_q.insert(s.header.time_ns, h).is_some() {
+        if self.too_late(ts) || self.baro_q.insert(ts, h).is_some() {
             self.health[id].dropped_late += 1;
         } else {
-            self.note_arrival(s.header.time_ns);
+            self.note_arrival(ts);
         }
         Ok(())
     }
 
     pub(super) fn validate_header(&self, sensor: SensorId, h: &Header) -> Result<(), Rejection> {
         let id = sid(sensor);
-        let bad = |r: RejectReason| Rejection::new(sensor, h.time_ns, r);
-        if h.time_ns < 0 {
+        let t = GpsTime::from_ns(h.time_ns);
+        let bad = |r: RejectReason| Rejection::new(sensor, t, r);
+        if t < GpsTime::EPOCH {
             return Err(bad(RejectReason::NegativeTime));
         }
         // The IMU's own time continuity (backward steps, gaps, jumps) is `check_imu_time`.
         let imu = id == sid(SensorId::Imu);
         if !imu
             && let Some(prev) = self.last_time[id]
-            && h.time_ns <= prev
+            && t <= prev
         {
-            return Err(bad(RejectReason::TimeNotIncreasing {
-                previous: GpsTime { ns: prev },
-            }));
+            return Err(bad(RejectReason::TimeNotIncreasing { previous: prev }));
         }
         if self.last_seq[id] == Some(h.seq) {
             return Err(bad(RejectReason::DuplicatedSequence));
@@ -249,13 +248,13 @@ impl Navigator {
         // good). Its queue is fused when the IMU reaches it, so the filter time is the
         // reference. (The IMU's own jumps: `check_imu_time`; a jump of 170 years found by
         // fuzzing made the covariance non-finite when it was stretched over.)
-        /// Largest accepted lead of an aiding time of validity over the filter time, ns (1 h:
+        /// Largest accepted lead of an aiding time of validity over the filter time (1 h:
         /// samples queued further ahead could only be fused after an IMU gap that is
         /// re-initialised anyway, which clears the queues).
-        const MAX_TIME_AHEAD_NS: i64 = 3_600_000_000_000;
-        let reference = (!imu && self.time_ns > 0).then_some(self.time_ns);
+        const MAX_TIME_AHEAD: Duration = Duration::from_seconds(3_600);
+        let reference = (!imu && self.time > GpsTime::EPOCH).then_some(self.time);
         if let Some(r) = reference
-            && h.time_ns.saturating_sub(r) > MAX_TIME_AHEAD_NS
+            && t.saturating_since(r) > MAX_TIME_AHEAD
         {
             return Err(bad(RejectReason::FarAheadOfImu));
         }
@@ -268,13 +267,13 @@ impl Navigator {
         {
             self.health[id].seq_gaps += h.seq - prev - 1;
         }
-        self.last_time[id] = Some(h.time_ns);
+        self.last_time[id] = Some(GpsTime::from_ns(h.time_ns));
         self.last_seq[id] = Some(h.seq);
         self.health[id].last_time_ns = h.time_ns;
     }
 
     pub(super) fn validate_imu(&self, s: &ImuSample) -> Result<(), Rejection> {
-        let bad = |r| Rejection::new(SensorId::Imu, s.header.time_ns, r);
+        let bad = |r| Rejection::new(SensorId::Imu, GpsTime::from_ns(s.header.time_ns), r);
         // At least 10 µs: no IMU outputs faster than 100 kHz (DESIGN: up to 2 kHz), and a
         // vanishing interval divides the increments into infinite rates (found by fuzzing: a
         // subnormal dt_s made the state non-finite).
@@ -298,8 +297,8 @@ impl Navigator {
         Ok(())
     }
 
-    pub(super) fn too_late(&self, t: i64) -> bool {
+    pub(super) fn too_late(&self, t: GpsTime) -> bool {
         self.phase == Phase::Navigating
-            && t < self.time_ns - (self.config.buffer_window_s * 1e9) as i64
+            && t < self.time - Duration::from_seconds_f64(self.config.buffer_window_s)
     }
 }

@@ -100,7 +100,7 @@ use crate::ekf::{
     StateVector, idx,
 };
 use crate::strapdown::{ImuIncrement, Integrator, MechanizationConfig, NavState, Strapdown, q_e_n};
-use crate::time::GpsTime;
+use crate::time::{Duration, GpsTime};
 use msgs::{
     BaroSample, GnssSample, Header, ImuSample, MAX_IMU_CHANNELS, MAX_SATELLITES, MAX_SENSORS,
     NavMode, NavSolution, OdometerSample, Record, SensorHealth, SensorId, StarTrackerSample,
@@ -210,11 +210,14 @@ pub struct Navigator {
     init_fix: Option<(Vector3<f64>, Matrix3<f64>)>,
     /// The replayable navigation state (a checkpoint is its copy with the time).
     core: Core,
-    time_ns: i64,
+    /// Time of the last IMU sample processed (the epoch of the solution).
+    time: GpsTime,
     last_seq: [Option<u64>; MAX_SENSORS],
-    last_time: [Option<i64>; MAX_SENSORS],
+    /// Time of validity of each sensor's last accepted sample.
+    last_time: [Option<GpsTime>; MAX_SENSORS],
     health: [SensorHealth; MAX_SENSORS],
-    last_fused_ns: [Option<i64>; MAX_SENSORS],
+    /// Time of validity of each sensor's latest fused sample (the mode's deadlines).
+    last_fused: [Option<GpsTime>; MAX_SENSORS],
     gnss_q: TimeQueue<GnssObs, GNSS_CAP>,
     celestial: CelestialCache,
     star_q: TimeQueue<StarObs, STAR_CAP>,
@@ -227,10 +230,10 @@ pub struct Navigator {
     odo_done: TimeQueue<f64, ODO_CAP>,
     baro_done: TimeQueue<f64, BARO_CAP>,
     /// Earliest time of validity of a sample that arrived after the IMU passed it.
-    rewind_to: Option<i64>,
-    /// Time of validity at which navigation started (the end of alignment), GPS ns: aiding
-    /// up to it belongs to the alignment period, whenever it arrives (`fuse_due`).
-    nav_start_ns: i64,
+    rewind_to: Option<GpsTime>,
+    /// Time of validity at which navigation started (the end of alignment; None before):
+    /// aiding up to it belongs to the alignment period, whenever it arrives (`fuse_due`).
+    nav_start: Option<GpsTime>,
     zupt: ZuptHealth,
     solutions: u64,
     mode: NavMode,
@@ -250,7 +253,7 @@ pub struct Navigator {
     nhc: NhcHealth,
     /// The latest least-squares GNSS fix of the alignment period and its time of validity
     /// (initial position and tight-mode clock, `initialize_from_ls`).
-    init_ls: Option<(i64, crate::gnss_ls::GnssFix)>,
+    init_ls: Option<(GpsTime, crate::gnss_ls::GnssFix)>,
 }
 
 /// Slot of a sensor in the health array.
@@ -271,11 +274,11 @@ impl Navigator {
             phase: Phase::Initializing,
             align: Accumulator::default(),
             init_fix: None,
-            time_ns: 0,
+            time: GpsTime::EPOCH,
             last_seq: [None; MAX_SENSORS],
             last_time: [None; MAX_SENSORS],
             health: [SensorHealth::default(); MAX_SENSORS],
-            last_fused_ns: [None; MAX_SENSORS],
+            last_fused: [None; MAX_SENSORS],
             gnss_q: TimeQueue::new(),
             celestial: CelestialCache::default(),
             star_q: TimeQueue::new(),
@@ -285,7 +288,7 @@ impl Navigator {
             checkpoints: Ring::new(
                 CHECKPOINT_CAP,
                 Checkpoint {
-                    t: 0,
+                    t: GpsTime::EPOCH,
                     core: core.clone(),
                 },
             ),
@@ -294,7 +297,7 @@ impl Navigator {
             odo_done: TimeQueue::new(),
             baro_done: TimeQueue::new(),
             rewind_to: None,
-            nav_start_ns: i64::MIN,
+            nav_start: None,
             core,
             zupt: ZuptHealth::default(),
             solutions: 0,
@@ -442,9 +445,9 @@ impl Navigator {
         self.phase == Phase::Navigating
     }
 
-    /// Time of the last IMU sample processed, GPS ns (0 before the first).
-    pub fn time_ns(&self) -> i64 {
-        self.time_ns
+    /// Time of the last IMU sample processed (the GPS epoch before the first).
+    pub fn time(&self) -> GpsTime {
+        self.time
     }
 }
 

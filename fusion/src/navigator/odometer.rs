@@ -5,10 +5,10 @@ use super::*;
 /// Odometer epoch kept for the next sample's interval-mean correction (`fuse_odometer`).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(super) struct OdometerEpoch {
-    /// Time of validity, GPS ns.
-    pub(super) t: i64,
-    /// Spacing from the epoch before, ns.
-    pub(super) spacing_ns: Option<i64>,
+    /// Time of validity.
+    pub(super) t: GpsTime,
+    /// Spacing from the epoch before.
+    pub(super) spacing: Option<Duration>,
     /// Body-x speed of the solution after the update, m/s.
     pub(super) v_x_m_s: f64,
 }
@@ -32,7 +32,7 @@ impl Navigator {
     /// independent noises, and the odometer's NIS on `sextant/status` is then the speed's
     /// alone — the constraint's NIS is far below its dof whatever its σ (its innovations are
     /// below the prior's lateral-velocity spread) and would hide the speed's consistency.
-    pub(super) fn fuse_odometer(&mut self, ts: i64, speed: f64, tally: Tally) {
+    pub(super) fn fuse_odometer(&mut self, ts: GpsTime, speed: f64, tally: Tally) {
         let id = sid(SensorId::Odometer);
         self.core.last_odo = Some((ts, speed));
         if !self.config.updates.odometer {
@@ -47,9 +47,10 @@ impl Navigator {
         let spacing = prev.map(|p| ts - p.t);
         let end_speed = match (prev, spacing) {
             (Some(p), Some(d))
-                if d > 0
-                    && d <= 1_000_000_000
-                    && p.spacing_ns.is_some_and(|s| (s - d).abs() <= 1_000) =>
+                if d > Duration::ZERO
+                    && d <= Duration::from_seconds(1)
+                    && p.spacing
+                        .is_some_and(|s| (s - d).abs() <= Duration::from_ns(1_000)) =>
             {
                 speed + (1.0 + k) * 0.5 * (body_vx(&self.core.nav) - p.v_x_m_s)
             }
@@ -84,7 +85,7 @@ impl Navigator {
         }
         self.odo_epoch = Some(OdometerEpoch {
             t: ts,
-            spacing_ns: spacing,
+            spacing,
             v_x_m_s: body_vx(&self.core.nav),
         });
     }

@@ -17,10 +17,10 @@ pub struct ClockEstimate {
 }
 
 impl Navigator {
-    pub(super) fn update_mode(&mut self, t: i64) {
+    pub(super) fn update_mode(&mut self, t: GpsTime) {
         let d = &self.config.deadlines;
         let recent = |s: SensorId, dl: f64| -> bool {
-            self.last_fused_ns[sid(s)].is_some_and(|f| ((t - f) as f64) * 1e-9 <= dl)
+            self.last_fused[sid(s)].is_some_and(|f| (t - f).seconds_f64() <= dl)
         };
         let star = recent(SensorId::StarTracker, d.star_tracker_s);
         let gnss = recent(SensorId::Gnss, d.gnss_s);
@@ -29,7 +29,7 @@ impl Navigator {
         let zupt = self
             .core
             .last_zupt
-            .is_some_and(|z| ((t - z) as f64) * 1e-9 <= 1.0)
+            .is_some_and(|z| (t - z).seconds_f64() <= 1.0)
             && self.core.static_since.is_some();
         let mut mask = 0u32;
         for (on, s) in [
@@ -72,7 +72,7 @@ impl Navigator {
         self.solutions += 1;
         NavSolution {
             header: Header {
-                time_ns: self.time_ns,
+                time_ns: self.time.ns,
                 seq: self.solutions,
                 status: 0,
                 reserved: 0,

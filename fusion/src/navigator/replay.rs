@@ -12,7 +12,7 @@ impl Navigator {
     pub(super) fn imu_step(&mut self, e: &ImuLogEntry, tally: Tally) {
         let t = e.t;
         // The increment covers dt_s; after missing samples, stretch it over the gap.
-        let gap_s = e.prev_t.map_or(e.dt_s, |p| (t - p) as f64 * 1e-9);
+        let gap_s = e.prev_t.map_or(e.dt_s, |p| (t - p).seconds_f64());
         let (scale, dt) = if gap_s > 1.5 * e.dt_s {
             self.core.strapdown.reset_history();
             (gap_s / e.dt_s, gap_s)
@@ -37,33 +37,30 @@ impl Navigator {
                 .ekf
                 .propagate_covariance(&self.ell, &self.core.nav.r_e);
         }
-        self.time_ns = t;
+        self.time = t;
         self.update_static_detector(t, &inc);
         self.fuse_due(t);
         self.maybe_zupt(t, tally);
-        let last = if self.checkpoints.len > 0 {
-            self.checkpoints.get(self.checkpoints.len - 1).t
-        } else {
-            i64::MIN / 2
-        };
-        if t - last >= CHECKPOINT_PERIOD_NS {
+        let due = self.checkpoints.len == 0
+            || t - self.checkpoints.get(self.checkpoints.len - 1).t >= CHECKPOINT_PERIOD;
+        if due {
             self.take_checkpoint(t);
         }
     }
 
     /// A sample queued at time of validity `ts`: if the inertial solution has already passed
     /// it, the filter must rewind (done at the next IMU sample, once for a burst).
-    pub(super) fn note_arrival(&mut self, ts: i64) {
-        if self.phase == Phase::Navigating && ts <= self.time_ns {
+    pub(super) fn note_arrival(&mut self, ts: GpsTime) {
+        if self.phase == Phase::Navigating && ts <= self.time {
             self.rewind_to = Some(self.rewind_to.map_or(ts, |r| r.min(ts)));
         }
     }
 
-    pub(super) fn take_checkpoint(&mut self, t: i64) {
+    pub(super) fn take_checkpoint(&mut self, t: GpsTime) {
         // The checkpoints are cleared only when navigation starts (and a replay keeps at least
         // one), so the first one marks the start.
         if self.checkpoints.len == 0 {
-            self.nav_start_ns = t;
+            self.nav_start = Some(t);
         }
         self.checkpoints.push(Checkpoint {
             t,
@@ -81,7 +78,7 @@ impl Navigator {
     /// period and `fuse_due` discards them. When the IMU log does not reach back to the
     /// checkpoint (an IMU faster than `max_imu_rate_hz`), the replay is impossible: counted,
     /// and the late samples are dropped ([`Self::drop_unreplayable`]).
-    pub(super) fn replay_from(&mut self, ts: i64) {
+    pub(super) fn replay_from(&mut self, ts: GpsTime) {
         let mut k = self.checkpoints.len;
         while k > 0 && self.checkpoints.get(k - 1).t >= ts {
             k -= 1;
@@ -103,7 +100,7 @@ impl Navigator {
         }
         self.checkpoints.truncate(k);
         self.core = c.core;
-        self.time_ns = c.t;
+        self.time = c.t;
         while let Some((t, v, _)) = self.gnss_done.pop_newer(c.t) {
             self.gnss_q.insert_flagged(t, v, true);
         }
@@ -128,13 +125,13 @@ impl Navigator {
     /// queued at or before the current epoch; the in-time ones stay), count them as late and
     /// the event in `replays_impossible`.
     pub(super) fn drop_unreplayable(&mut self) {
-        self.drop_queued_until(self.time_ns);
+        self.drop_queued_until(self.time);
         self.diagnostics.replays_impossible += 1;
     }
 
     /// Drop the queued aiding with time of validity ≤ `t`, counting each sample (once) in its
     /// sensor's `dropped_late`.
-    pub(super) fn drop_queued_until(&mut self, t: i64) {
+    pub(super) fn drop_queued_until(&mut self, t: GpsTime) {
         let mut dropped = [0u64; MAX_SENSORS];
         while let Some((_, _, counted)) = self.gnss_q.pop_due(t) {
             dropped[sid(SensorId::Gnss)] += u64::from(!counted);
@@ -155,32 +152,32 @@ impl Navigator {
 
     /// Fuse every queued sample with time of validity ≤ `t` (the current epoch) and keep it
     /// for a possible replay.
-    pub(super) fn fuse_due(&mut self, t: i64) {
+    pub(super) fn fuse_due(&mut self, t: GpsTime) {
         while let Some((ts, obs, counted)) = self.gnss_q.pop_due(t) {
             // Alignment discards the aiding of its own period when it arrives in time
             // (`consume_during_alignment`); arriving after the start, it is discarded too.
-            if ts <= self.nav_start_ns {
+            if self.nav_start.is_some_and(|start| ts <= start) {
                 continue;
             }
             self.fuse_gnss(ts, &obs, Tally::first_time(counted));
             self.gnss_done.insert_flagged(ts, obs, true);
         }
         while let Some((ts, obs, counted)) = self.star_q.pop_due(t) {
-            if ts <= self.nav_start_ns {
+            if self.nav_start.is_some_and(|start| ts <= start) {
                 continue;
             }
             self.fuse_star(ts, &obs, Tally::first_time(counted));
             self.star_done.insert_flagged(ts, obs, true);
         }
         while let Some((ts, speed, counted)) = self.odo_q.pop_due(t) {
-            if ts <= self.nav_start_ns {
+            if self.nav_start.is_some_and(|start| ts <= start) {
                 continue;
             }
             self.fuse_odometer(ts, speed, Tally::first_time(counted));
             self.odo_done.insert_flagged(ts, speed, true);
         }
         while let Some((ts, h, counted)) = self.baro_q.pop_due(t) {
-            if ts <= self.nav_start_ns {
+            if self.nav_start.is_some_and(|start| ts <= start) {
                 continue;
             }
             self.fuse_baro(ts, h, Tally::first_time(counted));

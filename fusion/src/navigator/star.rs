@@ -7,29 +7,27 @@ use super::*;
 ///
 /// `C_e_i = W(x_p, y_p, s') · R3(ERA) · C_cirs_gcrs` ([`crate::celestial::c_e_i`], IAU
 /// 2006/2000A, ~1 400 sin/cos pairs). Only `C_cirs_gcrs` (precession–nutation) is cached; it
-/// is recomputed when the sample is more than [`CelestialCache::REFRESH_NS`] from the cached
+/// is recomputed when the sample is more than [`CelestialCache::REFRESH`] from the cached
 /// epoch. Its largest rates are precession, 50.3″/yr ≈ 1.6·10⁻⁶ ″/s, and the short-period
 /// nutation terms (e.g. 0.23″ at 13.66 d: 2π·0.23″/13.66 d ≈ 1.2·10⁻⁶ ″/s), so over 60 s the
 /// cached matrix is off by < 0.2 mas — four orders below star-tracker noise (arcseconds). The
 /// Earth rotation angle and polar motion are evaluated exactly at every call.
 #[derive(Debug, Clone, Copy, Default)]
 pub(super) struct CelestialCache {
-    pub(super) epoch_ns: Option<i64>,
+    /// Epoch of the cached precession–nutation matrix.
+    pub(super) epoch: Option<GpsTime>,
     pub(super) c_cirs_gcrs: Matrix3<f64>,
 }
 
 impl CelestialCache {
-    /// Largest distance between a sample and the cached precession–nutation epoch, ns.
-    const REFRESH_NS: i64 = 60_000_000_000;
+    /// Largest distance between a sample and the cached precession–nutation epoch.
+    const REFRESH: Duration = Duration::from_seconds(60);
 
     pub(super) fn c_e_i(&mut self, t: GpsTime, eop: &EarthOrientation) -> Matrix3<f64> {
         use crate::celestial::{NutationModel, c_cirs_gcrs, era, polar_motion_matrix};
-        if self
-            .epoch_ns
-            .is_none_or(|e| (t.ns - e).abs() > Self::REFRESH_NS)
-        {
+        if self.epoch.is_none_or(|e| (t - e).abs() > Self::REFRESH) {
             self.c_cirs_gcrs = c_cirs_gcrs(t, NutationModel::Iau2000A);
-            self.epoch_ns = Some(t.ns);
+            self.epoch = Some(t);
         }
         let (s, c) = era(t, eop.dut1_s).sin_cos();
         let r3 = Matrix3::new(c, s, 0.0, -s, c, 0.0, 0.0, 0.0, 1.0);
@@ -39,12 +37,12 @@ impl CelestialCache {
 }
 
 impl Navigator {
-    pub(super) fn fuse_star(&mut self, ts: i64, obs: &StarObs, tally: Tally) {
+    pub(super) fn fuse_star(&mut self, ts: GpsTime, obs: &StarObs, tally: Tally) {
         let id = sid(SensorId::StarTracker);
         if !self.config.updates.star_tracker {
             return;
         }
-        let c_e_i = self.celestial.c_e_i(GpsTime { ns: ts }, &self.config.eop);
+        let c_e_i = self.celestial.c_e_i(ts, &self.config.eop);
         let q = quat_from_wire(&obs.q);
         let m = ekf::star_attitude(
             &self.core.nav,

@@ -41,12 +41,12 @@ impl Navigator {
     }
 
     /// Note that sample `ts` of sensor `id` was fused (for the mode), counting it once.
-    pub(super) fn mark_fused(&mut self, id: usize, ts: i64, tally: Tally) {
+    pub(super) fn mark_fused(&mut self, id: usize, ts: GpsTime, tally: Tally) {
         // A sample with several updates (baseline attitude + fix) counts once; sample times
         // strictly increase per sensor.
-        if tally == Tally::Count && self.last_fused_ns[id] != Some(ts) {
+        if tally == Tally::Count && self.last_fused[id] != Some(ts) {
             self.health[id].fused += 1;
         }
-        self.last_fused_ns[id] = Some(self.last_fused_ns[id].map_or(ts, |p| p.max(ts)));
+        self.last_fused[id] = Some(self.last_fused[id].map_or(ts, |p| p.max(ts)));
     }
 }

@@ -3,7 +3,7 @@
 use super::*;
 
 impl Navigator {
-    pub(super) fn update_static_detector(&mut self, t: i64, inc: &ImuIncrement) {
+    pub(super) fn update_static_detector(&mut self, t: GpsTime, inc: &ImuIncrement) {
         let a = &self.config.aiding;
         let w = inc.delta_angle_rad.norm() / inc.dt_s;
         let f = inc.delta_velocity_m_s.norm() / inc.dt_s;
@@ -17,7 +17,7 @@ impl Navigator {
         }
     }
 
-    pub(super) fn maybe_zupt(&mut self, t: i64, tally: Tally) {
+    pub(super) fn maybe_zupt(&mut self, t: GpsTime, tally: Tally) {
         let a = self.config.aiding;
         if !self.config.updates.zupt {
             return;
@@ -25,11 +25,11 @@ impl Navigator {
         let Some(since) = self.core.static_since else {
             return;
         };
-        if ((t - since) as f64) * 1e-9 < a.zupt_window_s {
+        if (t - since).seconds_f64() < a.zupt_window_s {
             return;
         }
         if let Some(last) = self.core.last_zupt
-            && ((t - last) as f64) * 1e-9 < a.zupt_interval_s
+            && (t - last).seconds_f64() < a.zupt_interval_s
         {
             return;
         }
@@ -38,7 +38,7 @@ impl Navigator {
         }
         // A recent odometer sample saying the vehicle moves vetoes the update.
         if let Some((to, v)) = self.core.last_odo
-            && ((t - to) as f64) * 1e-9 < 1.0
+            && (t - to).seconds_f64() < 1.0
             && v.abs() > 0.02
         {
             return;

@@ -187,7 +187,7 @@ fn navigator_run(
     for msg in sim {
         match &msg {
             Record::Truth(t) => {
-                if !(nav.is_navigating() && nav.time_ns() == t.header.time_ns) {
+                if !(nav.is_navigating() && nav.time().ns == t.header.time_ns) {
                     continue;
                 }
                 let p = compare(&nav, t, epoch);
