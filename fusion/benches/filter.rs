@@ -7,15 +7,16 @@
 use criterion::{Criterion, criterion_group, criterion_main};
 use msgs::{BaroSample, GnssSample, ImuSample, OdometerSample, StarTrackerSample};
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
-use sextant_fusion::celestial::{EarthOrientation, c_e_i};
-use sextant_fusion::earth::{Geodetic, GravityModel, WGS84, geodetic_to_ecef};
+use sextant_fusion::earth::{Geodetic, WGS84, geodetic_to_ecef};
 use sextant_fusion::ekf::{self, ActiveStates, Covariance, ErrorStateEkf, GateTable};
 use sextant_fusion::frames::Rotation;
 use sextant_fusion::navigator::{GnssMode, ImuSpec, Navigator, NavigatorConfig};
-use sextant_fusion::strapdown::{NavState, q_e_n, stationary_increment};
-use sextant_fusion::time::GpsTime;
+use sextant_fusion::strapdown::{NavState, q_e_n};
 use std::hint::black_box;
 use std::time::Instant;
+
+#[path = "../tests/common/samples.rs"]
+mod samples;
 
 fn setup() -> (ErrorStateEkf, NavState) {
     let g = Geodetic {
@@ -48,7 +49,7 @@ struct Feed {
     q_e_b: UnitQuaternion<f64>,
     c_s_b: Matrix3<f64>,
     pressure: f64,
-    sats: [(Vector3<f64>, f64); 8],
+    sats: [Vector3<f64>; 8],
     k: i64,
 }
 
@@ -60,16 +61,8 @@ impl Feed {
             height_m: 180.0,
         };
         let r_e = geodetic_to_ecef(&WGS84, &site);
-        let c_e_n = q_e_n(site.lat_rad, site.lon_rad)
-            .to_rotation_matrix()
-            .into_inner();
         // Eight satellites 20 000 km away at elevations 20°–80°, spread in azimuth.
-        let sats = std::array::from_fn(|i| {
-            let az = i as f64 * 0.8;
-            let el = (20.0 + 8.0 * i as f64).to_radians();
-            let u_n = Vector3::new(az.cos() * el.cos(), az.sin() * el.cos(), -el.sin());
-            (r_e + c_e_n * u_n * 2.0e7, 0.0)
-        });
+        let sats = samples::sky(site.lat_rad, site.lon_rad, &r_e, 0.8, 20.0, 8.0);
         Self {
             r_e,
             q_e_b: q_e_n(site.lat_rad, site.lon_rad)
@@ -87,69 +80,23 @@ impl Feed {
         let k = self.k;
         let seq = k as u64;
         let t = T0 + k * 5_000_000;
-        let dt = 0.005;
-        let inc = stationary_increment(&WGS84, GravityModel::J2, &self.r_e, &self.q_e_b, dt);
-        let mut s = ImuSample::default();
-        s.header.time_ns = t;
-        s.header.seq = seq;
-        s.dt_s = dt;
-        s.delta_angle_rad = inc.delta_angle_rad.into();
-        s.delta_velocity_m_s = inc.delta_velocity_m_s.into();
         let mut out = Step {
-            imu: s,
+            imu: samples::static_imu(t, seq, 0.005, &self.r_e, &self.q_e_b),
             gnss: None,
             star: None,
             baro: None,
             odo: None,
         };
         if k % 200 == 0 {
-            let mut g = Box::new(GnssSample::default());
-            g.header.time_ns = t;
-            g.header.seq = seq;
-            g.fix_valid = 1;
-            g.pos_ecef_m = self.r_e.into();
-            g.pos_cov_ecef_m2 = [4.0, 0.0, 0.0, 0.0, 4.0, 0.0, 0.0, 0.0, 4.0];
-            g.vel_cov_ecef_m2_s2 = [1e-4, 0.0, 0.0, 0.0, 1e-4, 0.0, 0.0, 0.0, 1e-4];
-            g.n_satellites = self.sats.len() as u32;
-            for (i, (r_s, _)) in self.sats.iter().enumerate() {
-                let sat = &mut g.satellites[i];
-                sat.prn = i as u32 + 1;
-                sat.flags = 3;
-                sat.pseudorange_m = (r_s - self.r_e).norm() + 100.0;
-                sat.range_rate_m_s = 0.5;
-                sat.sigma_pseudorange_m = 3.0;
-                sat.sigma_range_rate_m_s = 0.05;
-                sat.sat_pos_ecef_m = (*r_s).into();
-            }
-            out.gnss = Some(g);
+            let g = samples::raw_gnss(t, seq, &self.r_e, &self.sats, 100.0, 0.5);
+            out.gnss = Some(Box::new(samples::with_fix(g, &self.r_e)));
         }
         if k % 40 == 0 {
-            let c_s_i = self.c_s_b
-                * self.q_e_b.to_rotation_matrix().into_inner().transpose()
-                * c_e_i(GpsTime { ns: t }, &EarthOrientation::default());
-            let q = UnitQuaternion::from_matrix(&c_s_i);
-            let mut st = StarTrackerSample::default();
-            st.header.time_ns = t;
-            st.header.seq = seq;
-            st.q_sensor_icrf = [q.w, q.i, q.j, q.k];
-            st.sigma_cross_rad = 2e-5;
-            st.sigma_roll_rad = 1e-4;
-            st.valid = 1;
-            st.n_stars = 10;
-            out.star = Some(st);
+            out.star = Some(samples::star(t, seq, &self.c_s_b, &self.q_e_b));
         }
         if k % 10 == 0 {
-            let mut b = BaroSample::default();
-            b.header.time_ns = t;
-            b.header.seq = seq;
-            b.pressure_pa = self.pressure;
-            b.temperature_c = 15.0;
-            out.baro = Some(b);
-            let mut o = OdometerSample::default();
-            o.header.time_ns = t;
-            o.header.seq = seq;
-            o.dt_s = 0.05;
-            out.odo = Some(o);
+            out.baro = Some(samples::baro(t, seq, self.pressure));
+            out.odo = Some(samples::odometer_at_rest(t, seq, 0.05));
         }
         out
     }

@@ -7,20 +7,17 @@
 //! Only allocations of the test's own thread are counted (`common`), so that the harness's
 //! other threads cannot make the count flaky.
 
-use msgs::{
-    BaroSample, GnssSample, ImuSample, NavMode, OdometerSample, SensorId, StarTrackerSample,
-};
+use msgs::{GnssSample, NavMode, SensorId};
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use sextant_fusion::celestial::{EarthOrientation, c_e_i};
-use sextant_fusion::earth::{GravityModel, WGS84};
+use sextant_fusion::earth::WGS84;
 use sextant_fusion::ekf::{self, GateTable};
 use sextant_fusion::frames::Rotation;
 use sextant_fusion::navigator::{GnssMode, Navigator, NavigatorConfig};
-use sextant_fusion::strapdown::{q_e_n, stationary_increment};
 use sextant_fusion::time::GpsTime;
 
 mod common;
-use common::{count, track_this_thread};
+use common::{count, samples, track_this_thread};
 
 const T0: i64 = 1_400_000_000_000_000_000;
 
@@ -42,74 +39,25 @@ fn filter_allocates_nothing_in_steady_state() {
         ..NavigatorConfig::default()
     };
     let mut nav_tight = Box::new(Navigator::new(tight).unwrap());
-    // Six satellites 20 000 km away at elevations 25°–75° (ECEF line of sight from NED).
-    let c_e_n = q_e_n(site.lat_rad, site.lon_rad)
-        .to_rotation_matrix()
-        .into_inner();
-    let sats: [Vector3<f64>; 6] = std::array::from_fn(|i| {
-        let az = i as f64 * 1.1;
-        let el = (25.0 + 10.0 * i as f64).to_radians();
-        r_e + c_e_n * Vector3::new(az.cos() * el.cos(), az.sin() * el.cos(), -el.sin()) * 2.0e7
-    });
+    // Six satellites 20 000 km away at elevations 25°–75°.
+    let sats: [Vector3<f64>; 6] = samples::sky(site.lat_rad, site.lon_rad, &r_e, 1.1, 25.0, 10.0);
     let rate = 100;
     let dt = 1.0 / rate as f64;
     let mut seq = 0u64;
     let mut step = |nav: &mut Navigator, k: i64| {
         seq += 1;
         let t = T0 + k * 10_000_000;
-        let inc = stationary_increment(&WGS84, GravityModel::J2, &r_e, &q_e_b, dt);
-        let mut s = ImuSample::default();
-        s.header.time_ns = t;
-        s.header.seq = seq;
-        s.dt_s = dt;
-        s.delta_angle_rad = inc.delta_angle_rad.into();
-        s.delta_velocity_m_s = inc.delta_velocity_m_s.into();
+        let s = samples::static_imu(t, seq, dt, &r_e, &q_e_b);
         if k % 10 == 0 {
-            let mut g = GnssSample::default();
-            g.header.time_ns = t;
-            g.header.seq = seq;
-            g.fix_valid = 1;
-            g.pos_ecef_m = r_e.into();
-            g.pos_cov_ecef_m2 = [4.0, 0.0, 0.0, 0.0, 4.0, 0.0, 0.0, 0.0, 4.0];
-            g.vel_cov_ecef_m2_s2 = [1e-4, 0.0, 0.0, 0.0, 1e-4, 0.0, 0.0, 0.0, 1e-4];
-            g.n_satellites = sats.len() as u32;
-            for (i, r_s) in sats.iter().enumerate() {
-                let sat = &mut g.satellites[i];
-                sat.prn = i as u32 + 1;
-                sat.flags = 3;
-                sat.pseudorange_m = (r_s - r_e).norm() + 150.0;
-                sat.range_rate_m_s = 0.2;
-                sat.sigma_pseudorange_m = 3.0;
-                sat.sigma_range_rate_m_s = 0.05;
-                sat.sat_pos_ecef_m = (*r_s).into();
-            }
+            let g = samples::with_fix(samples::raw_gnss(t, seq, &r_e, &sats, 150.0, 0.2), &r_e);
             nav.push_gnss(&g).unwrap();
-            let c_s_i = c_s_b
-                * q_e_b.to_rotation_matrix().into_inner().transpose()
-                * c_e_i(GpsTime { ns: t }, &EarthOrientation::default());
-            let q = UnitQuaternion::from_matrix(&c_s_i);
-            let mut st = StarTrackerSample::default();
-            st.header.time_ns = t;
-            st.header.seq = seq;
-            st.q_sensor_icrf = [q.w, q.i, q.j, q.k];
-            st.sigma_cross_rad = 2e-5;
-            st.sigma_roll_rad = 1e-4;
-            st.valid = 1;
-            st.n_stars = 10;
-            nav.push_star_tracker(&st).unwrap();
-            let mut b = BaroSample::default();
-            b.header.time_ns = t;
-            b.header.seq = seq;
-            b.pressure_pa = pressure;
-            b.temperature_c = 15.0;
-            nav.push_baro(&b).unwrap();
+            nav.push_star_tracker(&samples::star(t, seq, &c_s_b, &q_e_b))
+                .unwrap();
+            nav.push_baro(&samples::baro(t, seq, pressure)).unwrap();
         }
         if k % 2 == 0 {
-            let mut o = OdometerSample::default();
-            o.header.time_ns = t;
-            o.header.seq = seq;
-            o.dt_s = 0.02;
-            nav.push_odometer(&o).unwrap();
+            nav.push_odometer(&samples::odometer_at_rest(t, seq, 0.02))
+                .unwrap();
         }
         nav.push_imu(&s).unwrap()
     };

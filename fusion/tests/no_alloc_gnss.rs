@@ -7,13 +7,11 @@
 //! only are counted (`common`).
 
 mod common;
-use common::{count, track_this_thread};
-use msgs::{GnssSample, ImuSample, SensorId};
+use common::{count, samples, track_this_thread};
+use msgs::{GnssSample, SensorId};
 use nalgebra::Vector3;
-use sextant_fusion::earth::{GravityModel, WGS84};
 use sextant_fusion::gnss_ls;
 use sextant_fusion::navigator::{GnssMode, InitialPosition, Navigator, NavigatorConfig};
-use sextant_fusion::strapdown::{q_e_n, stationary_increment};
 
 const T0: i64 = 1_400_000_000_000_000_000;
 
@@ -22,14 +20,7 @@ fn gnss_cross_check_and_clock_start_allocate_nothing() {
     track_this_thread();
 
     let (site, r_e, q_e_b) = common::static_site(55.655, 37.534, 180.0);
-    let c_e_n = q_e_n(site.lat_rad, site.lon_rad)
-        .to_rotation_matrix()
-        .into_inner();
-    let sats: [Vector3<f64>; 6] = std::array::from_fn(|i| {
-        let az = i as f64 * 1.1;
-        let el = (25.0 + 10.0 * i as f64).to_radians();
-        r_e + c_e_n * Vector3::new(az.cos() * el.cos(), az.sin() * el.cos(), -el.sin()) * 2.0e7
-    });
+    let sats: [Vector3<f64>; 6] = samples::sky(site.lat_rad, site.lon_rad, &r_e, 1.1, 25.0, 10.0);
     let mut nav = Box::new(
         Navigator::new(NavigatorConfig {
             alignment_s: 5.0,
@@ -49,29 +40,10 @@ fn gnss_cross_check_and_clock_start_allocate_nothing() {
     let mut step = |nav: &mut Navigator, k: i64, with_gnss: bool| {
         seq += 1;
         let t = T0 + k * 10_000_000;
-        let inc = stationary_increment(&WGS84, GravityModel::J2, &r_e, &q_e_b, dt);
-        let mut s = ImuSample::default();
-        s.header.time_ns = t;
-        s.header.seq = seq;
-        s.dt_s = dt;
-        s.delta_angle_rad = inc.delta_angle_rad.into();
-        s.delta_velocity_m_s = inc.delta_velocity_m_s.into();
+        let s = samples::static_imu(t, seq, dt, &r_e, &q_e_b);
         if with_gnss && k % 10 == 0 {
-            let mut g = GnssSample::default();
-            g.header.time_ns = t;
-            g.header.seq = seq;
-            g.n_satellites = sats.len() as u32;
-            for (i, r_s) in sats.iter().enumerate() {
-                let sat = &mut g.satellites[i];
-                sat.prn = i as u32 + 1;
-                sat.flags = 3;
-                sat.pseudorange_m = (r_s - r_e).norm() + 150.0;
-                sat.range_rate_m_s = 0.2;
-                sat.sigma_pseudorange_m = 3.0;
-                sat.sigma_range_rate_m_s = 0.05;
-                sat.sat_pos_ecef_m = (*r_s).into();
-            }
-            nav.push_gnss(&g).unwrap();
+            nav.push_gnss(&samples::raw_gnss(t, seq, &r_e, &sats, 150.0, 0.2))
+                .unwrap();
         }
         nav.push_imu(&s).unwrap()
     };

@@ -8,15 +8,12 @@
 //! the test harness's main thread, which may still be setting up when a fast test starts,
 //! cannot make the count flaky.
 
-use msgs::{GnssSample, ImuSample};
 use nalgebra::Vector3;
-use sextant_fusion::earth::{GravityModel, WGS84};
 use sextant_fusion::navigator::{Navigator, NavigatorConfig};
 use sextant_fusion::redundancy::{FdiConfig, RedundantImu, pyramid_axes};
-use sextant_fusion::strapdown::stationary_increment;
 
 mod common;
-use common::{count, track_this_thread};
+use common::{count, samples, track_this_thread};
 
 const T0: i64 = 1_400_000_000_000_000_000;
 
@@ -47,31 +44,22 @@ fn redundant_channels_allocate_nothing_per_step() {
     let mut step = |nav: &mut Navigator, k: i64| {
         seq += 1;
         let t = T0 + k * 10_000_000;
-        let inc = stationary_increment(&WGS84, GravityModel::J2, &r_e, &q_e_b, dt);
-        let mut s = ImuSample::default();
-        s.header.time_ns = t;
-        s.header.seq = seq;
-        s.dt_s = dt;
-        s.delta_angle_rad = [0.0; 3];
-        s.delta_velocity_m_s = [0.0; 3];
+        // The body increments are carried by the channels only.
+        let mut s = samples::static_imu(t, seq, dt, &r_e, &q_e_b);
+        let dth = Vector3::from(std::mem::take(&mut s.delta_angle_rad));
+        let dv = Vector3::from(std::mem::take(&mut s.delta_velocity_m_s));
         s.n_channels = n as u32;
         for (i, ax) in axes.iter().enumerate().take(n) {
             let e = Vector3::from(*ax);
             s.channel_axis[i] = *ax;
-            s.channel_delta_angle_rad[i] = e.dot(&inc.delta_angle_rad);
-            s.channel_delta_velocity_m_s[i] = e.dot(&inc.delta_velocity_m_s);
+            s.channel_delta_angle_rad[i] = e.dot(&dth);
+            s.channel_delta_velocity_m_s[i] = e.dot(&dv);
         }
         if k >= fault_from {
             s.channel_delta_angle_rad[2] += 1e-6;
         }
         if k % 10 == 0 {
-            let mut g = GnssSample::default();
-            g.header.time_ns = t;
-            g.header.seq = seq;
-            g.fix_valid = 1;
-            g.pos_ecef_m = r_e.into();
-            g.pos_cov_ecef_m2 = [4.0, 0.0, 0.0, 0.0, 4.0, 0.0, 0.0, 0.0, 4.0];
-            g.vel_cov_ecef_m2_s2 = [1e-4, 0.0, 0.0, 0.0, 1e-4, 0.0, 0.0, 0.0, 1e-4];
+            let g = samples::with_fix(samples::raw_gnss(t, seq, &r_e, &[], 0.0, 0.0), &r_e);
             nav.push_gnss(&g).unwrap();
         }
         nav.push_imu(&s).unwrap()

@@ -37,10 +37,7 @@ impl<T: Copy + Default, const CAP: usize> TimeQueue<T, CAP> {
         counted: bool,
     ) -> Option<(GpsTime, T, bool)> {
         let evicted = if self.len == CAP {
-            let e = self.buf[self.head];
-            self.head = (self.head + 1) % CAP;
-            self.len -= 1;
-            Some(e)
+            self.pop_oldest()
         } else {
             None
         };
@@ -69,13 +66,20 @@ impl<T: Copy + Default, const CAP: usize> TimeQueue<T, CAP> {
     /// Remove and return the oldest entry if its time is ≤ `t`.
     pub(super) fn pop_due(&mut self, t: GpsTime) -> Option<(GpsTime, T, bool)> {
         if self.len > 0 && self.buf[self.head].0 <= t {
-            let e = self.buf[self.head];
-            self.head = (self.head + 1) % CAP;
-            self.len -= 1;
-            Some(e)
+            self.pop_oldest()
         } else {
             None
         }
+    }
+    /// Remove and return the oldest entry (None when empty).
+    fn pop_oldest(&mut self) -> Option<(GpsTime, T, bool)> {
+        if self.len == 0 {
+            return None;
+        }
+        let e = self.buf[self.head];
+        self.head = (self.head + 1) % CAP;
+        self.len -= 1;
+        Some(e)
     }
     pub(super) fn clear(&mut self) {
         self.len = 0;

@@ -68,45 +68,23 @@ pub(super) fn fold_sensor(h: &mut SensorHealth, v: Verdict) {
     }
 }
 
-/// Counters of the zero-velocity updates (not a sensor slot of `msgs::Status`).
+/// Counters of an update that is not a sensor slot of `msgs::Status`: the zero-velocity
+/// updates (3 dof) and the non-holonomic constraints (zero lateral and vertical body velocity,
+/// 2 dof).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct ZuptHealth {
-    /// Zero-velocity updates fused.
-    pub fused: u64,
-    /// Zero-velocity updates rejected by the gate.
-    pub rejected_gate: u64,
-    /// NIS of the last one.
-    pub last_nis: f64,
-}
-
-impl ZuptHealth {
-    /// Fold one zero-velocity update.
-    pub(super) fn fold(&mut self, v: Verdict) {
-        self.last_nis = v.nis;
-        if v.rejected {
-            self.rejected_gate += 1;
-        } else {
-            self.fused += 1;
-        }
-    }
-}
-
-/// Counters of the non-holonomic constraint updates (zero lateral and vertical body
-/// velocity, 2 dof; not a sensor slot of `msgs::Status`).
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct NhcHealth {
+pub struct ConstraintHealth {
     /// Updates fused.
     pub fused: u64,
     /// Updates rejected by the gate.
     pub rejected_gate: u64,
     /// NIS of the last one.
     pub last_nis: f64,
-    /// Sum of the NIS of the fused ones (mean NIS = nis_sum / fused, ≈ 2 if consistent).
+    /// Sum of the NIS of the fused ones (mean NIS = nis_sum / fused, ≈ dof if consistent).
     pub nis_sum: f64,
 }
 
-impl NhcHealth {
-    /// Fold one constraint update.
+impl ConstraintHealth {
+    /// Fold one update.
     pub(super) fn fold(&mut self, v: Verdict) {
         self.last_nis = v.nis;
         if v.rejected {
@@ -117,6 +95,12 @@ impl NhcHealth {
         }
     }
 }
+
+/// Counters of the zero-velocity updates.
+pub type ZuptHealth = ConstraintHealth;
+
+/// Counters of the non-holonomic constraint updates.
+pub type NhcHealth = ConstraintHealth;
 
 /// Navigator counters that are not per-sensor (published on `msgs::Status`).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]

@@ -132,7 +132,7 @@ pub use config::*;
 use gate::*;
 pub use gate::{RejectReason, Rejection};
 use health::*;
-pub use health::{NavigatorDiagnostics, NhcHealth, ZuptHealth};
+pub use health::{ConstraintHealth, NavigatorDiagnostics, NhcHealth, ZuptHealth};
 pub use imu_time::CONFIRM_SAMPLES;
 use imu_time::*;
 use obs::*;
