@@ -432,8 +432,46 @@ mod tests {
     use rand::SeedableRng;
     use rand_distr::{Distribution, Normal};
 
-    /// Static increments at a site from fusion::earth: Δθ = C_b_e ω_ie dt + b_g dt + noise,
-    /// Δv = −C_b_e g dt + b_a dt + noise.
+    /// The increments of a static IMU with attitude `c_b_e` (ECEF → body) under gravity `g_e`
+    /// (ECEF, m/s²) over `dt` s: Δθ = C_b_e ω_ie dt + b_g dt, Δv = −C_b_e g dt + b_a dt.
+    struct StaticIncrements {
+        c_b_e: Matrix3<f64>,
+        g_e: Vector3<f64>,
+        b_g: Vector3<f64>,
+        b_a: Vector3<f64>,
+        dt: f64,
+    }
+
+    impl StaticIncrements {
+        /// Add `steps` increments to `acc`, with navigation-grade white noise (ARW 0.002°/√h,
+        /// VRW 20 µg/√Hz) drawn from `rng` when one is given.
+        fn accumulate(
+            &self,
+            acc: &mut Accumulator,
+            steps: usize,
+            mut rng: Option<&mut rand_chacha::ChaCha8Rng>,
+        ) {
+            let dt = self.dt;
+            let arw = 0.002f64.to_radians() / 60.0;
+            let vrw = 20e-6 * 9.80665;
+            let n_g = Normal::new(0.0, arw * dt.sqrt()).unwrap();
+            let n_a = Normal::new(0.0, vrw * dt.sqrt()).unwrap();
+            for _ in 0..steps {
+                let mut dth = (self.c_b_e * WGS84.omega_ie_e() + self.b_g) * dt;
+                let mut dv = (-(self.c_b_e * self.g_e) + self.b_a) * dt;
+                if let Some(rng) = rng.as_deref_mut() {
+                    for i in 0..3 {
+                        dth[i] += n_g.sample(rng);
+                        dv[i] += n_a.sample(rng);
+                    }
+                }
+                acc.add(&dth, &dv, dt);
+            }
+        }
+    }
+
+    /// Static increments at a site from fusion::earth ([`StaticIncrements`], with noise when
+    /// `noisy`), averaged.
     fn static_means(
         lat: f64,
         rpy: (f64, f64, f64),
@@ -458,23 +496,15 @@ mod tests {
         let dt: f64 = 0.005;
         let mut acc = Accumulator::default();
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
-        // Navigation grade: ARW 0.002°/√h, VRW 20 µg/√Hz.
-        let arw = 0.002f64.to_radians() / 60.0;
-        let vrw = 20e-6 * 9.80665;
-        let n_g = Normal::new(0.0, arw * dt.sqrt()).unwrap();
-        let n_a = Normal::new(0.0, vrw * dt.sqrt()).unwrap();
         let steps = (seconds / dt).round() as usize;
-        for _ in 0..steps {
-            let mut dth = (c_b_e * WGS84.omega_ie_e() + b_g) * dt;
-            let mut dv = (-(c_b_e * g_e) + b_a) * dt;
-            if noisy {
-                for i in 0..3 {
-                    dth[i] += n_g.sample(&mut rng);
-                    dv[i] += n_a.sample(&mut rng);
-                }
-            }
-            acc.add(&dth, &dv, dt);
-        }
+        let inc = StaticIncrements {
+            c_b_e,
+            g_e,
+            b_g,
+            b_a,
+            dt,
+        };
+        inc.accumulate(&mut acc, steps, noisy.then_some(&mut rng));
         assert!((acc.duration_s() - seconds).abs() < 1e-6);
         (acc.mean_specific_force_m_s2(), acc.mean_rate_rad_s(), c_n_b)
     }
@@ -700,10 +730,6 @@ mod tests {
         let cen = c_e_n(site.lat_rad, site.lon_rad);
         let g_e = gravity_ecef(&WGS84, GravityModel::J2, &r_e);
         let dt: f64 = 0.005;
-        let arw = 0.002f64.to_radians() / 60.0;
-        let vrw = 20e-6 * 9.80665;
-        let n_g = Normal::new(0.0, arw * dt.sqrt()).unwrap();
-        let n_a = Normal::new(0.0, vrw * dt.sqrt()).unwrap();
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
         let mut out = [Accumulator::default(), Accumulator::default()];
         for (k, acc) in out.iter_mut().enumerate() {
@@ -711,17 +737,15 @@ mod tests {
             let (sb, cb) = beta.sin_cos();
             let r_z = Matrix3::new(cb, -sb, 0.0, sb, cb, 0.0, 0.0, 0.0, 1.0);
             let c_b_e = (cen * c0 * r_z).transpose();
-            for _ in 0..(seconds_each / dt).round() as usize {
-                let mut dth = (c_b_e * WGS84.omega_ie_e() + b_g) * dt;
-                let mut dv = (-(c_b_e * g_e) + b_a) * dt;
-                if noisy {
-                    for i in 0..3 {
-                        dth[i] += n_g.sample(&mut rng);
-                        dv[i] += n_a.sample(&mut rng);
-                    }
-                }
-                acc.add(&dth, &dv, dt);
-            }
+            let inc = StaticIncrements {
+                c_b_e,
+                g_e,
+                b_g,
+                b_a,
+                dt,
+            };
+            let steps = (seconds_each / dt).round() as usize;
+            inc.accumulate(acc, steps, noisy.then_some(&mut rng));
         }
         (out[0], out[1])
     }

@@ -164,6 +164,42 @@ pub fn processes_matching(needle: &str) -> Vec<(i32, String)> {
     out
 }
 
+/// Assert that a run on `prefix` left nothing behind: no process whose command line names the
+/// prefix, no iceoryx2 file-system entry that was not there before (`before`, from
+/// [`iceoryx_entries`] taken before the run).
+pub fn assert_nothing_left_behind(prefix: &str, before: &BTreeSet<PathBuf>) {
+    assert!(
+        processes_matching(prefix).is_empty(),
+        "{:?}",
+        processes_matching(prefix)
+    );
+    let leaked: Vec<_> = iceoryx_entries().difference(before).cloned().collect();
+    assert!(
+        leaked.is_empty(),
+        "iceoryx2 resources left behind: {leaked:?}"
+    );
+}
+
+/// Wait for `child` to exit within `timeout`, polling every 50 ms; when it overruns, kill it
+/// and panic naming `what`.
+pub fn wait_exit(
+    child: &mut std::process::Child,
+    what: &str,
+    timeout: std::time::Duration,
+) -> std::process::ExitStatus {
+    let t0 = std::time::Instant::now();
+    loop {
+        if let Some(st) = child.try_wait().expect("wait for a child process") {
+            return st;
+        }
+        if t0.elapsed() > timeout {
+            let _ = child.kill();
+            panic!("{what} overran {timeout:?}");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+}
+
 /// A JSON array of numbers as a Vec (empty when absent).
 pub fn f64s(v: &serde_json::Value) -> Vec<f64> {
     v.as_array()

@@ -21,7 +21,7 @@ use sextant_tests::*;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::sync::Mutex;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 static SERIAL: Mutex<()> = Mutex::new(());
 
@@ -94,17 +94,7 @@ fn bad_samples_over_iceoryx2_are_counted_never_fused_and_the_daemon_survives() {
     );
     let rss = rss_peak_mib(fusion.id());
     kill(Pid::from_raw(fusion.id() as i32), Signal::SIGTERM).unwrap();
-    let t0 = Instant::now();
-    let st = loop {
-        if let Some(st) = fusion.try_wait().unwrap() {
-            break st;
-        }
-        assert!(
-            t0.elapsed() < Duration::from_secs(20),
-            "fusion did not stop"
-        );
-        std::thread::sleep(Duration::from_millis(50));
-    };
+    let st = wait_exit(&mut fusion, "fusion stopping", Duration::from_secs(20));
     let log = std::fs::read_to_string(dir.join("fusion.log")).unwrap_or_default();
     assert!(st.success(), "fusion exit {st}\n{log}");
 

@@ -47,21 +47,6 @@ fn start_run(out: &Path, prefix: &str, extra: &[&str]) -> Child {
         .expect("start sextant run")
 }
 
-/// Wait for a child with a timeout; kill it when it overruns.
-fn wait_for(child: &mut Child, timeout: Duration) -> std::process::ExitStatus {
-    let t0 = Instant::now();
-    loop {
-        if let Some(st) = child.try_wait().unwrap() {
-            return st;
-        }
-        if t0.elapsed() > timeout {
-            let _ = child.kill();
-            panic!("process overran {timeout:?}");
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    }
-}
-
 /// Pid of the process running `program` with this prefix (not the supervisor).
 fn pid_of(prefix: &str, program: &str) -> Option<i32> {
     processes_matching(prefix)
@@ -144,7 +129,7 @@ fn killed_driver_is_reported_degrades_and_is_used_again_after_restart() {
     ));
     let gnss_pid = pid_of(&prefix, "sextant-sim-gnss").expect("GNSS driver running");
     sigkill(gnss_pid);
-    let st = wait_for(&mut child, Duration::from_secs(60));
+    let st = wait_exit(&mut child, "sextant run", Duration::from_secs(60));
     assert!(st.success(), "sextant run: {st}\n{}", log_text(&out));
     assert!(launched.elapsed() < Duration::from_secs(40));
     let s = summary(&out);
@@ -300,7 +285,7 @@ fn killed_fusion_is_restarted_with_a_new_recording_and_the_old_one_is_readable()
     ));
     let fusion_pid = pid_of(&prefix, "sextant-fusion").expect("fusion running");
     sigkill(fusion_pid);
-    let st = wait_for(&mut child, Duration::from_secs(60));
+    let st = wait_exit(&mut child, "sextant run", Duration::from_secs(60));
     assert!(st.success(), "sextant run: {st}\n{}", log_text(&out));
     let s = summary(&out);
     assert_eq!(s["fusion_restarts"], 1, "{s}");
@@ -405,7 +390,7 @@ fn shared_memory_of_a_crashed_run_is_cleaned_at_the_next_start() {
             "20",
         ],
     );
-    let st = wait_for(&mut next, Duration::from_secs(40));
+    let st = wait_exit(&mut next, "the next sextant run", Duration::from_secs(40));
     let log = log_text(&out2);
     assert!(st.success(), "{log}");
     assert!(

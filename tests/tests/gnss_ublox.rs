@@ -201,17 +201,7 @@ fn epoch_bytes(k: u32, inj: &mut Injected) -> Vec<u8> {
 
 fn stop(child: &mut Child, name: &str) -> std::process::ExitStatus {
     let _ = kill(Pid::from_raw(child.id() as i32), Signal::SIGTERM);
-    let t0 = Instant::now();
-    loop {
-        if let Some(st) = child.try_wait().unwrap() {
-            return st;
-        }
-        assert!(
-            t0.elapsed() < Duration::from_secs(20),
-            "{name} did not stop"
-        );
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    wait_exit(child, &format!("{name} stopping"), Duration::from_secs(20))
 }
 
 /// Bytes written to the master that the slave side has not read yet.

@@ -17,7 +17,7 @@ use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
 use sextant_tests::*;
 use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 const DURATION_S: f64 = 240.0;
 const SPEED: f64 = 20.0;
@@ -75,14 +75,7 @@ fn real_gnss_played_into_a_simulated_bench_is_fused() {
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
-    let t0 = Instant::now();
-    let status = loop {
-        if let Some(s) = run.try_wait().unwrap() {
-            break s;
-        }
-        assert!(t0.elapsed() < Duration::from_secs(180), "sextant run hangs");
-        std::thread::sleep(Duration::from_millis(200));
-    };
+    let status = wait_exit(&mut run, "sextant run", Duration::from_secs(180));
     // The replay would go on to the end of the hour: stop it as a user would.
     kill(Pid::from_raw(replay.id() as i32), Signal::SIGTERM).expect("SIGTERM");
     let replay_out = replay.wait_with_output().unwrap();

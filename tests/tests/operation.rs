@@ -18,7 +18,7 @@ use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
 use sextant_tests::*;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Output, Stdio};
+use std::process::{Command, Output, Stdio};
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
@@ -101,20 +101,6 @@ fn wait_for_pid(prefix: &str, program: &str) -> i32 {
     }
 }
 
-fn wait_child(child: &mut Child, timeout: Duration) -> std::process::ExitStatus {
-    let t0 = Instant::now();
-    loop {
-        if let Some(st) = child.try_wait().unwrap() {
-            return st;
-        }
-        if t0.elapsed() > timeout {
-            let _ = child.kill();
-            panic!("overran {timeout:?}");
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    }
-}
-
 fn summary(dir: &Path) -> serde_json::Value {
     let t = std::fs::read_to_string(dir.join("summary.json")).unwrap();
     serde_json::from_str(&t).unwrap()
@@ -190,7 +176,7 @@ fn one_bus_per_prefix_and_an_earlier_run_is_never_overwritten() {
     assert!(text(&o).contains("is kept"), "{}", text(&o));
 
     // A is unaffected: it completes, navigates, and its recording is complete.
-    let st = wait_child(&mut a, Duration::from_secs(60));
+    let st = wait_exit(&mut a, "sextant run", Duration::from_secs(60));
     assert!(st.success(), "run A: {st}");
     let s = summary(&a_out);
     assert_eq!(s["recording_complete"], true, "{s}");
@@ -331,7 +317,7 @@ fn a_short_driver_stall_is_no_deadline_miss_at_the_configured_speed_up() {
     }
     // The barometer stopped for 1.5 s: a real silence, beyond every deadline.
     stall(baro, Duration::from_millis(1500));
-    let st = wait_child(&mut run, Duration::from_secs(60));
+    let st = wait_exit(&mut run, "sextant run", Duration::from_secs(60));
     assert!(st.success(), "sextant run: {st}");
     let rec = read_recording(&out.join("recording.mcap")).unwrap();
     let events: Vec<(i64, bool)> = rec

@@ -120,16 +120,7 @@ fn run_records_every_channel_and_navigates_within_sensor_bounds() {
     assert!(t0.elapsed() < Duration::from_secs_f64(duration_s / speed + 60.0));
 
     // No process and no shared memory of this run is left behind.
-    assert!(
-        processes_matching(&prefix).is_empty(),
-        "{:?}",
-        processes_matching(&prefix)
-    );
-    let leaked: Vec<_> = iceoryx_entries().difference(&shm_before).cloned().collect();
-    assert!(
-        leaked.is_empty(),
-        "iceoryx2 resources left behind: {leaked:?}"
-    );
+    assert_nothing_left_behind(&prefix, &shm_before);
 
     // Exactly one recording; every channel has a JSON Schema and every message validates.
     let mcaps: Vec<_> = std::fs::read_dir(&out)
@@ -342,32 +333,17 @@ fn ctrl_c_leaves_no_process_no_shared_memory_and_a_readable_recording() {
         nix::sys::signal::Signal::SIGINT,
     )
     .unwrap();
-    let t0 = Instant::now();
-    let status = loop {
-        if let Some(s) = child.try_wait().unwrap() {
-            break s;
-        }
-        assert!(
-            t0.elapsed() < Duration::from_secs(30),
-            "sextant run did not stop on SIGINT"
-        );
-        std::thread::sleep(Duration::from_millis(100));
-    };
+    let status = wait_exit(
+        &mut child,
+        "sextant run stopping on SIGINT",
+        Duration::from_secs(30),
+    );
     assert!(
         status.success() || status.code() == Some(130),
         "exit status {status}"
     );
     std::thread::sleep(Duration::from_millis(300));
-    assert!(
-        processes_matching(&prefix).is_empty(),
-        "{:?}",
-        processes_matching(&prefix)
-    );
-    let leaked: Vec<_> = iceoryx_entries().difference(&shm_before).cloned().collect();
-    assert!(
-        leaked.is_empty(),
-        "iceoryx2 resources left behind: {leaked:?}"
-    );
+    assert_nothing_left_behind(&prefix, &shm_before);
     let rec = read_recording(&out.join("recording.mcap")).expect("recording readable after Ctrl-C");
     assert!(rec.count("imu") > 100, "imu messages: {}", rec.count("imu"));
     assert!(rec.count("nav") > 10);

@@ -21,11 +21,7 @@ fn baro_bias_state_converges_with_gnss() {
             nav.push_gnss(&g).unwrap();
         }
         if k % 20 == 0 {
-            let mut b = BaroSample::default();
-            b.header.time_ns = imu.header.time_ns;
-            b.header.seq = k as u64;
-            b.pressure_pa = crate::atmosphere::isa_pressure_pa(h_true + 2.5);
-            b.temperature_c = 15.0;
+            let b = baro_at(imu.header.time_ns, k as u64, h_true + 2.5);
             nav.push_baro(&b).unwrap();
         }
     }
@@ -68,11 +64,7 @@ fn arrival_order_changes_only_the_epochs_with_a_sample_pending() {
         let t = imu.header.time_ns;
         let mut aiding = false;
         let baro = (k % 10 == 0).then(|| {
-            let mut baro = BaroSample::default();
-            baro.header.time_ns = t;
-            baro.header.seq = k as u64;
-            baro.pressure_pa = crate::atmosphere::isa_pressure_pa(181.0);
-            baro.temperature_c = 15.0;
+            let baro = baro_at(t, k as u64, 181.0);
             baro
         });
         let gnss = (k % 100 == 0).then(|| sim.gnss());

@@ -105,6 +105,16 @@ impl StaticSim {
     }
 }
 
+/// A baro sample at GPS `t_ns` reading the ISA pressure of `height_m` at 15 °C.
+fn baro_at(t_ns: i64, seq: u64, height_m: f64) -> BaroSample {
+    let mut b = BaroSample::default();
+    b.header.time_ns = t_ns;
+    b.header.seq = seq;
+    b.pressure_pa = crate::atmosphere::isa_pressure_pa(height_m);
+    b.temperature_c = 15.0;
+    b
+}
+
 fn quick_config() -> NavigatorConfig {
     NavigatorConfig {
         alignment_s: 60.0,
@@ -354,11 +364,7 @@ fn late_gnss_sample_gives_the_in_time_update() {
         let imu = sim.next_imu();
         let t = imu.header.time_ns;
         if k % 10 == 0 {
-            let mut baro = BaroSample::default();
-            baro.header.time_ns = t;
-            baro.header.seq = k as u64;
-            baro.pressure_pa = crate::atmosphere::isa_pressure_pa(181.0);
-            baro.temperature_c = 15.0;
+            let baro = baro_at(t, k as u64, 181.0);
             a.push_baro(&baro).unwrap();
             b.push_baro(&baro).unwrap();
         }
@@ -409,11 +415,7 @@ fn late_gnss_sample_gives_the_in_time_update() {
     for k in 1..=(80 * 100) {
         let imu = sim.next_imu();
         if k % 10 == 0 {
-            let mut baro = BaroSample::default();
-            baro.header.time_ns = imu.header.time_ns;
-            baro.header.seq = k as u64;
-            baro.pressure_pa = crate::atmosphere::isa_pressure_pa(181.0);
-            baro.temperature_c = 15.0;
+            let baro = baro_at(imu.header.time_ns, k as u64, 181.0);
             c.push_baro(&baro).unwrap();
         }
         if k % 100 == 0 {
@@ -443,11 +445,7 @@ fn late_fix_at_1_khz(cfg: NavigatorConfig, deliver: bool) -> (Box<Navigator>, Bo
         let imu = sim.next_imu();
         let t = imu.header.time_ns;
         if k % 100 == 0 {
-            let mut baro = BaroSample::default();
-            baro.header.time_ns = t;
-            baro.header.seq = k as u64;
-            baro.pressure_pa = crate::atmosphere::isa_pressure_pa(181.0);
-            baro.temperature_c = 15.0;
+            let baro = baro_at(t, k as u64, 181.0);
             a.push_baro(&baro).unwrap();
             b.push_baro(&baro).unwrap();
         }
