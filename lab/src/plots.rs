@@ -2,6 +2,7 @@
 //! shaded), and the horizontal trajectory of truth and solution.
 
 use crate::analysis::Series;
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use std::path::{Path, PathBuf};
 
@@ -62,22 +63,33 @@ fn time_plot(
             RGBColor(255, 200, 120).mix(0.4).filled(),
         )))?;
     }
-    for (name, v, color) in lines {
-        let c = *color;
+    let series = lines
+        .iter()
+        .map(|&(name, v, color)| (name, s.t_s.iter().copied().zip(v.iter().copied()), color));
+    draw_labelled_lines(&mut chart, series)?;
+    root.present()?;
+    Ok(())
+}
+
+/// Draw each `(label, points, colour)` as a line with its entry in the legend, then the legend.
+fn draw_labelled_lines<'a, 'n, DB: DrawingBackend + 'a, P: Iterator<Item = (f64, f64)>>(
+    chart: &mut ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+    lines: impl IntoIterator<Item = (&'n str, P, RGBColor)>,
+) -> Result<(), DynErr>
+where
+    DB::ErrorType: 'static,
+{
+    for (name, points, color) in lines {
         chart
-            .draw_series(LineSeries::new(
-                s.t_s.iter().copied().zip(v.iter().copied()),
-                c,
-            ))?
-            .label(*name)
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c));
+            .draw_series(LineSeries::new(points, color))?
+            .label(name)
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color));
     }
     chart
         .configure_series_labels()
         .background_style(WHITE.mix(0.8))
         .border_style(BLACK)
         .draw()?;
-    root.present()?;
     Ok(())
 }
 
@@ -104,20 +116,16 @@ fn trajectory_plot(path: &Path, s: &Series) -> Result<(), DynErr> {
         .x_desc("east [m]")
         .y_desc("north [m]")
         .draw()?;
-    for (name, pts, color) in [
-        ("truth", &s.truth_ne_m, BLACK),
-        ("solution", &s.nav_ne_m, BLUE),
-    ] {
-        chart
-            .draw_series(LineSeries::new(pts.iter().map(|(n, e)| (*e, *n)), color))?
-            .label(name)
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color));
+    fn east_north(pts: &[(f64, f64)]) -> impl Iterator<Item = (f64, f64)> + '_ {
+        pts.iter().map(|&(n, e)| (e, n))
     }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()?;
+    draw_labelled_lines(
+        &mut chart,
+        [
+            ("truth", east_north(&s.truth_ne_m), BLACK),
+            ("solution", east_north(&s.nav_ne_m), BLUE),
+        ],
+    )?;
     root.present()?;
     Ok(())
 }
