@@ -63,10 +63,7 @@ fn arrival_order_changes_only_the_epochs_with_a_sample_pending() {
         let imu = sim.next_imu();
         let t = imu.header.time_ns;
         let mut aiding = false;
-        let baro = (k % 10 == 0).then(|| {
-            let baro = baro_at(t, k as u64, 181.0);
-            baro
-        });
+        let baro = (k % 10 == 0).then(|| baro_at(t, k as u64, 181.0));
         let gnss = (k % 100 == 0).then(|| sim.gnss());
         if let Some(s) = &baro {
             a.push_baro(s).unwrap();
