@@ -200,6 +200,19 @@ pub fn wait_exit(
     }
 }
 
+/// Pid of the process whose executable is `program` and whose command line names `prefix`
+/// (a driver or the fusion daemon of a run, not its supervisor).
+pub fn pid_of(prefix: &str, program: &str) -> Option<i32> {
+    processes_matching(prefix)
+        .into_iter()
+        .find(|(_, cmd)| {
+            cmd.split_whitespace()
+                .next()
+                .is_some_and(|exe| exe.ends_with(program))
+        })
+        .map(|(pid, _)| pid)
+}
+
 /// A JSON array of numbers as a Vec (empty when absent).
 pub fn f64s(v: &serde_json::Value) -> Vec<f64> {
     v.as_array()

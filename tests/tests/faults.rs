@@ -47,18 +47,6 @@ fn start_run(out: &Path, prefix: &str, extra: &[&str]) -> Child {
         .expect("start sextant run")
 }
 
-/// Pid of the process running `program` with this prefix (not the supervisor).
-fn pid_of(prefix: &str, program: &str) -> Option<i32> {
-    processes_matching(prefix)
-        .into_iter()
-        .find(|(_, cmd)| {
-            cmd.split_whitespace()
-                .next()
-                .is_some_and(|exe| exe.ends_with(program))
-        })
-        .map(|(pid, _)| pid)
-}
-
 fn sigkill(pid: i32) {
     kill(Pid::from_raw(pid), Signal::SIGKILL).expect("SIGKILL");
 }

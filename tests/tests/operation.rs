@@ -75,18 +75,6 @@ fn text(o: &Output) -> String {
     )
 }
 
-/// Pid of the process running `program` with this prefix (not the supervisor).
-fn pid_of(prefix: &str, program: &str) -> Option<i32> {
-    processes_matching(prefix)
-        .into_iter()
-        .find(|(_, cmd)| {
-            cmd.split_whitespace()
-                .next()
-                .is_some_and(|exe| exe.ends_with(program))
-        })
-        .map(|(pid, _)| pid)
-}
-
 fn wait_for_pid(prefix: &str, program: &str) -> i32 {
     let t0 = Instant::now();
     loop {
