@@ -1,17 +1,34 @@
 //! GNSS simulation: a Walker constellation on circular Keplerian orbits and a receiver model
 //! (two-state clock, pseudorange and Doppler noise, C/N0 from elevation, dual-baseline carrier
-//! phase differences, least-squares-consistent fix with covariance `σ²(HᵀH)⁻¹`).
+//! phase differences).
+//!
+//! Two receivers:
+//! * **Matched** (no `[world]` in the scenario): white pseudorange noise of the grade's σ and
+//!   a fix consistent with it, `(HᵀH)⁻¹Hᵀε` with covariance exactly `σ²(HᵀH)⁻¹` — a fixture
+//!   for the filter's algebra.
+//! * **Real** (with `[world]`): the pseudoranges carry the world's errors ([`crate::world`]:
+//!   ionosphere, troposphere, multipath, broadcast clock and orbit, code noise by C/N0, the
+//!   oscillator, the antenna lever arm and latency). The receiver corrects them with its own
+//!   models — the broadcast Klobuchar ionosphere (IS-GPS-200 §20.3.3.5.2.5, coefficients of a
+//!   real broadcast) and Saastamoinen with a standard atmosphere and the cosecant mapping —
+//!   reports per satellite the σ of its own error budget ([`crate::scenario::UereModel`]),
+//!   and solves its fix by weighted least squares from exactly those pseudoranges
+//!   ([`fusion::gnss_ls`]), with the covariance `(HᵀWH)⁻¹` of its budget, not of the truth.
+//!   Its error therefore stays correlated for minutes, as a real receiver's does.
 //!
 //! Orbits are propagated in an inertial frame whose axes coincide with ECEF at the GPS epoch
 //! (1980-01-06T00:00:00) and rotated into ECEF with the WGS-84 Earth rate. Pseudoranges are
 //! transmission-time consistent: the satellite position at `t_tx = t_rx − τ` is rotated by the
 //! Earth's rotation during `τ` into the ECEF frame of reception (Sagnac).
 
-use crate::scenario::{ConstellationSpec, GnssGrade, Scenario, Window};
+use crate::scenario::{ConstellationSpec, GnssGrade, Scenario, UereModel, Window};
 use crate::truth::TruthPoint;
+use crate::world::GnssWorld;
+use crate::world::receiver_clock::TwoStateClock;
 use fusion::earth::WGS84;
+use fusion::gnss_corrections as corr;
 use msgs::{GnssSample, GnssSatellite, MAX_SATELLITES, SPEED_OF_LIGHT_M_S};
-use nalgebra::{Matrix2, Matrix4, Vector2, Vector3, Vector4};
+use nalgebra::{Matrix4, Vector3, Vector4};
 use rand::Rng;
 use rand_chacha::ChaCha20Rng;
 use rand_distr::StandardNormal;
@@ -114,6 +131,16 @@ pub fn elevation_rad(c_e_n: &nalgebra::Matrix3<f64>, u_e: &Vector3<f64>) -> f64 
     (-u_n.z).clamp(-1.0, 1.0).asin()
 }
 
+/// The broadcast Klobuchar coefficients the simulated receiver corrects with: those of a
+/// real GPS navigation message (2020-06-25, as broadcast and logged in a RINEX header).
+pub const BROADCAST_KLOBUCHAR: corr::KlobucharCoefficients = corr::KlobucharCoefficients {
+    alpha: [4.6566e-09, 1.4901e-08, -5.9605e-08, -1.1921e-07],
+    beta: [8.1920e+04, 9.8304e+04, -6.5536e+04, -5.2429e+05],
+};
+
+/// Relative humidity of the receiver's standard atmosphere (RTKLIB's default, 0.7).
+pub const RECEIVER_HUMIDITY: f64 = 0.7;
+
 /// What the receiver model knows but does not publish (for tests and truth).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct GnssEpochTruth {
@@ -123,6 +150,8 @@ pub struct GnssEpochTruth {
     pub clock_drift_m_s: f64,
     /// Geometric range of each published satellite (same order), m.
     pub geometric_range_m: [f64; MAX_SATELLITES],
+    /// Antenna position at the measurement instant, ECEF, m.
+    pub antenna_r_e_m: Vector3<f64>,
 }
 
 /// The GNSS receiver simulator.
@@ -132,26 +161,56 @@ pub struct GnssSim {
     grade: GnssGrade,
     outages: Vec<Window>,
     rng: ChaCha20Rng,
-    clock_bias_m: f64,
-    clock_drift_m_s: f64,
+    clock: TwoStateClock,
+    /// Antenna lever arm, body axes, m (zero without `[world.gnss_antenna]`).
+    lever_arm_b_m: Vector3<f64>,
     last_t_s: Option<f64>,
+    /// The world and the receiver's error budget (real receiver), or None (matched).
+    world: Option<(GnssWorld, UereModel)>,
+    last_fix: Option<(Vector3<f64>, f64)>,
 }
 
 impl GnssSim {
-    /// The receiver of the scenario with its clock drawn from the `"gnss"` stream.
+    /// The receiver of the scenario with its clock drawn from the `"gnss"` stream and, with a
+    /// `[world]`, the world's processes from the `"world"` stream.
     pub fn new(scn: &Scenario) -> Self {
         let mut rng = crate::sensor_rng(scn.spec.scenario.seed, "gnss");
         let g = scn.gnss;
         let b: f64 = rng.sample(StandardNormal);
         let d: f64 = rng.sample(StandardNormal);
+        let constellation = Constellation::new(scn.spec.gnss.constellation);
+        let (q_b_m2_s, q_d_m2_s3) = match scn.spec.world.and_then(|w| w.receiver_clock()) {
+            Some(osc) => (osc.phase_psd_m2_s(), osc.frequency_psd_m2_s3()),
+            None => (g.clock_bias_psd_m2_s, g.clock_drift_psd_m2_s3),
+        };
+        // Scenario validation guarantees the budget exists when the world's errors are on.
+        let world = scn
+            .spec
+            .world
+            .filter(|w| w.gnss_errors_on())
+            .zip(g.uere)
+            .map(|(w, u)| {
+                let rng_w = crate::sensor_rng(scn.spec.scenario.seed, "world");
+                (GnssWorld::new(w, constellation.len(), rng_w), u)
+            });
         Self {
-            constellation: Constellation::new(scn.spec.gnss.constellation),
+            constellation,
             grade: g,
             outages: scn.spec.gnss.outages.clone(),
             rng,
-            clock_bias_m: b * g.clock_bias_initial_sigma_m,
-            clock_drift_m_s: d * g.clock_drift_initial_sigma_m_s,
+            clock: TwoStateClock {
+                q_b_m2_s,
+                q_d_m2_s3,
+                bias_m: b * g.clock_bias_initial_sigma_m,
+                drift_m_s: d * g.clock_drift_initial_sigma_m_s,
+            },
+            lever_arm_b_m: scn
+                .spec
+                .world
+                .map_or_else(Vector3::zeros, |w| w.lever_arm_b_m()),
             last_t_s: None,
+            world,
+            last_fix: None,
         }
     }
 
@@ -160,27 +219,14 @@ impl GnssSim {
         &self.constellation
     }
 
-    fn propagate_clock(&mut self, dt: f64) {
-        let qb = self.grade.clock_bias_psd_m2_s;
-        let qd = self.grade.clock_drift_psd_m2_s3;
-        let q = Matrix2::new(
-            qb * dt + qd * dt * dt * dt / 3.0,
-            qd * dt * dt / 2.0,
-            qd * dt * dt / 2.0,
-            qd * dt,
-        );
-        let n1: f64 = self.rng.sample(StandardNormal);
-        let n2: f64 = self.rng.sample(StandardNormal);
-        let w = match q.cholesky() {
-            Some(c) => c.l() * Vector2::new(n1, n2),
-            None => Vector2::zeros(),
-        };
-        self.clock_bias_m += self.clock_drift_m_s * dt + w.x;
-        self.clock_drift_m_s += w.y;
+    /// The world of a real receiver (None for the matched one).
+    pub fn world(&self) -> Option<&GnssWorld> {
+        self.world.as_ref().map(|(w, _)| w)
     }
 
-    /// Receiver output at `t_s` since the scenario epoch (GPS time `t_gps_ns`) for the truth
-    /// point `truth`, with the hidden truth of the epoch.
+    /// Receiver output at `t_s` since the scenario epoch (GPS time `t_gps_ns` of the
+    /// measurement instant) for the truth point `truth` (the IMU's), with the hidden truth of
+    /// the epoch.
     pub fn sample(
         &mut self,
         t_s: f64,
@@ -188,29 +234,97 @@ impl GnssSim {
         truth: &TruthPoint,
     ) -> (GnssSample, GnssEpochTruth) {
         if let Some(prev) = self.last_t_s {
-            self.propagate_clock(t_s - prev);
+            self.clock.step(t_s - prev, &mut self.rng);
+            if let Some((w, _)) = &mut self.world {
+                w.step(t_s - prev);
+            }
         }
         self.last_t_s = Some(t_s);
-        let outage = self.outages.iter().any(|w| w.contains(t_s));
+        if self.world.is_some() {
+            self.sample_real(t_s, t_gps_ns, truth)
+        } else {
+            self.sample_matched(t_s, t_gps_ns, truth)
+        }
+    }
+
+    fn header(&self, t_s: f64, t_gps_ns: i64) -> (GnssSample, bool) {
         let g = self.grade;
-        let t_rx_s = t_gps_ns as f64 * 1e-9;
-        let r_rx = truth.r_e_m;
-        let v_rx = truth.v_e_m_s();
-        let c_e_b = truth.c_e_n * truth.c_n_b;
-        let wavelength = SPEED_OF_LIGHT_M_S / g.carrier_frequency_hz;
-        let baselines_e = [
-            c_e_b * Vector3::new(g.baseline_length_m[0], 0.0, 0.0),
-            c_e_b * Vector3::new(0.0, g.baseline_length_m[1], 0.0),
-        ];
-        let mask = g.elevation_mask_deg.to_radians();
         let mut out = GnssSample::default();
         out.header.time_ns = t_gps_ns;
         out.baseline_length_m = g.baseline_length_m;
-        out.wavelength_m = wavelength;
+        out.wavelength_m = SPEED_OF_LIGHT_M_S / g.carrier_frequency_hz;
+        let outage = self.outages.iter().any(|w| w.contains(t_s));
+        if outage {
+            out.header.status = STATUS_OUTAGE;
+        }
+        (out, outage)
+    }
+
+    /// Carrier-phase differences of the two body baselines for line of sight `u` (cycles).
+    fn baseline_phases(
+        &self,
+        c_e_b: &nalgebra::Matrix3<f64>,
+        u: &Vector3<f64>,
+        draws: &[f64; 4],
+    ) -> (u32, [f64; 2]) {
+        let g = self.grade;
+        let wavelength = SPEED_OF_LIGHT_M_S / g.carrier_frequency_hz;
+        let mut phase = [0.0; 2];
+        if g.baseline_length_m[0] > 0.0 && g.baseline_length_m[1] > 0.0 {
+            let baselines_e = [
+                c_e_b * Vector3::new(g.baseline_length_m[0], 0.0, 0.0),
+                c_e_b * Vector3::new(0.0, g.baseline_length_m[1], 0.0),
+            ];
+            for (k, b) in baselines_e.iter().enumerate() {
+                phase[k] = b.dot(u) / wavelength + g.phase_sigma_cycles * draws[2 + k];
+            }
+            return (FLAG_PHASE, phase);
+        }
+        (0, phase)
+    }
+
+    /// Antenna phase centre position and velocity (ECEF) for the truth point.
+    fn antenna(
+        &self,
+        truth: &TruthPoint,
+        c_e_b: &nalgebra::Matrix3<f64>,
+    ) -> (Vector3<f64>, Vector3<f64>) {
+        crate::world::antenna::antenna_state(
+            &truth.r_e_m,
+            &truth.v_e_m_s(),
+            c_e_b,
+            &truth.w_ib_b_rad_s,
+            &self.lever_arm_b_m,
+        )
+    }
+
+    fn draws(&mut self) -> [f64; 4] {
+        [
+            self.rng.sample(StandardNormal),
+            self.rng.sample(StandardNormal),
+            self.rng.sample(StandardNormal),
+            self.rng.sample(StandardNormal),
+        ]
+    }
+
+    /// The matched receiver: white errors of the grade's σ, fix error `(HᵀH)⁻¹Hᵀε`.
+    fn sample_matched(
+        &mut self,
+        t_s: f64,
+        t_gps_ns: i64,
+        truth: &TruthPoint,
+    ) -> (GnssSample, GnssEpochTruth) {
+        let g = self.grade;
+        let t_rx_s = t_gps_ns as f64 * 1e-9;
+        let c_e_b = truth.c_e_n * truth.c_n_b;
+        let (r_rx, v_rx) = self.antenna(truth, &c_e_b);
+        let mask = g.elevation_mask_deg.to_radians();
+        let (mut out, outage) = self.header(t_s, t_gps_ns);
         let mut hidden = GnssEpochTruth {
-            clock_bias_m: self.clock_bias_m,
-            clock_drift_m_s: self.clock_drift_m_s,
+            clock_bias_m: self.clock.bias_m,
+            clock_drift_m_s: self.clock.drift_m_s,
             geometric_range_m: [0.0; MAX_SATELLITES],
+            antenna_r_e_m: r_rx,
         };
         let mut hth = Matrix4::<f64>::zeros();
         let mut ht_pr = Vector4::<f64>::zeros();
@@ -218,12 +332,7 @@ impl GnssSim {
         let mut n = 0usize;
         for i in 0..self.constellation.len() {
             // Fixed draw order for every satellite, visible or not.
-            let draws: [f64; 4] = [
-                self.rng.sample(StandardNormal),
-                self.rng.sample(StandardNormal),
-                self.rng.sample(StandardNormal),
-                self.rng.sample(StandardNormal),
-            ];
+            let draws = self.draws();
             if outage || n >= MAX_SATELLITES {
                 continue;
             }
@@ -236,19 +345,12 @@ impl GnssSim {
             let e_pr = g.pseudorange_sigma_m * draws[0];
             let e_rr = g.range_rate_sigma_m_s * draws[1];
             let rate = (v_s - v_rx).dot(&u);
-            let mut flags = FLAG_PSEUDORANGE | FLAG_DOPPLER;
-            let mut phase = [0.0; 2];
-            if g.baseline_length_m[0] > 0.0 && g.baseline_length_m[1] > 0.0 {
-                flags |= FLAG_PHASE;
-                for (k, b) in baselines_e.iter().enumerate() {
-                    phase[k] = b.dot(&u) / wavelength + g.phase_sigma_cycles * draws[2 + k];
-                }
-            }
+            let (phase_flag, phase) = self.baseline_phases(&c_e_b, &u, &draws);
             out.satellites[n] = GnssSatellite {
                 prn: i as u32 + 1,
-                flags,
-                pseudorange_m: range + self.clock_bias_m + e_pr,
-                range_rate_m_s: rate + self.clock_drift_m_s + e_rr,
+                flags: FLAG_PSEUDORANGE | FLAG_DOPPLER | phase_flag,
+                pseudorange_m: range + self.clock.bias_m + e_pr,
+                range_rate_m_s: rate + self.clock.drift_m_s + e_rr,
                 cn0_dbhz: g.cn0_horizon_dbhz + (g.cn0_zenith_dbhz - g.cn0_horizon_dbhz) * el.sin(),
                 sigma_pseudorange_m: g.pseudorange_sigma_m,
                 sigma_range_rate_m_s: g.range_rate_sigma_m_s,
@@ -264,9 +366,6 @@ impl GnssSim {
             n += 1;
         }
         out.n_satellites = n as u32;
-        if outage {
-            out.header.status = STATUS_OUTAGE;
-        }
         if n >= 4
             && let Some(inv) = hth.try_inverse()
         {
@@ -288,6 +387,140 @@ impl GnssSim {
             out.pos_ecef_m = [p.x, p.y, p.z];
             out.vel_ecef_m_s = [v.x, v.y, v.z];
             out.pdop = (inv[(0, 0)] + inv[(1, 1)] + inv[(2, 2)]).sqrt();
+        }
+        (out, hidden)
+    }
+
+    /// The real receiver: the world's errors, the receiver's own corrections, its own σ and a
+    /// weighted least-squares fix of the corrected pseudoranges.
+    fn sample_real(
+        &mut self,
+        t_s: f64,
+        t_gps_ns: i64,
+        truth: &TruthPoint,
+    ) -> (GnssSample, GnssEpochTruth) {
+        let g = self.grade;
+        let t_rx_s = t_gps_ns as f64 * 1e-9;
+        let c_e_b = truth.c_e_n * truth.c_n_b;
+        let Some(uere) = self.world.as_ref().map(|(_, u)| *u) else {
+            return self.sample_matched(t_s, t_gps_ns, truth);
+        };
+        let (r_rx, v_rx) = self.antenna(truth, &c_e_b);
+        let geo = truth.geodetic;
+        let mask = g.elevation_mask_deg.to_radians();
+        // The receiver's own models: broadcast ionosphere, standard-atmosphere troposphere.
+        let gps_sow = t_rx_s.rem_euclid(604_800.0);
+        // Local time of the world's ionosphere: GPS time of day (GPS − UTC = 18 s shifts the
+        // diurnal curve by 0.005 h, far below its width).
+        let s_of_day = t_rx_s.rem_euclid(86_400.0);
+        let zenith = corr::saastamoinen_zenith(
+            geo.lat_rad,
+            geo.height_m,
+            &corr::standard_atmosphere(geo.height_m, RECEIVER_HUMIDITY),
+        );
+        let (mut out, outage) = self.header(t_s, t_gps_ns);
+        let mut hidden = GnssEpochTruth {
+            clock_bias_m: self.clock.bias_m,
+            clock_drift_m_s: self.clock.drift_m_s,
+            geometric_range_m: [0.0; MAX_SATELLITES],
+            antenna_r_e_m: r_rx,
+        };
+        let mut obs = fusion::gnss_ls::Observations::default();
+        let mut n = 0usize;
+        for i in 0..self.constellation.len() {
+            let draws = self.draws();
+            if outage || n >= MAX_SATELLITES {
+                continue;
+            }
+            let (r_s, v_s, range) = self.constellation.at_reception(i, t_rx_s, &r_rx);
+            let u = (r_s - r_rx) / range;
+            let u_n = truth.c_e_n.transpose() * u;
+            let el = (-u_n.z).clamp(-1.0, 1.0).asin();
+            if el < mask {
+                continue;
+            }
+            let az = u_n.y.atan2(u_n.x).rem_euclid(std::f64::consts::TAU);
+            let cn0 = g.cn0_horizon_dbhz + (g.cn0_zenith_dbhz - g.cn0_horizon_dbhz) * el.sin();
+            let Some((world, _)) = &self.world else {
+                unreachable!()
+            };
+            let errors = world.range_errors(
+                i,
+                (geo.lat_rad, geo.lon_rad),
+                geo.height_m,
+                (az, el),
+                s_of_day,
+                g.carrier_frequency_hz,
+            );
+            let sigma_code = world.code_noise_sigma_m(cn0).unwrap_or(0.0);
+            let r_s_broadcast = r_s + world.orbit_error_e_m(i, &r_s, &v_s);
+            let klobuchar = corr::iono_delay_at(
+                BROADCAST_KLOBUCHAR.l1_delay_m(&geo, az, el, gps_sow),
+                g.carrier_frequency_hz,
+            );
+            let tropo = corr::slant_troposphere_m(&zenith, el);
+            let pseudorange = range + self.clock.bias_m + errors.total_m() + sigma_code * draws[0]
+                - klobuchar
+                - tropo;
+            let e_rr = g.range_rate_sigma_m_s * draws[1];
+            let rate = (v_s - v_rx).dot(&u);
+            let (phase_flag, phase) = self.baseline_phases(&c_e_b, &u, &draws);
+            let sigma_pr = uere.sigma_m(el, cn0, klobuchar);
+            let sat = GnssSatellite {
+                prn: i as u32 + 1,
+                flags: FLAG_PSEUDORANGE | FLAG_DOPPLER | phase_flag,
+                pseudorange_m: pseudorange,
+                range_rate_m_s: rate + self.clock.drift_m_s + e_rr,
+                cn0_dbhz: cn0,
+                sigma_pseudorange_m: sigma_pr,
+                sigma_range_rate_m_s: g.range_rate_sigma_m_s,
+                sat_pos_ecef_m: r_s_broadcast.into(),
+                sat_vel_ecef_m_s: v_s.into(),
+                baseline_phase_cycles: phase,
+            };
+            out.satellites[n] = sat;
+            hidden.geometric_range_m[n] = range;
+            // Every value is finite and the satellite at orbital distance: push cannot fail.
+            let _ = obs.push(fusion::gnss_ls::SatelliteObservation {
+                prn: sat.prn,
+                sat_pos_ecef_m: r_s_broadcast,
+                sat_vel_ecef_m_s: v_s,
+                pseudorange_m: pseudorange,
+                sigma_pseudorange_m: sigma_pr,
+                has_range_rate: true,
+                range_rate_m_s: sat.range_rate_m_s,
+                sigma_range_rate_m_s: g.range_rate_sigma_m_s,
+            });
+            n += 1;
+        }
+        out.n_satellites = n as u32;
+        if n >= 4 {
+            let (r0, b0) = self.last_fix.unwrap_or((Vector3::zeros(), 0.0));
+            let settings = fusion::gnss_ls::LsSettings {
+                initial_r_e_m: r0,
+                initial_clock_bias_m: b0,
+                ..Default::default()
+            };
+            if let Ok(fix) = fusion::gnss_ls::solve(&obs, &settings) {
+                let p = fix.position.r_e_m;
+                out.fix_valid = 1;
+                out.pos_ecef_m = p.into();
+                out.pdop = fix.position.dop.pdop;
+                for r in 0..3 {
+                    for c in 0..3 {
+                        out.pos_cov_ecef_m2[3 * r + c] = fix.position.cov_r_e_m2[(r, c)];
+                    }
+                }
+                if let Some(v) = fix.velocity {
+                    out.vel_ecef_m_s = v.v_e_m_s.into();
+                    for r in 0..3 {
+                        for c in 0..3 {
+                            out.vel_cov_ecef_m2_s2[3 * r + c] = v.cov_v_e_m2_s2[(r, c)];
+                        }
+                    }
+                }
+                self.last_fix = Some((p, fix.position.clock_bias_m));
+            }
         }
         (out, hidden)
     }

@@ -4,7 +4,9 @@
 //!
 //! Every driver derives the same truth from the scenario file alone ([`truth`]): no process
 //! talks to another, yet all agree bit for bit. Each sensor draws from its own random stream
-//! ([`sensor_rng`]), so each process is reproducible on its own.
+//! ([`sensor_rng`]), so each process is reproducible on its own. The truth-only effects the
+//! filter does not model (atmosphere, multipath, broadcast errors, oscillator, lever arm,
+//! latency) are the [`world`]'s, switched and sized by a scenario's `[world]` section.
 
 pub mod driver;
 pub mod gnss;
@@ -15,6 +17,7 @@ pub mod sensors;
 pub mod sources;
 pub mod stand;
 pub mod truth;
+pub mod world;
 
 #[cfg(test)]
 mod tests;

@@ -44,6 +44,9 @@ pub struct ScenarioFile {
     /// Earth orientation parameters (UT1 − UTC, polar motion) used for the star tracker.
     #[serde(default)]
     pub earth_orientation: fusion::celestial::EarthOrientation,
+    /// Truth-only world effects ([`crate::world`]); absent: the matched world.
+    #[serde(default)]
+    pub world: Option<crate::world::WorldSection>,
 }
 
 /// `[scenario]`: identity, time and randomness.
@@ -638,6 +641,54 @@ pub struct GnssGrade {
     pub baseline_length_m: [f64; 2],
     /// Carrier frequency of the phase measurements, Hz (GPS L1 = 1 575.42 MHz).
     pub carrier_frequency_hz: f64,
+    /// The receiver's own pseudorange error budget (`[gnss.uere]`): the σ it reports per
+    /// satellite and weights its fix with when the scenario has a `[world]`.
+    #[serde(default)]
+    pub uere: Option<UereModel>,
+}
+
+/// A receiver's pseudorange error budget (user equivalent range error) by elevation and
+/// C/N0, after its broadcast corrections, in the form of RTCA DO-229 (Appendix J) and
+/// RTKLIB's single-point weighting:
+/// `σ² = σ_sis² + (k_iono·I_klob)² + σ_tropo(el)² + σ_mp(el)² + σ_noise(C/N0)²` with
+/// `σ_tropo = t_z·1.001/√(0.002001 + sin²el)`, `σ_mp = a + b·e^{−el/θ}`,
+/// `σ_noise = n₄₅·10^{(45 − C/N0)/20}`, `I_klob` the receiver's own Klobuchar correction.
+/// These are the receiver's data-sheet beliefs, not the world's values.
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct UereModel {
+    /// Signal-in-space range error (broadcast clock and orbit), 1-σ, m.
+    pub sis_m: f64,
+    /// Fraction of the Klobuchar correction taken as its 1-σ residual.
+    pub iono_fraction: f64,
+    /// Zenith troposphere residual t_z, 1-σ, m.
+    pub tropo_zenith_m: f64,
+    /// Multipath floor a, m.
+    pub multipath_floor_m: f64,
+    /// Multipath low-elevation term b, m.
+    pub multipath_low_m: f64,
+    /// Multipath elevation scale θ, deg.
+    pub multipath_scale_deg: f64,
+    /// Code noise at 45 dB-Hz, m.
+    pub noise_45_dbhz_m: f64,
+}
+
+impl UereModel {
+    /// The receiver's 1-σ for a satellite at `el_rad` with C/N0 `cn0_dbhz` whose Klobuchar
+    /// correction was `klobuchar_m`, m.
+    pub fn sigma_m(&self, el_rad: f64, cn0_dbhz: f64, klobuchar_m: f64) -> f64 {
+        let s = el_rad.sin();
+        let tropo = self.tropo_zenith_m * 1.001 / (0.002001 + s * s).sqrt();
+        let mp = self.multipath_floor_m
+            + self.multipath_low_m * (-el_rad.to_degrees() / self.multipath_scale_deg).exp();
+        let noise = self.noise_45_dbhz_m * 10f64.powf((45.0 - cn0_dbhz) / 20.0);
+        (self.sis_m.powi(2)
+            + (self.iono_fraction * klobuchar_m).powi(2)
+            + tropo * tropo
+            + mp * mp
+            + noise * noise)
+            .sqrt()
+    }
 }
 
 /// Odometer grade.
@@ -1008,6 +1059,16 @@ impl Scenario {
                 "must be > 7000 km",
             ));
         }
+        if let Some(w) = &spec.world {
+            w.validate(f)?;
+            if w.gnss_latency_ns() >= (1e9 / spec.gnss.rate_hz) as i64 {
+                return Err(invalid(
+                    f,
+                    "world.gnss_antenna.latency_s",
+                    "must be shorter than the GNSS period",
+                ));
+            }
+        }
         rate("odometer.rate_hz", spec.odometer.rate_hz)?;
         rate("baro.rate_hz", spec.baro.rate_hz)?;
         rate("truth.rate_hz", spec.truth.rate_hz)?;
@@ -1137,6 +1198,41 @@ impl Scenario {
             if !(v.is_finite() && (0.0..=70.0).contains(&v)) {
                 return Err(invalid(&nf, k, "outside 0..70 dB-Hz"));
             }
+        }
+        match &gnss.uere {
+            Some(u) => {
+                for (k, v) in [
+                    ("gnss.uere.sis_m", u.sis_m),
+                    ("gnss.uere.iono_fraction", u.iono_fraction),
+                    ("gnss.uere.tropo_zenith_m", u.tropo_zenith_m),
+                    ("gnss.uere.multipath_floor_m", u.multipath_floor_m),
+                    ("gnss.uere.multipath_low_m", u.multipath_low_m),
+                    ("gnss.uere.multipath_scale_deg", u.multipath_scale_deg),
+                    ("gnss.uere.noise_45_dbhz_m", u.noise_45_dbhz_m),
+                ] {
+                    if !(v.is_finite() && v >= 0.0) {
+                        return Err(invalid(&nf, k, format!("must be finite and ≥ 0, got {v}")));
+                    }
+                }
+                if u.sigma_m(std::f64::consts::FRAC_PI_2, 50.0, 0.0) <= 0.0
+                    || u.multipath_scale_deg <= 0.0
+                {
+                    return Err(invalid(
+                        &nf,
+                        "gnss.uere",
+                        "needs a σ > 0 at the zenith and multipath_scale_deg > 0",
+                    ));
+                }
+            }
+            None if spec.world.is_some_and(|w| w.gnss_errors_on()) => {
+                return Err(invalid(
+                    &nf,
+                    "gnss.uere",
+                    "a scenario with [world] pseudorange errors needs the receiver's error \
+                     budget [gnss.uere] in its grade (the σ it reports and weights its fix with)",
+                ));
+            }
+            None => {}
         }
 
         let odometer: OdometerGrade = load_grade(

@@ -139,7 +139,8 @@ impl SampleSource for StarTrackerSource {
     }
 }
 
-/// GNSS receiver.
+/// GNSS receiver. With a `[world.gnss_antenna]` latency `L`, the sample stamped `t` is the
+/// measurement made at `t − L` (a time-tag error the filter must be told about).
 #[derive(Debug, Clone)]
 pub struct GnssSource {
     gen_: TruthGenerator,
@@ -147,6 +148,7 @@ pub struct GnssSource {
     pub sim: GnssSim,
     epoch_ns: i64,
     period_ns: i64,
+    latency_ns: i64,
 }
 
 impl GnssSource {
@@ -157,14 +159,22 @@ impl GnssSource {
             sim: GnssSim::new(scn),
             epoch_ns,
             period_ns: period_ns(scn.spec.gnss.rate_hz),
+            latency_ns: scn.spec.world.map_or(0, |w| w.gnss_latency_ns()),
         }
     }
 
     /// Sample with the hidden truth of the epoch (clock, geometric ranges).
     pub fn sample_with_truth(&mut self, t_ns: i64) -> (GnssSample, crate::gnss::GnssEpochTruth) {
-        self.gen_.advance_to(t_ns);
-        self.sim
-            .sample(secs(t_ns), self.epoch_ns + t_ns, self.gen_.current())
+        // Validation keeps the latency a whole number of truth-grid steps below one period.
+        let t_meas_ns = (t_ns - self.latency_ns).max(0);
+        self.gen_.advance_to(t_meas_ns);
+        let (mut s, truth) = self.sim.sample(
+            secs(t_meas_ns),
+            self.epoch_ns + t_meas_ns,
+            self.gen_.current(),
+        );
+        s.header.time_ns = self.epoch_ns + t_ns;
+        (s, truth)
     }
 }
 

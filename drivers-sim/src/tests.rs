@@ -495,3 +495,105 @@ fn mems_outputs_are_quantised() {
         }
     }
 }
+
+/// The static site with the vehicle scenario's `[world]`, every effect switched on.
+fn static_site_in_the_world() -> Scenario {
+    let base = std::fs::read_to_string(scenario_path("static_site")).unwrap();
+    let vehicle = std::fs::read_to_string(scenario_path("vehicle")).unwrap();
+    let mut doc: toml::Table = toml::from_str(&base).unwrap();
+    let v: toml::Table = toml::from_str(&vehicle).unwrap();
+    let mut world = v["world"].as_table().unwrap().clone();
+    for (_, effect) in world.iter_mut() {
+        effect
+            .as_table_mut()
+            .unwrap()
+            .insert("enabled".into(), true.into());
+    }
+    doc.insert("world".into(), toml::Value::Table(world));
+    Scenario::from_toml_str(
+        &toml::to_string(&doc).unwrap(),
+        &scenario_path("static_site"),
+    )
+    .unwrap()
+}
+
+/// The real receiver: its fix is the weighted least-squares solution of exactly the
+/// pseudoranges (and satellite positions) it publishes, at the antenna (lever arm from the
+/// IMU), and its error is correlated over minutes, unlike the matched receiver's.
+#[test]
+fn real_receiver_fix_is_its_own_least_squares_and_correlated() {
+    let scn = static_site_in_the_world();
+    let epoch = scn.epoch_gps().ns;
+    let mut src = GnssSource::new(&scn, epoch);
+    let mut truth = TruthGenerator::new(&scn);
+    let lever = Vector3::from(scn.spec.world.unwrap().gnss_antenna.unwrap().lever_arm_b_m);
+    let n = 1200;
+    let mut north = Vec::with_capacity(n);
+    for k in 0..n as i64 {
+        let t_ns = k * 1_000_000_000;
+        let (m, hidden) = src.sample_with_truth(t_ns);
+        assert_eq!(m.fix_valid, 1, "epoch {k}");
+        truth.advance_to(t_ns);
+        let tp = truth.current();
+        // Static: the antenna is the IMU plus C_e_b l (rate term ≈ Ω|l| = 1e-4 m/s only).
+        let antenna = tp.r_e_m + tp.c_e_n * tp.c_n_b * lever;
+        assert!((hidden.antenna_r_e_m - antenna).norm() < 1e-9);
+        let own = fusion::gnss_ls::solve_sample(&m).unwrap();
+        // Both iterate to a 1e-4 m step tolerance.
+        let d = own.position.r_e_m - Vector3::from(m.pos_ecef_m);
+        assert!(d.norm() < 1e-3, "fix differs from its own LS by {d}");
+        let cov = Matrix3::from_row_slice(&m.pos_cov_ecef_m2);
+        assert!((own.position.cov_r_e_m2 - cov).norm() < 1e-9 * cov.norm());
+        north.push((tp.c_e_n.transpose() * (Vector3::from(m.pos_ecef_m) - antenna)).x);
+    }
+    // Lag-60 s autocorrelation of the north error. For a white series its estimate has a
+    // standard error of 1/√N = 0.029 (N = 1200); the world's slow terms (τ of 45 s to 2 h)
+    // must put it far above 4 standard errors.
+    let mean = north.iter().sum::<f64>() / n as f64;
+    let c = |lag: usize| {
+        (0..n - lag)
+            .map(|i| (north[i] - mean) * (north[i + lag] - mean))
+            .sum::<f64>()
+            / n as f64
+    };
+    let rho = c(60) / c(0);
+    assert!(
+        rho > 4.0 / (n as f64).sqrt(),
+        "lag-60 s autocorrelation {rho}"
+    );
+}
+
+/// A `[world]` with pseudorange errors needs the receiver's own error budget in its grade,
+/// and every world value is range-checked with its dotted key.
+#[test]
+fn world_section_is_validated() {
+    let path = scenario_path("static_site");
+    let base = std::fs::read_to_string(&path).unwrap();
+    let err = |extra: &str| match Scenario::from_toml_str(&format!("{base}\n{extra}"), &path) {
+        Ok(_) => String::from("accepted"),
+        Err(e) => e.to_string(),
+    };
+    let e = err(
+        "[world.multipath]\nsigma_zenith_m = 0.2\nsigma_horizon_m = -1.0\n\
+                 elevation_scale_deg = 10.0\ntau_s = 60.0\n",
+    );
+    assert!(e.contains("world.multipath.sigma_horizon_m"), "{e}");
+    let e = err("[world.gnss_antenna]\nlever_arm_b_m = [0.0, 0.0, -1.5]\nlatency_s = 0.0505\n");
+    assert!(e.contains("world.gnss_antenna.latency_s"), "{e}");
+    let e = err("[world.code_noise]\nsigma_at_45_dbhz_m = 0.3\nbogus = 1\n");
+    assert!(e.contains("bogus"), "{e}");
+    // The receiver's budget: the static site's grade has one; overriding it away is an error.
+    let no_uere = base.replace("[gnss]", "[gnss]\noverrides = { uere = { sis_m = -1.0 } }");
+    let e = match Scenario::from_toml_str(
+        &format!("{no_uere}\n[world.code_noise]\nsigma_at_45_dbhz_m = 0.3\n"),
+        &path,
+    ) {
+        Ok(_) => String::from("accepted"),
+        Err(e) => e.to_string(),
+    };
+    assert!(e.contains("gnss.uere"), "{e}");
+    assert_eq!(
+        err("[world.code_noise]\nsigma_at_45_dbhz_m = 0.3\n"),
+        "accepted"
+    );
+}

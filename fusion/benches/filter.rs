@@ -197,7 +197,7 @@ fn bench(c: &mut Criterion) {
     let z = nav.r_e + Vector3::new(1.0, -1.0, 0.5);
     c.bench_function("update_gnss_position", |b| {
         b.iter(|| {
-            let m = ekf::gnss_position(black_box(&nav), &z, &cov);
+            let m = ekf::gnss_position(black_box(&nav), &ekf::GnssAntenna::AT_IMU, &z, &cov);
             ekf::update(&f.p, &m, gates.threshold(3))
         })
     });
@@ -205,7 +205,7 @@ fn bench(c: &mut Criterion) {
     let covv = Matrix3::identity() * 1e-4;
     c.bench_function("update_gnss_velocity", |b| {
         b.iter(|| {
-            let m = ekf::gnss_velocity(black_box(&nav), &zv, &covv);
+            let m = ekf::gnss_velocity(black_box(&nav), &ekf::GnssAntenna::AT_IMU, &zv, &covv);
             ekf::update(&f.p, &m, gates.threshold(3))
         })
     });
@@ -214,13 +214,28 @@ fn bench(c: &mut Criterion) {
     let pr = (r_s - nav.r_e).norm() + 1.0;
     c.bench_function("update_pseudorange", |b| {
         b.iter(|| {
-            let m = ekf::gnss_pseudorange(black_box(&nav), &r_s, pr, 0.0, 3.0);
+            let m = ekf::gnss_pseudorange(
+                black_box(&nav),
+                &ekf::GnssAntenna::AT_IMU,
+                &r_s,
+                pr,
+                0.0,
+                3.0,
+            );
             ekf::update(&f.p, &m, gates.threshold(1))
         })
     });
     c.bench_function("update_range_rate", |b| {
         b.iter(|| {
-            let m = ekf::gnss_range_rate(black_box(&nav), &r_s, &v_s, 100.0, 0.0, 0.05);
+            let m = ekf::gnss_range_rate(
+                black_box(&nav),
+                &ekf::GnssAntenna::AT_IMU,
+                &r_s,
+                &v_s,
+                100.0,
+                0.0,
+                0.05,
+            );
             ekf::update(&f.p, &m, gates.threshold(1))
         })
     });

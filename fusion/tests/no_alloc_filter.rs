@@ -134,14 +134,24 @@ fn filter_allocates_nothing_in_steady_state() {
     let outs = [
         ekf::update(
             &p,
-            &ekf::gnss_position(&state, &r_e, &(Matrix3::identity() * 4.0)),
+            &ekf::gnss_position(
+                &state,
+                &ekf::GnssAntenna::AT_IMU,
+                &r_e,
+                &(Matrix3::identity() * 4.0),
+            ),
             gates.threshold(3),
         )
         .residual
         .nis,
         ekf::update(
             &p,
-            &ekf::gnss_velocity(&state, &Vector3::zeros(), &(Matrix3::identity() * 1e-4)),
+            &ekf::gnss_velocity(
+                &state,
+                &ekf::GnssAntenna::AT_IMU,
+                &Vector3::zeros(),
+                &(Matrix3::identity() * 1e-4),
+            ),
             gates.threshold(3),
         )
         .residual
@@ -187,14 +197,29 @@ fn filter_allocates_nothing_in_steady_state() {
             .nis,
         ekf::update(
             &p,
-            &ekf::gnss_pseudorange(&state, &(r_e * 4.0), 3.0 * r_e.norm(), 0.0, 3.0),
+            &ekf::gnss_pseudorange(
+                &state,
+                &ekf::GnssAntenna::AT_IMU,
+                &(r_e * 4.0),
+                3.0 * r_e.norm(),
+                0.0,
+                3.0,
+            ),
             gates.threshold(1),
         )
         .residual
         .nis,
         ekf::update(
             &p,
-            &ekf::gnss_range_rate(&state, &(r_e * 4.0), &Vector3::zeros(), 0.0, 0.0, 0.05),
+            &ekf::gnss_range_rate(
+                &state,
+                &ekf::GnssAntenna::AT_IMU,
+                &(r_e * 4.0),
+                &Vector3::zeros(),
+                0.0,
+                0.0,
+                0.05,
+            ),
             gates.threshold(1),
         )
         .residual

@@ -14,49 +14,115 @@ use crate::frames::{Body, Ecef, Icrf, Rotation, StarSensor};
 use crate::strapdown::NavState;
 use nalgebra::{Matrix3, Rotation3, SMatrix, SVector, UnitQuaternion, Vector3};
 
-/// GNSS position (antenna at the IMU, no lever arm): `z = r_e` (ECEF, m) with covariance
-/// `cov` (ECEF, m²); `nav` is the inertial state at the fix's time of validity.
-pub fn gnss_position(nav: &NavState, pos_e: &Vector3<f64>, cov: &Matrix3<f64>) -> Measurement<3> {
+/// Where the GNSS antenna is and how the body turns at the measurement: the lever arm from
+/// the IMU to the antenna phase centre in body axes (m, configured: `gnss.lever_arm_b_m`)
+/// and the body's inertial angular rate (rad/s, body axes; the last bias-corrected gyro
+/// rate) for the velocity term.
+///
+/// The antenna is at `r_a = r + C_e_b l` and moves with
+/// `v_a = v + C_e_b (ω_ib × l) − ω_ie × (C_e_b l)` (Groves 2013, eq. 14.104–14.105 with
+/// `ω_eb = ω_ib − C_b_e ω_ie`). With `C_e_b = (I + [ψ×]) Ĉ_e_b` (module [`super`]) and
+/// `l_e = Ĉ_e_b l`, `a_e = Ĉ_e_b (ω_ib × l)`:
+/// `δr_a = δr − [l_e×] ψ` and `δv_a = δv − [a_e×] ψ + [ω_ie×][l_e×] ψ`. The gyro-bias term
+/// of `δv_a` (`Ĉ_e_b [l×] δb_g`, ≈ 10⁻⁷ m/s for a navigation-grade bias and 1.5 m) is left
+/// out.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct GnssAntenna {
+    /// Lever arm IMU → antenna phase centre, body axes, m.
+    pub lever_arm_b_m: Vector3<f64>,
+    /// Inertial angular rate of the body, body axes, rad/s.
+    pub w_ib_b_rad_s: Vector3<f64>,
+}
+
+impl GnssAntenna {
+    /// An antenna at the IMU (no lever arm).
+    pub const AT_IMU: Self = Self {
+        lever_arm_b_m: Vector3::new(0.0, 0.0, 0.0),
+        w_ib_b_rad_s: Vector3::new(0.0, 0.0, 0.0),
+    };
+
+    /// Predicted antenna position and velocity (ECEF, m and m/s) and the attitude Jacobians
+    /// `∂δr_a/∂ψ`, `∂δv_a/∂ψ` at the inertial state `nav`.
+    pub fn predict(
+        &self,
+        nav: &NavState,
+    ) -> (Vector3<f64>, Vector3<f64>, Matrix3<f64>, Matrix3<f64>) {
+        let c_e_b = nav.q_e_b.to_rotation_matrix().into_inner();
+        let l_e = c_e_b * self.lever_arm_b_m;
+        let a_e = c_e_b * self.w_ib_b_rad_s.cross(&self.lever_arm_b_m);
+        let w_ie = crate::earth::WGS84.omega_ie_e();
+        let r_a = nav.r_e + l_e;
+        let v_a = nav.v_e + a_e - w_ie.cross(&l_e);
+        let h_r_psi = -skew(&l_e);
+        let h_v_psi = -skew(&a_e) + skew(&w_ie) * skew(&l_e);
+        (r_a, v_a, h_r_psi, h_v_psi)
+    }
+}
+
+/// GNSS position of the antenna: `z = r_a` (ECEF, m) with covariance `cov` (ECEF, m²);
+/// `nav` is the inertial state at the fix's time of validity; `H_r = I`, `H_ψ = −[l_e×]`
+/// ([`GnssAntenna`]).
+pub fn gnss_position(
+    nav: &NavState,
+    antenna: &GnssAntenna,
+    pos_e: &Vector3<f64>,
+    cov: &Matrix3<f64>,
+) -> Measurement<3> {
+    let (r_a, _, h_psi, _) = antenna.predict(nav);
     let mut h = SMatrix::<f64, 3, NX>::zeros();
     h.fixed_view_mut::<3, 3>(0, idx::POS)
         .copy_from(&Matrix3::identity());
+    h.fixed_view_mut::<3, 3>(0, idx::ATT).copy_from(&h_psi);
     Measurement {
-        innovation: pos_e - nav.r_e,
+        innovation: pos_e - r_a,
         h,
         r: *cov,
     }
 }
 
-/// GNSS velocity: `z = v_e` (ECEF, Earth-relative, m/s) with covariance `cov` ((m/s)²).
-pub fn gnss_velocity(nav: &NavState, vel_e: &Vector3<f64>, cov: &Matrix3<f64>) -> Measurement<3> {
+/// GNSS velocity of the antenna: `z = v_a` (ECEF, Earth-relative, m/s) with covariance
+/// `cov` ((m/s)²); `H_v = I`, `H_ψ` of [`GnssAntenna`].
+pub fn gnss_velocity(
+    nav: &NavState,
+    antenna: &GnssAntenna,
+    vel_e: &Vector3<f64>,
+    cov: &Matrix3<f64>,
+) -> Measurement<3> {
+    let (_, v_a, _, h_psi) = antenna.predict(nav);
     let mut h = SMatrix::<f64, 3, NX>::zeros();
     h.fixed_view_mut::<3, 3>(0, idx::VEL)
         .copy_from(&Matrix3::identity());
+    h.fixed_view_mut::<3, 3>(0, idx::ATT).copy_from(&h_psi);
     Measurement {
-        innovation: vel_e - nav.v_e,
+        innovation: vel_e - v_a,
         h,
         r: *cov,
     }
 }
 
 /// One satellite's pseudorange (tight coupling, paper 003 eq. 12 linearised at the inertial
-/// solution; antenna at the IMU). The satellite position `sat_pos_e` is the one at
-/// transmission rotated into the ECEF frame of reception (Sagnac included, as the receiver
-/// and `drivers-sim/src/gnss.rs` give it), so `ρ̂ = |r_s − r̂_e| + b̂_clk`,
-/// `H_r = −uᵀ` (u = unit line of sight receiver → satellite), `H_clk = 1`; noise `sigma_m`.
+/// solution) at the antenna ([`GnssAntenna`]). The satellite position `sat_pos_e` is the one
+/// at transmission rotated into the ECEF frame of reception (Sagnac included, as the receiver
+/// and `drivers-sim/src/gnss.rs` give it), so `ρ̂ = |r_s − r̂_a| + b̂_clk`,
+/// `H_r = −uᵀ` (u = unit line of sight antenna → satellite), `H_ψ = −uᵀ ∂δr_a/∂ψ`,
+/// `H_clk = 1`; noise `sigma_m`.
 pub fn gnss_pseudorange(
     nav: &NavState,
+    antenna: &GnssAntenna,
     sat_pos_e: &Vector3<f64>,
     pseudorange_m: f64,
     clock_bias_m: f64,
     sigma_m: f64,
 ) -> Measurement<1> {
-    let d = sat_pos_e - nav.r_e;
+    let (r_a, _, h_r_psi, _) = antenna.predict(nav);
+    let d = sat_pos_e - r_a;
     let range = d.norm();
     let u = d / range;
     let mut h = SMatrix::<f64, 1, NX>::zeros();
     h.fixed_view_mut::<1, 3>(0, idx::POS)
         .copy_from(&(-u.transpose()));
+    h.fixed_view_mut::<1, 3>(0, idx::ATT)
+        .copy_from(&(-u.transpose() * h_r_psi));
     h[(0, idx::CLK)] = 1.0;
     Measurement {
         innovation: SVector::<f64, 1>::new(pseudorange_m - range - clock_bias_m),
@@ -65,27 +131,33 @@ pub fn gnss_pseudorange(
     }
 }
 
-/// One satellite's Doppler range rate (tight coupling): `ρ̇̂ = (v_s − v̂_e)·u + d̂_clk` with
-/// `u = (r_s − r̂_e)/|r_s − r̂_e|` (the simulator's definition). `H_v = −uᵀ`, `H_d = 1`, and
-/// through the line of sight `H_r = −(v_s − v̂_e)ᵀ (I − u uᵀ)/ρ` (`∂u/∂r̂ = −(I − u uᵀ)/ρ`,
-/// ~10⁻⁴ per m: small but kept exact); noise `sigma_m_s`.
+/// One satellite's Doppler range rate (tight coupling) at the antenna: `ρ̇̂ = (v_s − v̂_a)·u
+/// + d̂_clk` with `u = (r_s − r̂_a)/|r_s − r̂_a|` (the simulator's definition). `H_v = −uᵀ`,
+/// `H_d = 1`, and through the line of sight `H_r = −(v_s − v̂_a)ᵀ (I − u uᵀ)/ρ`
+/// (`∂u/∂r̂ = −(I − u uᵀ)/ρ`, ~10⁻⁴ per m: small but kept exact); the attitude enters through
+/// both the antenna velocity and position: `H_ψ = −uᵀ ∂δv_a/∂ψ + H_r ∂δr_a/∂ψ`; noise
+/// `sigma_m_s`.
 pub fn gnss_range_rate(
     nav: &NavState,
+    antenna: &GnssAntenna,
     sat_pos_e: &Vector3<f64>,
     sat_vel_e: &Vector3<f64>,
     range_rate_m_s: f64,
     clock_drift_m_s: f64,
     sigma_m_s: f64,
 ) -> Measurement<1> {
-    let d = sat_pos_e - nav.r_e;
+    let (r_a, v_a, h_r_psi, h_v_psi) = antenna.predict(nav);
+    let d = sat_pos_e - r_a;
     let range = d.norm();
     let u = d / range;
-    let dv = sat_vel_e - nav.v_e;
+    let dv = sat_vel_e - v_a;
     let mut h = SMatrix::<f64, 1, NX>::zeros();
     let h_r = -(dv.transpose() * (Matrix3::identity() - u * u.transpose())) / range;
     h.fixed_view_mut::<1, 3>(0, idx::POS).copy_from(&h_r);
     h.fixed_view_mut::<1, 3>(0, idx::VEL)
         .copy_from(&(-u.transpose()));
+    h.fixed_view_mut::<1, 3>(0, idx::ATT)
+        .copy_from(&(-u.transpose() * h_v_psi + h_r * h_r_psi));
     h[(0, idx::CLK_DRIFT)] = 1.0;
     Measurement {
         innovation: SVector::<f64, 1>::new(range_rate_m_s - dv.dot(&u) - clock_drift_m_s),
@@ -98,6 +170,7 @@ pub fn gnss_range_rate(
 pub fn zero_velocity(nav: &NavState, sigma_m_s: f64) -> Measurement<3> {
     let mut m = gnss_velocity(
         nav,
+        &GnssAntenna::AT_IMU,
         &Vector3::zeros(),
         &(Matrix3::identity() * sigma_m_s * sigma_m_s),
     );
@@ -350,8 +423,9 @@ mod tests {
         nav.v_e = Vector3::new(5.0, -12.0, 3.0);
         let r_s = Vector3::new(2.0e7, 1.2e7, 0.9e7);
         let v_s = Vector3::new(-1200.0, 2500.0, 800.0);
-        let m0 = gnss_pseudorange(&nav, &r_s, 2.3e7, 100.0, 3.0);
-        let d0 = gnss_range_rate(&nav, &r_s, &v_s, -300.0, 1.5, 0.05);
+        let at_imu = GnssAntenna::AT_IMU;
+        let m0 = gnss_pseudorange(&nav, &at_imu, &r_s, 2.3e7, 100.0, 3.0);
+        let d0 = gnss_range_rate(&nav, &at_imu, &r_s, &v_s, -300.0, 1.5, 0.05);
         let mut dx = StateVector::zeros();
         dx.fixed_rows_mut::<3>(idx::POS)
             .copy_from(&Vector3::new(30.0, -20.0, 10.0));
@@ -361,8 +435,8 @@ mod tests {
         dx[idx::CLK_DRIFT] = 0.3;
         let mut nav2 = nav;
         correct_nav_state(&mut nav2, &dx);
-        let m1 = gnss_pseudorange(&nav2, &r_s, 2.3e7, 100.0 + 7.0, 3.0);
-        let d1 = gnss_range_rate(&nav2, &r_s, &v_s, -300.0, 1.5 + 0.3, 0.05);
+        let m1 = gnss_pseudorange(&nav2, &at_imu, &r_s, 2.3e7, 100.0 + 7.0, 3.0);
+        let d1 = gnss_range_rate(&nav2, &at_imu, &r_s, &v_s, -300.0, 1.5 + 0.3, 0.05);
         // Second-order terms: |δr|²/(2ρ) ≈ 2e-5 m for the range; |δr||δv|/ρ ≈ 1e-6 m/s and
         // |δr|²|v|/ρ² ≈ 1e-8 m/s for the rate.
         let e_pr = m0.innovation[0] - m1.innovation[0] - (m0.h * dx)[0];
@@ -371,6 +445,61 @@ mod tests {
         assert!(e_rr.abs() < 1e-5, "{e_rr}");
         // The position column of the rate Jacobian is not negligible against its noise.
         assert!((d0.h.fixed_view::<1, 3>(0, idx::POS) * dx.fixed_rows::<3>(0))[0].abs() > 1e-4);
+    }
+
+    #[test]
+    fn lever_arm_jacobians_match_finite_differences() {
+        // Estimate moved by dx (position, velocity, attitude ψ): every GNSS innovation must
+        // change by H·dx up to second order. With |ψ| = 5e-4 rad, |l| = 1.5 m the neglected
+        // attitude term is |ψ|²|l|/2 ≈ 2e-7 m (position, pseudorange), and |ψ|²|ω||l| ≈ 1e-7
+        // m/s for the velocities; the range-rate line-of-sight term adds
+        // |δr_a|·|δv_a|/ρ ≈ 1e-6 m/s and the pseudorange |δr_a|²/(2ρ) ≈ 1e-6 m.
+        let mut nav = nav_at_origin();
+        nav.v_e = Vector3::new(3.0, 15.0, -1.0);
+        nav.q_e_b = UnitQuaternion::from_euler_angles(0.1, -0.2, 2.1);
+        let antenna = GnssAntenna {
+            lever_arm_b_m: Vector3::new(0.3, 0.1, -1.5),
+            w_ib_b_rad_s: Vector3::new(0.01, -0.02, 0.25),
+        };
+        let r_s = Vector3::new(2.0e7, 1.2e7, 0.9e7);
+        let v_s = Vector3::new(-1200.0, 2500.0, 800.0);
+        let z_r = nav.r_e + Vector3::new(1.0, 2.0, -1.0);
+        let z_v = nav.v_e + Vector3::new(0.1, -0.1, 0.05);
+        let cov = Matrix3::identity();
+        let mut dx = StateVector::zeros();
+        dx.fixed_rows_mut::<3>(idx::POS)
+            .copy_from(&Vector3::new(0.8, -0.5, 0.3));
+        dx.fixed_rows_mut::<3>(idx::VEL)
+            .copy_from(&Vector3::new(0.05, 0.02, -0.03));
+        dx.fixed_rows_mut::<3>(idx::ATT)
+            .copy_from(&Vector3::new(3e-4, -2e-4, 3e-4));
+        let mut nav2 = nav;
+        correct_nav_state(&mut nav2, &dx);
+        let p0 = gnss_position(&nav, &antenna, &z_r, &cov);
+        let p1 = gnss_position(&nav2, &antenna, &z_r, &cov);
+        let v0 = gnss_velocity(&nav, &antenna, &z_v, &cov);
+        let v1 = gnss_velocity(&nav2, &antenna, &z_v, &cov);
+        let r0 = gnss_pseudorange(&nav, &antenna, &r_s, 2.3e7, 0.0, 3.0);
+        let r1 = gnss_pseudorange(&nav2, &antenna, &r_s, 2.3e7, 0.0, 3.0);
+        let d0 = gnss_range_rate(&nav, &antenna, &r_s, &v_s, -300.0, 0.0, 0.05);
+        let d1 = gnss_range_rate(&nav2, &antenna, &r_s, &v_s, -300.0, 0.0, 0.05);
+        let e_p = p0.innovation - p1.innovation - p0.h * dx;
+        let e_v = v0.innovation - v1.innovation - v0.h * dx;
+        let e_r = r0.innovation[0] - r1.innovation[0] - (r0.h * dx)[0];
+        let e_d = d0.innovation[0] - d1.innovation[0] - (d0.h * dx)[0];
+        assert!(e_p.norm() < 1e-6, "position {e_p}");
+        assert!(e_v.norm() < 1e-6, "velocity {e_v}");
+        assert!(e_r.abs() < 5e-6, "pseudorange {e_r}");
+        assert!(e_d.abs() < 5e-6, "range rate {e_d}");
+        // The lever-arm attitude terms are at least 10× those tolerances, so the check above
+        // fails without them (|ψ × l_e| = 3.1e-4 m, |ψ × (ω × l)_e| = 4.1e-5 m/s here).
+        let att = |m: &SMatrix<f64, 3, NX>| {
+            m.fixed_view::<3, 3>(0, idx::ATT) * dx.fixed_rows::<3>(idx::ATT)
+        };
+        assert!(att(&p0.h).norm() > 1e-5 && att(&v0.h).norm() > 1e-5);
+        // No lever arm: the predicted antenna is the IMU.
+        let (r_a, v_a, _, _) = GnssAntenna::AT_IMU.predict(&nav);
+        assert_eq!((r_a, v_a), (nav.r_e, nav.v_e));
     }
 
     #[test]

@@ -157,9 +157,9 @@ pub fn augment_covariance<const M: usize>(
 
 #[cfg(test)]
 mod tests {
-    use super::super::gnss_position;
     use super::super::test_support::{nav_at_origin, random_spd};
     use super::super::{GateTable, idx};
+    use super::super::{GnssAntenna, gnss_position};
     use super::*;
     use nalgebra::{Matrix3, Vector3};
     use rand::{Rng, SeedableRng};
@@ -174,12 +174,22 @@ mod tests {
         let nav = nav_at_origin();
         let cov = Matrix3::identity() * 4.0;
         let gates = GateTable::new(0.999);
-        let good = gnss_position(&nav, &(nav.r_e + Vector3::new(3.0, -2.0, 1.0)), &cov);
+        let good = gnss_position(
+            &nav,
+            &GnssAntenna::AT_IMU,
+            &(nav.r_e + Vector3::new(3.0, -2.0, 1.0)),
+            &cov,
+        );
         let out = update(&p, &good, gates.threshold(3));
         assert!(!out.residual.rejected);
         assert!((out.dx[0] - 3.0 * 100.0 / 104.0).abs() < 1e-9);
         assert!((out.p[(0, 0)] - 100.0 * 4.0 / 104.0).abs() < 1e-9);
-        let bad = gnss_position(&nav, &(nav.r_e + Vector3::new(300.0, 0.0, 0.0)), &cov);
+        let bad = gnss_position(
+            &nav,
+            &GnssAntenna::AT_IMU,
+            &(nav.r_e + Vector3::new(300.0, 0.0, 0.0)),
+            &cov,
+        );
         let out = update(&p, &bad, gates.threshold(3));
         assert!(out.residual.rejected);
         assert!(out.residual.nis > out.residual.gate);

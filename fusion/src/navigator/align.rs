@@ -19,6 +19,7 @@ impl Navigator {
         if self.align.duration_s() + 1e-9 < self.config.alignment_s {
             return;
         }
+        let mut from_gnss = false;
         let (r_e, pos_cov) = if let Some(p) = &self.config.initial_position {
             let g = Geodetic {
                 lat_rad: p.lat_deg * DEG,
@@ -31,6 +32,7 @@ impl Navigator {
                 Matrix3::identity() * s2,
             )
         } else if let Some(f) = self.initial_fix() {
+            from_gnss = true;
             f
         } else {
             return; // keep averaging until a position is known
@@ -68,10 +70,17 @@ impl Navigator {
         let s_head = s_head.max(self.config.initial.heading_sigma_min_deg * DEG);
         let q_e_n = q_e_n(geo.lat_rad, geo.lon_rad);
         let c_e_n = q_e_n.to_rotation_matrix().into_inner();
+        let q_e_b = q_e_n * a.q_n_b;
+        // A GNSS fix is the antenna's position: the IMU is a lever arm away from it.
+        let lever_e = if from_gnss {
+            q_e_b * self.config.gnss.lever_arm_b()
+        } else {
+            Vector3::zeros()
+        };
         self.core.nav = NavState {
-            r_e,
+            r_e: r_e - lever_e,
             v_e: Vector3::zeros(),
-            q_e_b: q_e_n * a.q_n_b,
+            q_e_b,
         };
         let mut p0 = Covariance::zeros();
         p0.fixed_view_mut::<3, 3>(idx::POS, idx::POS)

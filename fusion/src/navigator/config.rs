@@ -152,6 +152,23 @@ pub enum GnssMode {
     Tight,
 }
 
+/// The GNSS antenna's installation (`[gnss]` in `config/filter.toml`).
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct GnssInstallation {
+    /// Antenna phase centre relative to the IMU, body axes (x forward, y right, z down), m:
+    /// surveyed on the vehicle. Used by the loose and tight measurement models and to move
+    /// the first fix from the antenna to the IMU at alignment.
+    pub lever_arm_b_m: [f64; 3],
+}
+
+impl GnssInstallation {
+    /// The lever arm as a vector, body axes, m.
+    pub fn lever_arm_b(&self) -> Vector3<f64> {
+        Vector3::from(self.lever_arm_b_m)
+    }
+}
+
 /// Initial uncertainties of the filter after coarse alignment.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields, default)]
@@ -349,6 +366,8 @@ pub struct NavigatorConfig {
     pub covariance_interval_s: f64,
     /// GNSS coupling.
     pub gnss_mode: GnssMode,
+    /// GNSS antenna installation (lever arm).
+    pub gnss: GnssInstallation,
     /// Estimated state groups.
     pub states: StateSwitches,
     /// Initial position for alignment; when absent, the first valid GNSS fix is used.
@@ -382,6 +401,7 @@ impl Default for NavigatorConfig {
             max_imu_rate_hz: 2000.0,
             covariance_interval_s: 0.05,
             gnss_mode: GnssMode::Loose,
+            gnss: GnssInstallation::default(),
             states: StateSwitches::default(),
             initial_position: None,
             eop: EarthOrientation::default(),
@@ -574,6 +594,13 @@ impl NavigatorConfig {
             ),
         ] {
             check(nonneg(v), k, "must be a finite number >= 0")?;
+        }
+        for (i, v) in self.gnss.lever_arm_b_m.iter().enumerate() {
+            check(
+                v.is_finite() && v.abs() <= 50.0,
+                &format!("gnss.lever_arm_b_m[{i}]"),
+                "must be a finite number within ±50 m",
+            )?;
         }
         check(
             self.gnss_mode == GnssMode::Loose || self.states.clock,

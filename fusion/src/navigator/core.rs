@@ -28,6 +28,9 @@ pub(super) struct Core {
     pub(super) last_odo: Option<(GpsTime, f64)>,
     /// Whether the receiver clock states have been started (tight coupling).
     pub(super) clock_initialized: bool,
+    /// Bias-corrected inertial angular rate of the last IMU step, body axes, rad/s (the
+    /// velocity lever-arm term of the GNSS antenna).
+    pub(super) w_ib_b_rad_s: Vector3<f64>,
 }
 
 impl Core {
@@ -51,6 +54,7 @@ impl Core {
             last_baro_fused: None,
             last_odo: None,
             clock_initialized: false,
+            w_ib_b_rad_s: Vector3::zeros(),
         }
     }
 }

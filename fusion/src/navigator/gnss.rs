@@ -5,6 +5,15 @@
 use super::*;
 
 impl Navigator {
+    /// The GNSS antenna as the measurement models need it: the configured lever arm and the
+    /// last bias-corrected body rate.
+    pub(super) fn gnss_antenna(&self) -> ekf::GnssAntenna {
+        ekf::GnssAntenna {
+            lever_arm_b_m: self.config.gnss.lever_arm_b(),
+            w_ib_b_rad_s: self.core.w_ib_b_rad_s,
+        }
+    }
+
     /// Dual-baseline attitude of a sample (paper 003, [`crate::baseline_attitude`]), started
     /// from the inertial attitude (so two satellites suffice), lines of sight from the
     /// inertial position; None when switched off, not navigating, or not solvable.
@@ -55,13 +64,15 @@ impl Navigator {
         let mut fused = false;
         let mut nis = f64::NEG_INFINITY;
         if self.config.updates.gnss_position {
-            let m = ekf::gnss_position(&self.core.nav, &fix.pos, &fix.pos_cov);
+            let m =
+                ekf::gnss_position(&self.core.nav, &self.gnss_antenna(), &fix.pos, &fix.pos_cov);
             let v = self.run_update(Counter::Sensor(id), &m, tally);
             fused |= v.accepted();
             nis = nis.max(v.nis);
         }
         if self.config.updates.gnss_velocity && fix.vel_valid {
-            let m = ekf::gnss_velocity(&self.core.nav, &fix.vel, &fix.vel_cov);
+            let m =
+                ekf::gnss_velocity(&self.core.nav, &self.gnss_antenna(), &fix.vel, &fix.vel_cov);
             let v = self.run_update(Counter::Sensor(id), &m, tally);
             fused |= v.accepted();
             nis = nis.max(v.nis);
@@ -96,6 +107,7 @@ impl Navigator {
                 let b = self.core.ekf.clock_bias_m - self.core.ekf.clock_drift_m_s * back_s;
                 let m = ekf::gnss_pseudorange(
                     &self.core.nav,
+                    &self.gnss_antenna(),
                     &sat.pos,
                     sat.pseudorange_m,
                     b,
@@ -108,6 +120,7 @@ impl Navigator {
             if sat.has_rr && self.config.updates.gnss_velocity && skip_rr != Some(i) {
                 let m = ekf::gnss_range_rate(
                     &self.core.nav,
+                    &self.gnss_antenna(),
                     &sat.pos,
                     &sat.vel,
                     sat.range_rate_m_s,
@@ -166,6 +179,7 @@ impl Navigator {
         let sk = &sats[k];
         let m_b = ekf::gnss_pseudorange(
             &self.core.nav,
+            &self.gnss_antenna(),
             &sk.pos,
             sk.pseudorange_m,
             0.0,
@@ -176,6 +190,7 @@ impl Navigator {
                 let sj = &sats[j];
                 let m_d = ekf::gnss_range_rate(
                     &self.core.nav,
+                    &self.gnss_antenna(),
                     &sj.pos,
                     &sj.vel,
                     sj.range_rate_m_s,
@@ -268,7 +283,9 @@ impl Navigator {
     /// of disagreements is the operator's (or a supervisor's) signal to re-initialise.
     pub(super) fn gnss_ls_cross_check(&mut self, ts: GpsTime, obs: &GnssObs, tally: Tally) {
         let back_s = (self.time - ts).seconds_f64();
-        let r_pred = self.core.nav.r_e - self.core.nav.v_e * back_s;
+        // The fix is the antenna's: compare it with the predicted antenna position.
+        let (r_a, v_a, _, _) = self.gnss_antenna().predict(&self.core.nav);
+        let r_pred = r_a - v_a * back_s;
         let b_guess = if self.core.clock_initialized {
             self.core.ekf.clock_bias_m - self.core.ekf.clock_drift_m_s * back_s
         } else {

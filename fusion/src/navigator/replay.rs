@@ -23,6 +23,7 @@ impl Navigator {
             .core
             .ekf
             .correct_increment(&(e.dth * scale), &(e.dv * scale), dt);
+        self.core.w_ib_b_rad_s = dth_c / dt;
         let inc = ImuIncrement {
             dt_s: dt,
             delta_angle_rad: dth_c,

@@ -1,0 +1,347 @@
+//! The simulated world: truth-only effects the navigation filter does not model.
+//!
+//! A scenario's optional `[world]` section names every effect and its magnitude; each effect
+//! is switchable (`enabled = false`, or leave its table out). Without a `[world]` section the
+//! simulator is the *matched* world: GNSS errors white with exactly the covariance the
+//! receiver reports — a fixture for the filter's algebra, not a test of navigation.
+//!
+//! With it, the GNSS receiver ([`crate::gnss`]) sees, per satellite: the ionosphere
+//! ([`ionosphere`]), the troposphere ([`troposphere`]), multipath ([`multipath`]), broadcast
+//! clock and orbit errors ([`satellite`]), code tracking noise by C/N0 ([`CodeNoiseSpec`]),
+//! its own oscillator ([`receiver_clock`]) and the antenna's lever arm and time-tag latency
+//! ([`antenna`]); it corrects the pseudoranges with its own broadcast models and reports a
+//! least-squares fix with the covariance of its own noise model, as a receiver does.
+//!
+//! These models are the world's own: none calls `fusion`'s ionosphere, troposphere or gravity
+//! models (only its proven foundations: ellipsoid, time, frames).
+
+pub mod antenna;
+pub mod gauss_markov;
+pub mod ionosphere;
+pub mod multipath;
+pub mod receiver_clock;
+pub mod satellite;
+pub mod troposphere;
+
+use crate::SimError;
+use antenna::GnssAntennaSpec;
+use ionosphere::{Ionosphere, IonosphereSpec};
+use multipath::{Multipath, MultipathSpec};
+use nalgebra::Vector3;
+use rand_chacha::ChaCha20Rng;
+use receiver_clock::ReceiverClockSpec;
+use satellite::{EphemerisSpec, SatelliteClockSpec, SignalInSpace};
+use serde::Deserialize;
+use std::path::Path;
+use troposphere::{Troposphere, TroposphereSpec};
+
+pub(crate) fn yes() -> bool {
+    true
+}
+
+/// `[world.code_noise]`: code tracking noise, white, by carrier-to-noise density.
+///
+/// `σ(C/N0) = σ₄₅·10^{(45 − C/N0)/20}`: the delay-lock-loop jitter scales as `1/√(C/N0)`
+/// (Kaplan & Hegarty, "Understanding GPS/GNSS", 3rd ed., eq. 8.48, thermal term).
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CodeNoiseSpec {
+    /// Whether the effect is applied.
+    #[serde(default = "yes")]
+    pub enabled: bool,
+    /// 1-σ pseudorange noise at 45 dB-Hz, m.
+    pub sigma_at_45_dbhz_m: f64,
+}
+
+impl CodeNoiseSpec {
+    /// 1-σ at `cn0_dbhz`, m.
+    pub fn sigma_m(&self, cn0_dbhz: f64) -> f64 {
+        self.sigma_at_45_dbhz_m * 10f64.powf((45.0 - cn0_dbhz) / 20.0)
+    }
+}
+
+/// `[world]`: every truth-only effect with its magnitude.
+#[derive(Debug, Clone, Copy, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WorldSection {
+    /// Ionospheric group delay.
+    pub ionosphere: Option<IonosphereSpec>,
+    /// Tropospheric delay.
+    pub troposphere: Option<TroposphereSpec>,
+    /// Code multipath.
+    pub multipath: Option<MultipathSpec>,
+    /// Broadcast satellite clock error.
+    pub satellite_clock: Option<SatelliteClockSpec>,
+    /// Broadcast orbit error.
+    pub ephemeris: Option<EphemerisSpec>,
+    /// Code tracking noise.
+    pub code_noise: Option<CodeNoiseSpec>,
+    /// Receiver oscillator (replaces the grade's clock PSDs).
+    pub receiver_clock: Option<ReceiverClockSpec>,
+    /// Antenna lever arm and time-tag latency.
+    pub gnss_antenna: Option<GnssAntennaSpec>,
+}
+
+fn on<T: Copy>(x: Option<T>, enabled: impl Fn(&T) -> bool) -> Option<T> {
+    x.filter(|s| enabled(s))
+}
+
+impl WorldSection {
+    /// Whether any pseudorange error effect is on: then the simulator's receiver is the real
+    /// one ([`crate::gnss`]); otherwise the matched one (white errors of the grade's σ),
+    /// with the antenna, latency and oscillator of this section still applied.
+    pub fn gnss_errors_on(&self) -> bool {
+        on(self.ionosphere, |s| s.enabled).is_some()
+            || on(self.troposphere, |s| s.enabled).is_some()
+            || on(self.multipath, |s| s.enabled).is_some()
+            || on(self.satellite_clock, |s| s.enabled).is_some()
+            || on(self.ephemeris, |s| s.enabled).is_some()
+            || on(self.code_noise, |s| s.enabled).is_some()
+    }
+
+    /// The antenna spec when enabled.
+    pub fn antenna(&self) -> Option<GnssAntennaSpec> {
+        on(self.gnss_antenna, |s| s.enabled)
+    }
+    /// The receiver oscillator when enabled.
+    pub fn receiver_clock(&self) -> Option<ReceiverClockSpec> {
+        on(self.receiver_clock, |s| s.enabled)
+    }
+    /// The antenna lever arm (body, m), zero when off.
+    pub fn lever_arm_b_m(&self) -> Vector3<f64> {
+        self.antenna()
+            .map_or_else(Vector3::zeros, |a| Vector3::from(a.lever_arm_b_m))
+    }
+    /// The GNSS time-tag latency, ns (0 when off).
+    pub fn gnss_latency_ns(&self) -> i64 {
+        self.antenna()
+            .map_or(0, |a| (a.latency_s * 1e9).round() as i64)
+    }
+
+    /// Check every value; errors name `file` and the dotted key.
+    pub fn validate(&self, file: &Path) -> Result<(), SimError> {
+        let bad = |key: &str, reason: String| SimError::Invalid {
+            file: file.to_path_buf(),
+            key: format!("world.{key}"),
+            reason,
+        };
+        let nonneg = |key: &str, v: f64| {
+            if v.is_finite() && v >= 0.0 {
+                Ok(())
+            } else {
+                Err(bad(key, format!("must be finite and ≥ 0, got {v}")))
+            }
+        };
+        let positive = |key: &str, v: f64| {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(bad(key, format!("must be finite and > 0, got {v}")))
+            }
+        };
+        if let Some(s) = &self.ionosphere {
+            nonneg("ionosphere.night_vtec_tecu", s.night_vtec_tecu)?;
+            nonneg("ionosphere.day_vtec_tecu", s.day_vtec_tecu)?;
+            if !(0.0..=24.0).contains(&s.peak_local_hour) {
+                return Err(bad("ionosphere.peak_local_hour", "outside 0..24 h".into()));
+            }
+            nonneg("ionosphere.gradient_per_deg", s.gradient_per_deg)?;
+            if !(s.shell_height_km.is_finite() && (100.0..=2000.0).contains(&s.shell_height_km)) {
+                return Err(bad(
+                    "ionosphere.shell_height_km",
+                    "outside 100..2000 km".into(),
+                ));
+            }
+            if !(s.residual_fraction.is_finite() && (0.0..1.0).contains(&s.residual_fraction)) {
+                return Err(bad("ionosphere.residual_fraction", "outside 0..1".into()));
+            }
+            positive("ionosphere.residual_tau_s", s.residual_tau_s)?;
+        }
+        if let Some(s) = &self.troposphere {
+            if !(s.sea_level_pressure_hpa.is_finite()
+                && (850.0..=1100.0).contains(&s.sea_level_pressure_hpa))
+            {
+                return Err(bad(
+                    "troposphere.sea_level_pressure_hpa",
+                    "outside 850..1100 hPa".into(),
+                ));
+            }
+            if !(s.sea_level_temperature_c.is_finite()
+                && (-60.0..=60.0).contains(&s.sea_level_temperature_c))
+            {
+                return Err(bad(
+                    "troposphere.sea_level_temperature_c",
+                    "outside −60..60 °C".into(),
+                ));
+            }
+            if !(s.relative_humidity.is_finite() && (0.0..=1.0).contains(&s.relative_humidity)) {
+                return Err(bad("troposphere.relative_humidity", "outside 0..1".into()));
+            }
+            nonneg("troposphere.wet_residual_m", s.wet_residual_m)?;
+            positive("troposphere.wet_residual_tau_s", s.wet_residual_tau_s)?;
+        }
+        if let Some(s) = &self.multipath {
+            nonneg("multipath.sigma_zenith_m", s.sigma_zenith_m)?;
+            nonneg("multipath.sigma_horizon_m", s.sigma_horizon_m)?;
+            positive("multipath.elevation_scale_deg", s.elevation_scale_deg)?;
+            positive("multipath.tau_s", s.tau_s)?;
+        }
+        if let Some(s) = &self.satellite_clock {
+            nonneg("satellite_clock.sigma_m", s.sigma_m)?;
+            positive("satellite_clock.tau_s", s.tau_s)?;
+        }
+        if let Some(s) = &self.ephemeris {
+            nonneg("ephemeris.sigma_radial_m", s.sigma_radial_m)?;
+            nonneg("ephemeris.sigma_along_m", s.sigma_along_m)?;
+            nonneg("ephemeris.sigma_cross_m", s.sigma_cross_m)?;
+            positive("ephemeris.tau_s", s.tau_s)?;
+        }
+        if let Some(s) = &self.code_noise {
+            nonneg("code_noise.sigma_at_45_dbhz_m", s.sigma_at_45_dbhz_m)?;
+        }
+        if let Some(s) = &self.receiver_clock {
+            nonneg("receiver_clock.h0", s.h0)?;
+            nonneg("receiver_clock.h_minus2", s.h_minus2)?;
+        }
+        if let Some(s) = &self.gnss_antenna {
+            for (i, v) in s.lever_arm_b_m.iter().enumerate() {
+                if !(v.is_finite() && v.abs() <= 50.0) {
+                    return Err(bad(
+                        &format!("gnss_antenna.lever_arm_b_m[{i}]"),
+                        format!("{v} is outside ±50 m"),
+                    ));
+                }
+            }
+            let ms = s.latency_s * 1e3;
+            if !(s.latency_s.is_finite()
+                && (0.0..1.0).contains(&s.latency_s)
+                && (ms - ms.round()).abs() < 1e-6)
+            {
+                return Err(bad(
+                    "gnss_antenna.latency_s",
+                    format!(
+                        "{} must be a whole number of milliseconds (the truth grid) in [0, 1) s",
+                        s.latency_s
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The GNSS error state of the world during a run: one instance per receiver, advanced once
+/// per epoch (every process draws for every satellite, visible or not, so the stream is
+/// independent of the geometry).
+#[derive(Debug, Clone)]
+pub struct GnssWorld {
+    spec: WorldSection,
+    rng: ChaCha20Rng,
+    ionosphere: Option<Ionosphere>,
+    troposphere: Option<Troposphere>,
+    multipath: Option<Multipath>,
+    signal_in_space: SignalInSpace,
+}
+
+/// The world's error terms of one satellite's pseudorange, m (positive: the range reads long).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct RangeErrors {
+    /// Ionospheric group delay.
+    pub ionosphere_m: f64,
+    /// Tropospheric delay.
+    pub troposphere_m: f64,
+    /// Code multipath.
+    pub multipath_m: f64,
+    /// Broadcast satellite clock error.
+    pub satellite_clock_m: f64,
+}
+
+impl RangeErrors {
+    /// Sum of the terms, m.
+    pub fn total_m(&self) -> f64 {
+        self.ionosphere_m + self.troposphere_m + self.multipath_m + self.satellite_clock_m
+    }
+}
+
+impl GnssWorld {
+    /// The world of `spec` for `n_sats` satellites, drawing from `rng` (the `"world"` stream).
+    pub fn new(spec: WorldSection, n_sats: usize, mut rng: ChaCha20Rng) -> Self {
+        let ionosphere =
+            on(spec.ionosphere, |s| s.enabled).map(|s| Ionosphere::new(s, n_sats, &mut rng));
+        let troposphere =
+            on(spec.troposphere, |s| s.enabled).map(|s| Troposphere::new(s, &mut rng));
+        let multipath =
+            on(spec.multipath, |s| s.enabled).map(|s| Multipath::new(s, n_sats, &mut rng));
+        let signal_in_space =
+            SignalInSpace::new(spec.satellite_clock, spec.ephemeris, n_sats, &mut rng);
+        Self {
+            spec,
+            rng,
+            ionosphere,
+            troposphere,
+            multipath,
+            signal_in_space,
+        }
+    }
+
+    /// The section it was built from.
+    pub fn spec(&self) -> &WorldSection {
+        &self.spec
+    }
+
+    /// Advance every process by `dt_s`.
+    pub fn step(&mut self, dt_s: f64) {
+        if let Some(i) = &mut self.ionosphere {
+            i.step(dt_s, &mut self.rng);
+        }
+        if let Some(t) = &mut self.troposphere {
+            t.step(dt_s, &mut self.rng);
+        }
+        if let Some(m) = &mut self.multipath {
+            m.step(dt_s, &mut self.rng);
+        }
+        self.signal_in_space.step(dt_s, &mut self.rng);
+    }
+
+    /// Error terms of satellite `i` seen from geodetic `(lat, lon)` rad and `height_m` at
+    /// azimuth/elevation `az_el_rad` on carrier `f_hz`, at `utc_s_of_day`.
+    pub fn range_errors(
+        &self,
+        i: usize,
+        lat_lon_rad: (f64, f64),
+        height_m: f64,
+        az_el_rad: (f64, f64),
+        utc_s_of_day: f64,
+        f_hz: f64,
+    ) -> RangeErrors {
+        RangeErrors {
+            ionosphere_m: self.ionosphere.as_ref().map_or(0.0, |m| {
+                m.delay_m(i, lat_lon_rad, az_el_rad, utc_s_of_day, f_hz)
+            }),
+            troposphere_m: self
+                .troposphere
+                .as_ref()
+                .map_or(0.0, |m| m.delay_m(lat_lon_rad.0, height_m, az_el_rad.1)),
+            multipath_m: self
+                .multipath
+                .as_ref()
+                .map_or(0.0, |m| m.error_m(i, az_el_rad.1)),
+            satellite_clock_m: self.signal_in_space.clock_error_m(i),
+        }
+    }
+
+    /// Broadcast orbit error of satellite `i` (ECEF, m) at its true state.
+    pub fn orbit_error_e_m(
+        &self,
+        i: usize,
+        r_s: &Vector3<f64>,
+        v_s: &Vector3<f64>,
+    ) -> Vector3<f64> {
+        self.signal_in_space.orbit_error_e_m(i, r_s, v_s)
+    }
+
+    /// Code tracking noise σ at `cn0_dbhz`, m (`None` when the effect is off).
+    pub fn code_noise_sigma_m(&self, cn0_dbhz: f64) -> Option<f64> {
+        on(self.spec.code_noise, |s| s.enabled).map(|s| s.sigma_m(cn0_dbhz))
+    }
+}
