@@ -88,6 +88,12 @@ pub struct Summary {
     pub attitude_error_rms_deg: Option<f64>,
     /// Largest attitude error angle, deg.
     pub attitude_error_max_deg: Option<f64>,
+    /// RMS horizontal error of the GNSS receiver's own fixes over the same run, m: each valid
+    /// fix against the truth sample of its time tag (the IMU's position, which is the
+    /// antenna's when the scenario has no lever arm), to set beside the solution's.
+    pub gnss_fix_horizontal_error_rms_m: Option<f64>,
+    /// RMS vertical error of the receiver's own fixes, m.
+    pub gnss_fix_vertical_error_rms_m: Option<f64>,
     /// Largest horizontal error during any GNSS outage, m.
     pub outage_horizontal_error_max_m: Option<f64>,
     /// RMS horizontal error in the 60 s after the GNSS outages, m.
@@ -226,6 +232,7 @@ pub fn analyze(path: &Path, outages: &[TimeWindow]) -> Result<Analysis, Analysis
     let mut truth: HashMap<i64, TruthSample> = HashMap::new();
     let mut first_truth: Option<TruthSample> = None;
     let mut navs: Vec<NavSolution> = Vec::new();
+    let mut fixes: Vec<(i64, [f64; 3])> = Vec::new();
     let mut last_status: Option<Status> = None;
     let (mut t_min, mut t_max) = (i64::MAX, i64::MIN);
     for m in rec {
@@ -271,6 +278,7 @@ pub fn analyze(path: &Path, outages: &[TimeWindow]) -> Result<Analysis, Analysis
                 truth.insert(t.header.time_ns, t);
             }
             Record::Nav(n) => navs.push(n),
+            Record::Gnss(g) if g.fix_valid == 1 => fixes.push((g.header.time_ns, g.pos_ecef_m)),
             Record::Status(st) => last_status = Some(*st),
             _ => {}
         }
@@ -330,6 +338,18 @@ pub fn analyze(path: &Path, outages: &[TimeWindow]) -> Result<Analysis, Analysis
         series.push_matched(t_s, &e, att, n, t, origin.as_ref());
     }
     s.solutions_matched_with_truth = t_ns.len() as u64;
+    let (mut fix_h, mut fix_v) = (Vec::new(), Vec::new());
+    for (t, pos) in &fixes {
+        if let Some(tr) = truth.get(t) {
+            let e = ned_offset(tr.pos_ecef_m, tr.lat_rad, tr.lon_rad, *pos);
+            if e.iter().all(|x| x.is_finite()) {
+                fix_h.push(e[0].hypot(e[1]));
+                fix_v.push(e[2]);
+            }
+        }
+    }
+    s.gnss_fix_horizontal_error_rms_m = rms(&fix_h);
+    s.gnss_fix_vertical_error_rms_m = rms(&fix_v);
     s.horizontal_error_rms_m = rms(&series.horizontal_m);
     s.horizontal_error_max_m = max_abs(&series.horizontal_m);
     s.vertical_error_rms_m = rms(&series.vertical_m);
@@ -411,6 +431,14 @@ pub fn format_table(s: &Summary) -> String {
                 "{} / {}",
                 opt(s.vertical_error_rms_m, 3),
                 opt(s.vertical_error_max_m, 3)
+            ),
+        ),
+        (
+            "GNSS receiver fix alone: horizontal / vertical RMS [m]".into(),
+            format!(
+                "{} / {}",
+                opt(s.gnss_fix_horizontal_error_rms_m, 3),
+                opt(s.gnss_fix_vertical_error_rms_m, 3)
             ),
         ),
         (

@@ -300,6 +300,7 @@ fn run_records_every_channel_and_navigates_within_sensor_bounds() {
         serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
     for key in [
         "horizontal_error_rms_m",
+        "gnss_fix_horizontal_error_rms_m",
         "attitude_error_rms_deg",
         "latency_p50_us",
         "latency_p99_us",
