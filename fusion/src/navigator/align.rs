@@ -1,22 +1,35 @@
 //! From static coarse alignment to navigation (paper 003, [`crate::alignment`]): the aiding
-//! consumed while aligning (the GNSS position and, in tight mode, the least-squares clock),
-//! and the initial state and joint covariance once the alignment window is complete.
+//! consumed while aligning (the GNSS position and, in tight mode, the least-squares clock; the
+//! star-tracker attitude and GNSS velocity for the alignment in motion, `motion_align`),
+//! and the initial state and joint covariance once the static alignment window is complete.
 
 use super::*;
 
 impl Navigator {
-    pub(super) fn consume_during_alignment(&mut self, t: GpsTime) {
+    /// While aligning, at IMU epoch `t` with the increment `dth` (body, rad) over `dt_s`:
+    /// carry the star attitude, take the aiding due, and start navigating in motion when the
+    /// sensors allow it (`try_align_in_motion`).
+    pub(super) fn consume_during_alignment(&mut self, t: GpsTime, dth: &Vector3<f64>, dt_s: f64) {
+        self.check_warm_start_age(t);
+        self.carry_star_attitude(dth, dt_s);
+        while let Some((ts, obs, _)) = self.star_q.pop_due(t) {
+            self.alignment_star(ts, &obs, t, dth, dt_s);
+        }
         while let Some((ts, obs, _)) = self.gnss_q.pop_due(t) {
             self.alignment_gnss(ts, &obs);
+            if self.try_align_in_motion(ts, &obs, t, dt_s) {
+                return;
+            }
         }
         // Other aiding is not used before navigation starts.
-        while self.star_q.pop_due(t).is_some() {}
         while self.odo_q.pop_due(t).is_some() {}
         while self.baro_q.pop_due(t).is_some() {}
     }
 
     pub(super) fn try_finish_alignment(&mut self, t: GpsTime) {
-        if self.align.duration_s() + 1e-9 < self.config.alignment_s {
+        if self.phase == Phase::Navigating
+            || self.align.duration_s() + 1e-9 < self.config.alignment_s
+        {
             return;
         }
         let mut from_gnss = false;
@@ -49,10 +62,7 @@ impl Navigator {
             }
         };
         let imu = &self.config.imu;
-        let mut noise = imu.process_noise();
-        noise.baro_bias_rw_m_sqrt_s = self.config.aiding.baro_bias_rw_m_sqrt_s;
-        noise.clock_bias_psd_m2_s = self.config.aiding.clock_bias_psd_m2_s;
-        noise.clock_drift_psd_m2_s3 = self.config.aiding.clock_drift_psd_m2_s3;
+        let noise = self.filter_noise();
         let spec = alignment::AlignmentErrorSpec {
             gyro_bias_rad_s: imu.gyro_bias_rad_s(),
             accel_bias_m_s2: imu.accel_bias_m_s2(),
@@ -82,7 +92,7 @@ impl Navigator {
             v_e: Vector3::zeros(),
             q_e_b,
         };
-        let mut p0 = Covariance::zeros();
+        let mut p0 = self.sensor_prior(&f_b);
         p0.fixed_view_mut::<3, 3>(idx::POS, idx::POS)
             .copy_from(&pos_cov);
         let sv = self.config.initial.velocity_sigma_m_s.powi(2);
@@ -95,19 +105,6 @@ impl Navigator {
         ));
         p0.fixed_view_mut::<3, 3>(idx::ATT, idx::ATT)
             .copy_from(&(c_e_n * att_n * c_e_n.transpose()));
-        let sbg = imu.gyro_bias_rad_s().powi(2);
-        let sba = imu.accel_bias_m_s2().powi(2);
-        // The accelerometer misalignment (relative to the gyro-defined body frame, σ_m per
-        // off-diagonal, not a state) turns the specific force f_b into the error M f_b; axis
-        // k's part `Σ_{j≠k} M_kj f_j` has variance σ_m² (|f|² − f_k²). With the static f_b
-        // of the alignment (gravity) it is constant in the body, i.e. a bias: it widens the
-        // initial accelerometer-bias σ (≈ 48 µg on the level axes for 10″).
-        let s_mis = imu.misalignment_arcsec / 3600.0 * DEG;
-        for k in 0..3 {
-            p0[(idx::BG + k, idx::BG + k)] = sbg;
-            p0[(idx::BA + k, idx::BA + k)] =
-                sba + s_mis * s_mis * (f_b.norm_squared() - f_b[k] * f_b[k]);
-        }
         // The alignment's tilt and heading errors are the accelerometer and gyro biases seen
         // through levelling and gyrocompassing, not independent of them (counting both would
         // make e.g. a star tracker's boresight tilt look √2 better known than it is):
@@ -127,28 +124,12 @@ impl Navigator {
         );
         p0.fixed_view_mut::<9, 9>(idx::ATT, idx::ATT)
             .copy_from(&joint);
-        p0[(idx::BARO, idx::BARO)] = self.config.aiding.baro_bias_sigma_m.powi(2);
-        p0[(idx::ODO, idx::ODO)] = self.config.aiding.odometer_scale_sigma.powi(2);
-        let sg = imu.gyro_scale_ppm * 1e-6;
-        let sa = imu.accel_scale_ppm * 1e-6;
-        let sk = self.config.aiding.boresight_sigma_deg * DEG;
-        for k in 0..3 {
-            p0[(idx::SG + k, idx::SG + k)] = sg * sg;
-            p0[(idx::SA + k, idx::SA + k)] = sa * sa;
-            p0[(idx::KAPPA + k, idx::KAPPA + k)] = sk * sk;
+        // A snapshot's sensor errors are not taken over here: the coarse attitude above was
+        // derived with zero biases and is correlated with them (the joint block).
+        if self.warm.take().is_some() {
+            self.warm_outcome = Some(WarmStartOutcome::Refused(WarmStartRefusal::StandingStart));
         }
-        self.core.ekf = ErrorStateEkf::new(p0, noise, self.active_states(false));
-        self.core.clock_initialized = false;
-        self.initialize_from_ls(t);
-        self.core.strapdown = Strapdown::new(self.config.mechanization());
-        self.phase = Phase::Navigating;
-        self.time = t;
-        self.imu_log.clear();
-        self.checkpoints.clear();
-        self.rewind_to = None;
-        self.take_checkpoint(t);
-        // Aiding queued up to now belongs to the alignment period.
-        self.gnss_q.clear();
+        self.start_navigation(p0, t);
     }
 
     /// During alignment: keep the latest least-squares fix of the raw pseudoranges (the

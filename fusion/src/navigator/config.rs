@@ -386,6 +386,10 @@ pub struct NavigatorConfig {
     pub deadlines: Deadlines,
     /// Redundant-channel fault detection (paper 004; used when the IMU has channels).
     pub redundancy: crate::redundancy::RedundancyConfig,
+    /// Alignment in motion from the star tracker and GNSS.
+    pub motion_alignment: MotionAlignment,
+    /// Resumption from a snapshot after a restart.
+    pub warm_start: WarmStartConfig,
 }
 
 impl Default for NavigatorConfig {
@@ -411,6 +415,8 @@ impl Default for NavigatorConfig {
             aiding: AidingNoise::default(),
             deadlines: Deadlines::default(),
             redundancy: crate::redundancy::RedundancyConfig::default(),
+            motion_alignment: MotionAlignment::default(),
+            warm_start: WarmStartConfig::default(),
         }
     }
 }
@@ -434,6 +440,8 @@ pub(super) fn nonneg(x: f64) -> bool {
 impl NavigatorConfig {
     /// Check the meaning of the values (ranges, consistency); the error names the key.
     pub fn validate(&self) -> Result<(), ConfigError> {
+        self.motion_alignment.validate()?;
+        self.warm_start.validate()?;
         check(
             nonneg(self.alignment_s) && self.alignment_s <= 3600.0,
             "alignment_s",

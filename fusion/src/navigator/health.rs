@@ -120,4 +120,8 @@ pub struct NavigatorDiagnostics {
     /// [`NavigatorConfig::max_imu_rate_hz`]): one per rewind; the samples are dropped and
     /// counted in their sensor's `dropped_late`, never fused at a wrong epoch.
     pub replays_impossible: u64,
+    /// Alignments in motion (star-tracker attitude, GNSS position and velocity).
+    pub motion_alignments: u64,
+    /// Starts of navigation that resumed the sensor-error states from a snapshot.
+    pub warm_starts: u64,
 }

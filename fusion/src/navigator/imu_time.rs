@@ -96,7 +96,9 @@ impl Navigator {
     /// diagnostics (counting this re-initialisation), the ZUPT counters, the solution count,
     /// the aiding sequence numbers, and the redundant-channel FDI (an excluded channel is
     /// broken hardware, whatever the time base). New: the filter, the alignment, the delayed-
-    /// fusion queues, log and checkpoints, the clock state and every time reference.
+    /// fusion queues, log and checkpoints, the clock state and every time reference; the
+    /// sensor-error estimates are held as a snapshot for the alignment in motion
+    /// (`warm_start`).
     pub(super) fn reinitialize(&mut self) {
         // The configuration was validated when this navigator was built: `new` cannot fail.
         let Ok(mut fresh) = Navigator::new(self.config.clone()) else {
@@ -113,6 +115,10 @@ impl Navigator {
         fresh.last_seq[sid(SensorId::Imu)] = None;
         fresh.redundancy = self.redundancy.take();
         fresh.redundancy_config = self.redundancy_config;
+        // The sensor-error estimates survive the gap (calibration memory): resumed when the
+        // new alignment is one in motion and the gap is within `warm_start.max_age_s`.
+        fresh.warm = self.snapshot();
+        fresh.warm_outcome = self.warm_outcome;
         *self = fresh;
     }
 

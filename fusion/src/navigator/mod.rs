@@ -7,7 +7,10 @@
 //! [`NavigatorConfig::alignment_s`] (paper 003 static alignment, [`crate::alignment`]) while
 //! GNSS gives the position (or [`NavigatorConfig::initial_position`]) → navigating: strapdown
 //! ([`crate::strapdown`]) plus the 28-state error-state EKF ([`crate::ekf`]), mode from the
-//! aiding actually fused within its deadline.
+//! aiding actually fused within its deadline. While GNSS shows the vehicle moving, the
+//! alignment in motion (`motion_align`) starts navigation at once instead, from one
+//! star-tracker attitude and the GNSS position and velocity, resuming the sensor-error
+//! estimates of a snapshot after a restart or a re-initialisation (`warm_start`).
 //!
 //! # GNSS least squares (paper 003 eq. 12–13, [`crate::gnss_ls`])
 //! With ≥ 4 pseudoranges (loose or tight mode) the receiver-style fix is computed from the raw
@@ -80,7 +83,10 @@
 //! - `input`: header checks, health bookkeeping and queueing of each accepted sample.
 //! - `imu_time`: IMU time continuity (bridged gaps, confirmed discontinuities).
 //! - `channels`: redundant IMU channels with fault detection (paper 004).
-//! - `align`: coarse alignment and the start of navigation.
+//! - `align`: static coarse alignment.
+//! - `motion_align`: alignment in motion from the star tracker and GNSS, and the start of
+//!   navigation.
+//! - `warm_start`: the snapshot of the estimate for a warm restart, and the resumption from it.
 //! - `core`: the replayable state as one `Clone` value; a checkpoint is `(time, Core)`.
 //! - `buffer`, `obs`: the delayed-fusion queues and logs, and the observations they hold.
 //! - `replay`: the navigating IMU step, checkpoints and the replay of late samples.
@@ -118,12 +124,14 @@ mod gnss;
 mod health;
 mod imu_time;
 mod input;
+mod motion_align;
 mod obs;
 mod odometer;
 mod output;
 mod replay;
 mod star;
 mod update;
+mod warm_start;
 mod zupt;
 
 use self::core::*;
@@ -135,10 +143,13 @@ use health::*;
 pub use health::{ConstraintHealth, NavigatorDiagnostics, NhcHealth, ZuptHealth};
 pub use imu_time::CONFIRM_SAMPLES;
 use imu_time::*;
+pub use motion_align::MotionAlignment;
+use motion_align::*;
 use obs::*;
 use odometer::*;
 pub use output::ClockEstimate;
 use star::*;
+pub use warm_start::{NavSnapshot, WarmStartConfig, WarmStartOutcome, WarmStartRefusal};
 
 const DEG: f64 = std::f64::consts::PI / 180.0;
 
@@ -254,6 +265,13 @@ pub struct Navigator {
     /// The latest least-squares GNSS fix of the alignment period and its time of validity
     /// (initial position and tight-mode clock, `initialize_from_ls`).
     init_ls: Option<(GpsTime, crate::gnss_ls::GnssFix)>,
+    /// While aligning: the latest star-tracker attitude, carried by the gyros
+    /// (`motion_align`).
+    star_attitude: Option<StarAttitude>,
+    /// A snapshot to resume the sensor-error states from (`warm_start`).
+    warm: Option<NavSnapshot>,
+    /// What became of the snapshot given to [`Navigator::warm_start`].
+    warm_outcome: Option<WarmStartOutcome>,
 }
 
 /// Slot of a sensor in the health array.
@@ -310,6 +328,9 @@ impl Navigator {
             odo_epoch: None,
             nhc: NhcHealth::default(),
             init_ls: None,
+            star_attitude: None,
+            warm: None,
+            warm_outcome: None,
             ell,
             config,
         })

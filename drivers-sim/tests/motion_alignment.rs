@@ -1,0 +1,317 @@
+//! Alignment in motion and warm restart on a real simulated drive (drivers_sim::offline):
+//! a navigator that first sees the IMU while the vehicle drives, one re-initialised by an IMU
+//! gap during the drive, and one restarted from a snapshot of another's estimate all navigate
+//! again within one GNSS plus one star-tracker interval, with their errors inside the reported
+//! covariance (`fusion::navigator`, modules `motion_align` and `warm_start`).
+//!
+//! Consistency bound used throughout: for a consistent filter the normalized error
+//! `eᵀ P⁻¹ e` of a 3-vector (position, velocity, attitude) is χ²(3)-distributed. Each check
+//! below is one such value against the 0.9999 quantile, 21.11: at most 0.01 % per check, so the
+//! ≈ 60 checks of this file fail by chance with probability < 1 %, while a covariance too
+//! small by a factor 2 in σ (NEES ×4) fails them for most samples.
+
+use fusion::navigator::{
+    NavSnapshot, Navigator, NavigatorConfig, WarmStartOutcome, WarmStartRefusal,
+};
+use msgs::{ImuSample, Record};
+use nalgebra::Matrix3;
+use sextant_drivers_sim::offline::{OfflineSim, RunPoint, compare, feed};
+use sextant_drivers_sim::scenario::Scenario;
+use std::path::Path;
+
+/// χ²(3) quantile 0.9999.
+const CHI2_3_9999: f64 = 21.108;
+
+fn root() -> &'static Path {
+    Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
+}
+
+fn default_config() -> NavigatorConfig {
+    let text = std::fs::read_to_string(root().join("config/filter.toml")).expect("filter.toml");
+    toml::from_str(&text).expect("filter.toml parses")
+}
+
+/// The default vehicle scenario with the trajectory and duration replaced.
+fn vehicle_with(segments: &str, duration_s: f64) -> Scenario {
+    let path = root().join("config/scenarios/vehicle.toml");
+    let text = std::fs::read_to_string(&path).expect("vehicle.toml");
+    let start = text.find("segments = [").expect("segments");
+    let end = start + text[start..].find("\n]\n").expect("end of segments") + 3;
+    let text = format!(
+        "{}segments = [{segments}]\n{}",
+        &text[..start],
+        &text[end..]
+    )
+    .replace(
+        "duration_s = 600.0",
+        &format!("duration_s = {duration_s:.1}"),
+    );
+    Scenario::from_toml_str(&text, &path).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// 110 s standing (the static alignment of `alignment_s` = 100 s), then a drive with turns
+/// (245 s in all).
+const DRIVE: &str = r#"
+    { type = "hold", duration_s = 110.0 },
+    { type = "speed", to_m_s = 10.0, duration_s = 10.0 },
+    { type = "cruise", duration_s = 30.0 },
+    { type = "turn", angle_deg = 90.0, duration_s = 15.0 },
+    { type = "cruise", duration_s = 20.0 },
+    { type = "turn", angle_deg = -60.0, duration_s = 10.0 },
+    { type = "speed", to_m_s = 15.0, duration_s = 10.0 },
+    { type = "cruise", duration_s = 40.0 },"#;
+const DRIVE_S: f64 = 245.0;
+
+/// Longest wait from the first IMU sample to the start of navigation in motion: a star
+/// attitude comes within one star-tracker interval (5 Hz), the GNSS epoch that starts
+/// navigation within one GNSS interval (1 Hz) after it.
+const START_BOUND_S: f64 = 1.0 / 5.0 + 1.0 / 1.0;
+
+#[derive(Default)]
+struct Run {
+    /// Solution points compared with the truth.
+    points: Vec<RunPoint>,
+    /// Sim time (s) of every start of navigation.
+    starts: Vec<f64>,
+    /// Snapshot taken at the first IMU epoch at or after the requested time.
+    snapshot: Option<NavSnapshot>,
+}
+
+/// Feed the scenario; IMU samples for which `keep_imu(t_s)` is false are dropped (the daemon
+/// not running, or samples lost); aiding before `first_s` is dropped too (a daemon that is not
+/// running receives nothing).
+fn run(
+    scn: &Scenario,
+    nav: &mut Navigator,
+    first_s: f64,
+    keep_imu: impl Fn(f64) -> bool,
+    snapshot_at_s: Option<f64>,
+) -> Run {
+    let sim = OfflineSim::new(scn);
+    let epoch = sim.epoch_ns();
+    let mut out = Run::default();
+    for msg in sim {
+        let t_s = (msg.time_ns() - epoch) as f64 * 1e-9;
+        if t_s < first_s {
+            continue;
+        }
+        match msg {
+            Record::Truth(tr) => {
+                if nav.is_navigating() && nav.time() == fusion::time::GpsTime::from_ns(tr.header.time_ns) {
+                    out.points.push(compare(nav, &tr, epoch));
+                }
+            }
+            Record::Imu(s) => {
+                if !keep_imu(t_s) {
+                    continue;
+                }
+                let was = nav.is_navigating();
+                let _ = push_imu(nav, &s);
+                if !was && nav.is_navigating() {
+                    out.starts.push(t_s);
+                }
+                if snapshot_at_s.is_some_and(|a| t_s >= a) && out.snapshot.is_none() {
+                    out.snapshot = nav.snapshot();
+                }
+            }
+            m => {
+                let _ = feed(nav, &m);
+            }
+        }
+    }
+    out
+}
+
+fn push_imu(nav: &mut Navigator, s: &ImuSample) -> bool {
+    nav.push_imu(s).is_ok()
+}
+
+fn nees(e: &nalgebra::Vector3<f64>, p: &Matrix3<f64>) -> f64 {
+    let inv = p.try_inverse().expect("covariance invertible");
+    (e.transpose() * inv * e)[0]
+}
+
+/// χ² checks of position, velocity and attitude at the first point at or after each time.
+fn assert_consistent(points: &[RunPoint], times: &[f64], what: &str) {
+    for &t in times {
+        let p = points
+            .iter()
+            .find(|p| p.t_s >= t)
+            .unwrap_or_else(|| panic!("{what}: no solution at or after {t} s"));
+        let n = [
+            nees(&p.pos_err_e_m, &p.pos_cov_e_m2),
+            nees(&p.vel_err_e_m_s, &p.vel_cov_e_m2_s2),
+            nees(&p.att_err_e_rad, &p.att_cov_e_rad2),
+        ];
+        println!(
+            "{what} t {:.2} s: |δr| {:.2} m, |δv| {:.3} m/s, |ψ| {:.1}″, NEES pos/vel/att {:.2}/{:.2}/{:.2}",
+            p.t_s,
+            p.pos_err_e_m.norm(),
+            p.vel_err_e_m_s.norm(),
+            p.att_err_e_rad.norm().to_degrees() * 3600.0,
+            n[0],
+            n[1],
+            n[2]
+        );
+        for (v, name) in n.iter().zip(["position", "velocity", "attitude"]) {
+            assert!(
+                *v < CHI2_3_9999,
+                "{what}: {name} NEES {v:.1} at {:.2} s beyond the χ²(3) 0.9999 bound",
+                p.t_s
+            );
+        }
+    }
+}
+
+/// The navigator first sees the IMU at 125 s, driving at 10 m/s: it starts within one GNSS
+/// plus one star-tracker interval, by the alignment in motion, consistent at the start and
+/// through the turns that follow.
+#[test]
+fn a_navigator_started_while_driving_navigates_at_once() {
+    let scn = vehicle_with(DRIVE, DRIVE_S);
+    let mut nav = Navigator::new(default_config()).unwrap();
+    let first = 125.0;
+    let r = run(&scn, &mut nav, first, |_| true, None);
+    let d = nav.diagnostics();
+    println!("starts {:?}, diagnostics {d:?}", r.starts);
+    assert_eq!(r.starts.len(), 1);
+    assert_eq!(d.motion_alignments, 1);
+    assert!(
+        r.starts[0] - first <= START_BOUND_S,
+        "navigation started {:.2} s after the first IMU sample",
+        r.starts[0] - first
+    );
+    let t0 = r.starts[0];
+    assert_consistent(
+        &r.points,
+        &[
+            t0,
+            t0 + 1.0,
+            t0 + 5.0,
+            t0 + 20.0,
+            t0 + 40.0,
+            t0 + 80.0,
+            t0 + 110.0,
+        ],
+        "started in motion",
+    );
+}
+
+/// An IMU gap of 3 s in the middle of the drive (beyond the 1 s that is bridged) re-initialises
+/// the navigator; it navigates again within the start bound after the sample that confirms the
+/// gap (20 samples, 0.1 s at 200 Hz), without a standstill, and keeps its sensor-error
+/// estimates (warm start from its own snapshot).
+#[test]
+fn a_reinitialisation_while_driving_navigates_at_once() {
+    let scn = vehicle_with(DRIVE, DRIVE_S);
+    let mut nav = Navigator::new(default_config()).unwrap();
+    let (gap0, gap1) = (160.0, 163.0);
+    let r = run(&scn, &mut nav, 0.0, |t| !(t > gap0 && t <= gap1), None);
+    let d = nav.diagnostics();
+    println!("starts {:?}, diagnostics {d:?}", r.starts);
+    assert_eq!(d.reinitializations, 1);
+    assert_eq!(d.motion_alignments, 1);
+    assert_eq!(d.warm_starts, 1);
+    assert_eq!(r.starts.len(), 2);
+    let confirm_s = f64::from(fusion::navigator::CONFIRM_SAMPLES) / 200.0;
+    assert!(
+        r.starts[1] - gap1 <= confirm_s + START_BOUND_S,
+        "re-started {:.2} s after the gap",
+        r.starts[1] - gap1
+    );
+    let t0 = r.starts[1];
+    assert_consistent(
+        &r.points,
+        &[t0, t0 + 1.0, t0 + 10.0, t0 + 40.0, t0 + 70.0],
+        "after re-initialisation",
+    );
+}
+
+/// A navigator restarted 6 s after another's snapshot resumes its sensor-error estimates:
+/// equal to the snapshot's, with the covariance widened by the process noise over the gap
+/// (never smaller than the snapshot's, far below the priors), and navigates consistently.
+/// A snapshot older than `warm_start.max_age_s` is refused and the navigator aligns from its
+/// priors; one with a non-finite value is refused at once.
+#[test]
+fn a_restart_resumes_from_a_fresh_snapshot_and_refuses_a_stale_one() {
+    let scn = vehicle_with(DRIVE, DRIVE_S);
+    let cfg = default_config();
+    let mut first = Navigator::new(cfg.clone()).unwrap();
+    let a = run(&scn, &mut first, 0.0, |_| true, Some(150.0));
+    let snap = a.snapshot.expect("snapshot while navigating");
+    let t_snap = 150.0;
+
+    let mut nav = Navigator::new(cfg.clone()).unwrap();
+    assert_eq!(nav.warm_start(snap.clone()), WarmStartOutcome::Held);
+    let restart = t_snap + 6.0;
+    let r = run(&scn, &mut nav, restart, |_| true, None);
+    println!(
+        "starts {:?}, outcome {:?}, diagnostics {:?}",
+        r.starts,
+        nav.warm_start_outcome(),
+        nav.diagnostics()
+    );
+    let Some(WarmStartOutcome::Resumed { gap_s }) = nav.warm_start_outcome() else {
+        panic!("not resumed: {:?}", nav.warm_start_outcome());
+    };
+    assert!(gap_s >= 6.0 && gap_s <= 6.0 + START_BOUND_S, "gap {gap_s}");
+    assert!(r.starts[0] - restart <= START_BOUND_S);
+    assert_consistent(
+        &r.points,
+        &[
+            r.starts[0],
+            r.starts[0] + 1.0,
+            r.starts[0] + 20.0,
+            r.starts[0] + 60.0,
+        ],
+        "warm restart",
+    );
+
+    // The resumed sensor-error states: the snapshot's estimate, its variance plus Q·Δ.
+    let mut again = Navigator::new(cfg.clone()).unwrap();
+    again.warm_start(snap.clone());
+    let r2 = run(&scn, &mut again, restart, |_| true, Some(0.0));
+    let at_start = r2.snapshot.expect("snapshot at the start");
+    assert_eq!(at_start.gyro_bias_rad_s, snap.gyro_bias_rad_s);
+    assert_eq!(at_start.accel_bias_m_s2, snap.accel_bias_m_s2);
+    assert_eq!(at_start.accel_scale, snap.accel_scale);
+    let nx = 31;
+    let bg = 9;
+    let prior = cfg.imu.gyro_bias_rad_s().powi(2);
+    let q = cfg.imu.process_noise().gyro_bias_rw_rad_s_sqrt_s.powi(2);
+    for k in bg..bg + 3 {
+        let old = snap.covariance[k * nx + k];
+        let new = at_start.covariance[k * nx + k];
+        let want = old + q * gap_s;
+        assert!(
+            (new - want).abs() <= 1e-12 * want,
+            "gyro-bias variance {new:e}, expected {want:e} (snapshot {old:e} + Q·Δ)"
+        );
+        assert!(new < prior, "not below the prior: {new:e} vs {prior:e}");
+    }
+
+    // Stale: 80 s old at the restart, more than max_age_s = 60 s.
+    let mut stale = Navigator::new(cfg.clone()).unwrap();
+    stale.warm_start(snap.clone());
+    let late = t_snap + 80.0;
+    let r3 = run(&scn, &mut stale, late, |_| true, None);
+    match stale.warm_start_outcome() {
+        Some(WarmStartOutcome::Refused(WarmStartRefusal::Stale { age_s, max_age_s })) => {
+            assert!(age_s > max_age_s && max_age_s == cfg.warm_start.max_age_s);
+        }
+        o => panic!("a stale snapshot was not refused: {o:?}"),
+    }
+    assert_eq!(stale.diagnostics().warm_starts, 0);
+    assert!(
+        r3.starts[0] - late <= START_BOUND_S,
+        "aligned in motion instead"
+    );
+
+    let mut bad = snap;
+    bad.gyro_bias_rad_s[1] = f64::NAN;
+    let mut nav = Navigator::new(cfg).unwrap();
+    assert!(matches!(
+        nav.warm_start(bad),
+        WarmStartOutcome::Refused(WarmStartRefusal::Invalid(_))
+    ));
+}

@@ -1,0 +1,279 @@
+//! Alignment in motion from the star tracker and GNSS: one star-tracker attitude gives the
+//! whole body attitude, one GNSS fix the position and velocity, and navigation starts at once;
+//! the filter refines. Used whenever the navigator aligns (start, re-initialisation after an
+//! IMU gap, restart of the daemon) while GNSS says the vehicle moves; a standing vehicle keeps
+//! the static gyrocompass alignment (`align`, paper 003).
+//!
+//! # Attitude (paper 000's measurement chain, inverted)
+//! The star tracker measures `C̃_s_i` (ICRF → sensor). With the celestial transformation
+//! `C_e_i(t)` (GCRS → ITRS, IAU 2006/2000A, [`crate::celestial`]) at the exposure time and the
+//! body → sensor mount `C_s_b = C_s_b,nom·M(κ̂)` ([`crate::ekf::star_attitude`]),
+//! `Ĉ_e_b = C_e_i · C̃_s_iᵀ · C_s_b`.
+//! The update model of [`crate::ekf::star_attitude`] is `y = Ĉ_s_e ψ − C_s_b B δκ + ν`; the
+//! attitude that makes y = 0 therefore has the error `ψ = C_e_s (C_s_b B δκ − ν)`, i.e.
+//! `P_ψψ = C_e_s R C_s_e + C_e_b B P_κκ Bᵀ C_b_e` and `P_ψκ = C_e_b B P_κκ`
+//! (R = diag(σ_cross², σ_cross², σ_roll²), sensor axes; P_κκ only when the boresight is
+//! estimated — otherwise the filter takes the mount as exact, as its star updates do).
+//!
+//! Between the exposure and the start (the next GNSS epoch, ≤ one GNSS interval later) the
+//! attitude is carried by the gyros: `C_e_b ← R_z(−ω_ie Δt) · C_e_b · exp([Δθ×])`, which adds
+//! the angle random walk `ARW²·τ` and the unestimated gyro bias `(σ_bg τ)²` per axis over the
+//! carried time τ (for τ = 1 s and the navigation-grade defaults: 5·10⁻⁷ and 5·10⁻⁸ rad,
+//! two orders below the star tracker's arcseconds).
+//!
+//! # Position and velocity
+//! From the GNSS fix with its own covariance, moved from the fix epoch `t_g` to the IMU epoch
+//! `t ≥ t_g` (within one IMU interval) by `r += v·(t − t_g)`, `P_rr += (t − t_g)²·P_vv`.
+//! The sensors' errors are independent, so the position, velocity and attitude blocks start
+//! uncorrelated; the sensor biases start from their priors (`sensor_prior`) or,
+//! after a warm restart, from the checkpoint (`warm_start`).
+//!
+//! # When the vehicle moves
+//! GNSS velocity with `|v| ≥ motion_alignment.min_speed_m_s` and `|v|² > 9·tr(P_vv)` (the
+//! speed is more than three of its own σ away from zero), so a receiver's noise on a
+//! standing vehicle never triggers it.
+
+use super::*;
+
+/// Alignment in motion (`[motion_alignment]` in `config/filter.toml`).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MotionAlignment {
+    /// Start navigation from one star-tracker attitude and one GNSS fix when the vehicle
+    /// moves (false: only the static alignment).
+    pub enabled: bool,
+    /// GNSS speed above which the vehicle counts as moving, m/s.
+    pub min_speed_m_s: f64,
+}
+
+impl Default for MotionAlignment {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            min_speed_m_s: 1.0,
+        }
+    }
+}
+
+impl MotionAlignment {
+    pub(super) fn validate(&self) -> Result<(), ConfigError> {
+        check(
+            pos(self.min_speed_m_s) && self.min_speed_m_s <= 100.0,
+            "motion_alignment.min_speed_m_s",
+            "must be in (0, 100] m/s",
+        )
+    }
+}
+
+/// A star-tracker attitude carried by the gyros until navigation starts.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct StarAttitude {
+    /// Attitude body → ECEF at the last IMU epoch.
+    pub(super) q_e_b: UnitQuaternion<f64>,
+    /// Covariance of the ECEF attitude error ψ at the exposure, rad².
+    pub(super) p_psi: Matrix3<f64>,
+    /// Cross-covariance of ψ with the boresight error δκ, rad².
+    pub(super) p_psi_kappa: Matrix3<f64>,
+    /// Time carried by the gyros since the exposure, s.
+    pub(super) carried_s: f64,
+}
+
+/// Whether a sample `age` before the IMU epoch belongs to the current IMU interval of `dt_s`
+/// seconds (with half an interval of margin for jitter).
+fn within_interval(age: Duration, dt_s: f64) -> bool {
+    age >= Duration::ZERO && age.seconds_f64() <= 1.5 * dt_s
+}
+
+impl Navigator {
+    /// During alignment: carry a star attitude over one IMU increment `dth` (body, rad) of
+    /// `dt_s` seconds.
+    pub(super) fn carry_star_attitude(&mut self, dth: &Vector3<f64>, dt_s: f64) {
+        let omega = self.ell.omega_ie_rad_s;
+        if let Some(a) = &mut self.star_attitude {
+            let earth = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), -omega * dt_s);
+            a.q_e_b = earth * a.q_e_b * UnitQuaternion::from_scaled_axis(*dth);
+            a.carried_s += dt_s;
+        }
+    }
+
+    /// During alignment: the attitude from a star-tracker sample of exposure time `ts`, carried
+    /// to the IMU epoch `t ≥ ts` with the current increment (`dth` over `dt_s`).
+    pub(super) fn alignment_star(
+        &mut self,
+        ts: GpsTime,
+        obs: &StarObs,
+        t: GpsTime,
+        dth: &Vector3<f64>,
+        dt_s: f64,
+    ) {
+        // Only a sample of the current IMU interval (not one queued before the first IMU sample).
+        if !(self.config.motion_alignment.enabled && self.config.updates.star_tracker)
+            || !within_interval(t - ts, dt_s)
+        {
+            return;
+        }
+        let c_e_i = self.celestial.c_e_i(ts, &self.config.eop);
+        let (kappa, p_kk) = self.boresight_prior();
+        let c_s_b = self.c_s_b * ekf::kappa_matrix(&kappa);
+        let c_s_i = quat_from_wire(&obs.q).to_rotation_matrix().into_inner();
+        let c_e_b = c_e_i * c_s_i.transpose() * c_s_b;
+        let c_e_s = c_e_b * c_s_b.transpose();
+        let r = Matrix3::from_diagonal(&Vector3::new(
+            obs.sigma_cross * obs.sigma_cross,
+            obs.sigma_cross * obs.sigma_cross,
+            obs.sigma_roll * obs.sigma_roll,
+        ));
+        let b = ekf::kappa_jacobian(&kappa);
+        let g = c_e_b * b;
+        let q_e_b = UnitQuaternion::from_rotation_matrix(&nalgebra::Rotation3::from_matrix(&c_e_b));
+        let frac = if dt_s > 0.0 {
+            ((t - ts).seconds_f64() / dt_s).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        self.star_attitude = Some(StarAttitude {
+            q_e_b,
+            p_psi: c_e_s * r * c_e_s.transpose() + g * p_kk * g.transpose(),
+            p_psi_kappa: g * p_kk,
+            carried_s: 0.0,
+        });
+        self.carry_star_attitude(&(dth * frac), dt_s * frac);
+    }
+
+    /// The boresight estimate and its covariance the star attitude is derived with: the
+    /// checkpoint's after a warm restart, else zero with the configured prior σ; zero
+    /// covariance when the boresight is not estimated.
+    fn boresight_prior(&self) -> (Vector3<f64>, Matrix3<f64>) {
+        if !self.active_states(false).boresight {
+            return (Vector3::zeros(), Matrix3::zeros());
+        }
+        if let Some(w) = &self.warm {
+            let p = w.covariance_matrix();
+            return (
+                Vector3::from(w.kappa_rad),
+                p.fixed_view::<3, 3>(idx::KAPPA, idx::KAPPA).into_owned(),
+            );
+        }
+        let sk = self.config.aiding.boresight_sigma_deg * DEG;
+        (Vector3::zeros(), Matrix3::identity() * sk * sk)
+    }
+
+    /// During alignment, at a GNSS epoch `ts` due at IMU epoch `t`: start navigating when the
+    /// fix shows a moving vehicle and a star attitude is at hand. True when it started.
+    pub(super) fn try_align_in_motion(
+        &mut self,
+        ts: GpsTime,
+        obs: &GnssObs,
+        t: GpsTime,
+        dt_s: f64,
+    ) -> bool {
+        if !self.config.motion_alignment.enabled || !within_interval(t - ts, dt_s) {
+            return false;
+        }
+        let (Some(att), Some(fix)) = (self.star_attitude, obs.fix) else {
+            return false;
+        };
+        if !fix.vel_valid {
+            return false;
+        }
+        let speed2 = fix.vel.norm_squared();
+        let min = self.config.motion_alignment.min_speed_m_s;
+        if speed2 < min * min || speed2 <= 9.0 * fix.vel_cov.trace() {
+            return false;
+        }
+        let dt_fix = (t - ts).seconds_f64();
+        let r_e = fix.pos + fix.vel * dt_fix;
+        let p_rr = fix.pos_cov + fix.vel_cov * (dt_fix * dt_fix);
+        let imu = &self.config.imu;
+        let noise = imu.process_noise();
+        let tau = att.carried_s;
+        let carried = noise.arw_rad_sqrt_s.powi(2) * tau + (imu.gyro_bias_rad_s() * tau).powi(2);
+        let c_e_b = att.q_e_b.to_rotation_matrix().into_inner();
+        // Gravity as the body senses it on average (the accelerometer-misalignment prior).
+        let geo = earth::ecef_to_geodetic(&self.ell, &r_e);
+        let c_e_n = q_e_n(geo.lat_rad, geo.lon_rad)
+            .to_rotation_matrix()
+            .into_inner();
+        let f_b = c_e_b.transpose() * c_e_n * Vector3::new(0.0, 0.0, -G0);
+        let mut p0 = self.sensor_prior(&f_b);
+        p0.fixed_view_mut::<3, 3>(idx::POS, idx::POS)
+            .copy_from(&p_rr);
+        p0.fixed_view_mut::<3, 3>(idx::VEL, idx::VEL)
+            .copy_from(&fix.vel_cov);
+        p0.fixed_view_mut::<3, 3>(idx::ATT, idx::ATT)
+            .copy_from(&(att.p_psi + Matrix3::identity() * carried));
+        if self.active_states(false).boresight {
+            p0.fixed_view_mut::<3, 3>(idx::ATT, idx::KAPPA)
+                .copy_from(&att.p_psi_kappa);
+            p0.fixed_view_mut::<3, 3>(idx::KAPPA, idx::ATT)
+                .copy_from(&att.p_psi_kappa.transpose());
+        }
+        self.core.nav = NavState {
+            r_e,
+            v_e: fix.vel,
+            q_e_b: att.q_e_b,
+        };
+        self.start_navigation(p0, t);
+        self.diagnostics.motion_alignments += 1;
+        true
+    }
+
+    /// Prior covariance of the sensor-error states (biases, scale factors, boresight, baro and
+    /// odometer), zero elsewhere, for a body sensing the specific force `f_b` (m/s²): the
+    /// accelerometer misalignment (σ_m per off-diagonal, not a state) turns it into the error
+    /// `M f_b`, whose axis-k part `Σ_{j≠k} M_kj f_j` has variance `σ_m² (|f|² − f_k²)`, a bias
+    /// while `f_b` is gravity.
+    pub(super) fn sensor_prior(&self, f_b: &Vector3<f64>) -> Covariance {
+        let imu = &self.config.imu;
+        let mut p0 = Covariance::zeros();
+        let sbg = imu.gyro_bias_rad_s().powi(2);
+        let sba = imu.accel_bias_m_s2().powi(2);
+        let s_mis = imu.misalignment_arcsec / 3600.0 * DEG;
+        let sg = imu.gyro_scale_ppm * 1e-6;
+        let sa = imu.accel_scale_ppm * 1e-6;
+        let sk = self.config.aiding.boresight_sigma_deg * DEG;
+        for k in 0..3 {
+            p0[(idx::BG + k, idx::BG + k)] = sbg;
+            p0[(idx::BA + k, idx::BA + k)] =
+                sba + s_mis * s_mis * (f_b.norm_squared() - f_b[k] * f_b[k]);
+            p0[(idx::SG + k, idx::SG + k)] = sg * sg;
+            p0[(idx::SA + k, idx::SA + k)] = sa * sa;
+            p0[(idx::KAPPA + k, idx::KAPPA + k)] = sk * sk;
+        }
+        p0[(idx::BARO, idx::BARO)] = self.config.aiding.baro_bias_sigma_m.powi(2);
+        p0[(idx::ODO, idx::ODO)] = self.config.aiding.odometer_scale_sigma.powi(2);
+        p0
+    }
+
+    /// The process noise of the filter: the IMU's plus the aiding states' random walks.
+    pub(super) fn filter_noise(&self) -> ProcessNoise {
+        let mut noise = self.config.imu.process_noise();
+        noise.baro_bias_rw_m_sqrt_s = self.config.aiding.baro_bias_rw_m_sqrt_s;
+        noise.clock_bias_psd_m2_s = self.config.aiding.clock_bias_psd_m2_s;
+        noise.clock_drift_psd_m2_s3 = self.config.aiding.clock_drift_psd_m2_s3;
+        noise
+    }
+
+    /// Start navigating at IMU epoch `t` from the inertial state already in `core.nav` and the
+    /// initial covariance `p0`: a fresh filter (or, after a warm restart, the checkpoint's
+    /// sensor estimates with their covariance, `apply_warm_start`), fresh
+    /// mechanization history, delayed-fusion log and checkpoints; aiding queued up to `t`
+    /// belongs to the alignment period.
+    pub(super) fn start_navigation(&mut self, p0: Covariance, t: GpsTime) {
+        self.core.ekf = ErrorStateEkf::new(p0, self.filter_noise(), self.active_states(false));
+        self.core.clock_initialized = false;
+        self.apply_warm_start(t);
+        if !self.core.clock_initialized {
+            self.initialize_from_ls(t);
+        }
+        self.core.strapdown = Strapdown::new(self.config.mechanization());
+        self.phase = Phase::Navigating;
+        self.time = t;
+        self.star_attitude = None;
+        self.imu_log.clear();
+        self.checkpoints.clear();
+        self.rewind_to = None;
+        self.take_checkpoint(t);
+        self.gnss_q.clear();
+    }
+}
