@@ -93,6 +93,14 @@ pub struct FusionSection {
     /// deadline, floored at `min_wall_deadline_ms`). Not the filter's `[deadlines]`, which
     /// say how long a fused aiding source counts for the navigation mode.
     pub deadlines_ms: PerSensor<f64>,
+    /// Write the navigator's checkpoint for a warm restart (`navigator.checkpoint` next to the
+    /// recording) every this many seconds of filter (GPS) time; 0 disables it.
+    #[serde(default = "default_checkpoint_interval_s")]
+    pub checkpoint_interval_s: f64,
+}
+
+fn default_checkpoint_interval_s() -> f64 {
+    1.0
 }
 
 /// `[recorder]`: the MCAP writer.
@@ -251,6 +259,13 @@ impl SystemConfig {
         }
         positive(file, "fusion.status_period_s", f.status_period_s)?;
         positive(file, "fusion.min_wall_deadline_ms", f.min_wall_deadline_ms)?;
+        if !(f.checkpoint_interval_s.is_finite() && f.checkpoint_interval_s >= 0.0) {
+            return Err(invalid(
+                file,
+                "fusion.checkpoint_interval_s",
+                format!("must be >= 0 s, got {}", f.checkpoint_interval_s),
+            ));
+        }
         for s in SensorId::ALL {
             positive(
                 file,

@@ -6,10 +6,11 @@
 //! The navigator is reached through the [`NavEngine`] trait, so that the loop can be tested with
 //! a stand-in before (and independently of) the real filter.
 
+use crate::checkpoint::CheckpointWriter;
 use crate::config::SystemConfig;
 use crate::recorder::{Recorder, RecorderError, RecorderOptions, RecorderStats};
 use fusion::Rejection;
-use fusion::navigator::{Input, Navigator};
+use fusion::navigator::{Input, NavSnapshot, Navigator, WarmStartOutcome};
 use iceoryx2::prelude::*;
 use msgs::ipc::{Bus, NodeError, PublisherError, Sub, SubscriberError, WaitSetError};
 use msgs::{
@@ -67,6 +68,15 @@ pub trait NavEngine {
     /// Counters of the pseudo-measurements (zero velocity, non-holonomic constraint).
     fn constraint_health(&self) -> (fusion::navigator::ZuptHealth, fusion::navigator::NhcHealth) {
         Default::default()
+    }
+    /// The estimate to write to the checkpoint (None while not navigating, or for an engine
+    /// without one).
+    fn snapshot(&self) -> Option<NavSnapshot> {
+        None
+    }
+    /// What became of the checkpoint the engine was started from.
+    fn warm_start_outcome(&self) -> Option<WarmStartOutcome> {
+        None
     }
 }
 
@@ -135,6 +145,12 @@ impl NavEngine for Navigator {
     fn constraint_health(&self) -> (fusion::navigator::ZuptHealth, fusion::navigator::NhcHealth) {
         (self.zupt_health(), self.nhc_health())
     }
+    fn snapshot(&self) -> Option<NavSnapshot> {
+        Navigator::snapshot(self)
+    }
+    fn warm_start_outcome(&self) -> Option<WarmStartOutcome> {
+        Navigator::warm_start_outcome(self)
+    }
 }
 
 /// Push one recorded input into the engine: the single code path by which both the live daemon
@@ -196,6 +212,9 @@ pub struct DaemonOptions {
     /// MCAP metadata written first in the recording (name, key/value map): the configuration
     /// under [`crate::recorder::CONFIG_METADATA_NAME`], so that replay needs no outside file.
     pub metadata: Vec<(String, BTreeMap<String, String>)>,
+    /// Checkpoint file for a warm restart, written every `fusion.checkpoint_interval_s` of
+    /// filter time (None: no checkpoint).
+    pub checkpoint: Option<PathBuf>,
 }
 
 /// Totals of a finished run.
@@ -234,6 +253,12 @@ struct State<'a, E: NavEngine> {
     errors_logged: u64,
     alive_events: u64,
     stop: &'a AtomicBool,
+    checkpoint: Option<CheckpointWriter>,
+    checkpoint_interval_ns: i64,
+    /// Filter time of the last checkpoint submitted, GPS ns.
+    last_checkpoint_ns: i64,
+    /// The warm-start outcome last logged.
+    warm_logged: Option<WarmStartOutcome>,
 }
 
 impl<E: NavEngine> State<'_, E> {
@@ -320,10 +345,46 @@ impl<E: NavEngine> State<'_, E> {
                 }
                 self.recorder
                     .record(Record::Nav(sol), sol.header.send_mono_ns);
+                self.maybe_checkpoint(sol.header.time_ns);
             }
             (Ok(_), Some(s)) => self.filter_time_ns = s.header.time_ns,
             (Ok(_), None) => {}
             (Err(e), _) => self.log_push_error(e),
+        }
+    }
+
+    /// Hand the engine's estimate to the checkpoint writer when the interval has passed.
+    fn maybe_checkpoint(&mut self, t_ns: i64) {
+        let Some(w) = &self.checkpoint else {
+            return;
+        };
+        if t_ns - self.last_checkpoint_ns < self.checkpoint_interval_ns {
+            return;
+        }
+        if let Some(s) = self.engine.snapshot() {
+            w.submit(s);
+            self.last_checkpoint_ns = t_ns;
+        }
+    }
+
+    /// Log what became of the checkpoint the engine started from, once per change.
+    fn log_warm_start(&mut self) {
+        let o = self.engine.warm_start_outcome();
+        if o == self.warm_logged {
+            return;
+        }
+        self.warm_logged = o;
+        match o {
+            Some(WarmStartOutcome::Held) => {
+                tracing::info!("checkpoint is fresh: held for the alignment in motion")
+            }
+            Some(WarmStartOutcome::Resumed { gap_s }) => tracing::info!(
+                "warm restart: sensor-error estimates resumed from the checkpoint, {gap_s:.2} s after it"
+            ),
+            Some(WarmStartOutcome::Refused(r)) => {
+                tracing::warn!("checkpoint refused ({r}): aligning from the priors")
+            }
+            None => {}
         }
     }
 
@@ -361,6 +422,7 @@ impl<E: NavEngine> State<'_, E> {
     }
 
     fn publish_status(&mut self) {
+        self.log_warm_start();
         let st = self.status();
         match self.status_pub.send(st) {
             Ok(stamped) => {
@@ -419,7 +481,20 @@ pub fn run<E: NavEngine>(
         errors_logged: 0,
         alive_events: 0,
         stop,
+        checkpoint: None,
+        checkpoint_interval_ns: (opts.system.fusion.checkpoint_interval_s * 1e9) as i64,
+        last_checkpoint_ns: i64::MIN / 2,
+        warm_logged: None,
     };
+    if let Some(path) = &opts.checkpoint
+        && opts.system.fusion.checkpoint_interval_s > 0.0
+    {
+        // Not fatal: without checkpoints the daemon navigates; a restart aligns again.
+        match CheckpointWriter::start(path.clone()) {
+            Ok(w) => st.checkpoint = Some(w),
+            Err(e) => tracing::error!("no checkpoints ({}): {e}", path.display()),
+        }
+    }
 
     let ws = msgs::ipc::waitset()?;
     let attach = WaitSetError::Attach;
@@ -501,8 +576,22 @@ pub fn run<E: NavEngine>(
     );
     drain_all(&mut st);
     st.publish_status();
+    st.log_warm_start();
     let report_base = (st.imu_received, st.solutions, st.published);
-    let State { recorder, .. } = st;
+    let State {
+        recorder,
+        checkpoint,
+        ..
+    } = st;
+    if let Some(w) = checkpoint {
+        let c = w.finish();
+        tracing::info!(
+            "checkpoints: {} written, {} failed, {} superseded",
+            c.written,
+            c.failed,
+            c.superseded
+        );
+    }
     let segments = recorder.segments();
     let recorder = recorder.finish()?;
     Ok(DaemonReport {
@@ -624,6 +713,7 @@ mod tests {
             system,
             node_name: "test-fusion".into(),
             metadata: Vec::new(),
+            checkpoint: None,
         };
         let fake = Fake::default();
         let engine = fake.clone();

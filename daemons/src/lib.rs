@@ -2,6 +2,7 @@
 //! configuration, the recording format and reader, and the process glue around them.
 //!
 //! - [`bus_check`]: one bus per prefix (who is on it; is the prefix valid).
+//! - [`checkpoint`]: the navigator checkpoint file of a warm restart.
 //! - [`config`]: the system configuration (`config/sextant.toml`) and the filter tuning file.
 //! - [`daemon`]: the fusion daemon's WaitSet loop.
 //! - [`recorder`]: the MCAP writer thread.
@@ -15,6 +16,7 @@
 //! The offline lab (experiments, reports, analysis, plots) is the `sextant-lab` crate.
 
 pub mod bus_check;
+pub mod checkpoint;
 pub mod config;
 pub mod daemon;
 pub mod exit_report;

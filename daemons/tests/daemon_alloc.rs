@@ -293,6 +293,7 @@ fn daemon_loop_allocations() {
         system,
         node_name: "alloc-fusion".into(),
         metadata: Vec::new(),
+        checkpoint: None,
     };
     let tally = Arc::new(Tally::default());
     let engine = Probe(tally.clone());

@@ -1,11 +1,14 @@
 //! The fusion daemon: `sextant-fusion --config FILE --prefix P --out FILE.mcap [--speed X]`.
 //! Runs until SIGINT/SIGTERM, then finishes the recording, prints its final counters as one
 //! line on stdout (`sextant_daemons::exit_report`) and exits 0. It never overwrites an existing
-//! recording.
+//! recording. It writes the navigator's checkpoint next to the recording
+//! (`navigator.checkpoint`, or `--checkpoint FILE`) and, when one is there at start, resumes
+//! from it if it is fresh (warm restart); a corrupt or stale one is refused with a message and
+//! the navigator aligns.
 
 use anyhow::Context;
 use clap::Parser;
-use sextant_daemons::{bus_check, config, daemon, exit_report, logging, signals};
+use sextant_daemons::{bus_check, checkpoint, config, daemon, exit_report, logging, signals};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
@@ -25,6 +28,10 @@ struct Args {
     /// Speed-up of simulated over wall time of the drivers (scales the deadlines).
     #[arg(long, default_value_t = 1.0)]
     speed: f64,
+    /// Checkpoint file of the warm restart (default: `navigator.checkpoint` in the directory
+    /// of `--out`).
+    #[arg(long)]
+    checkpoint: Option<PathBuf>,
 }
 
 fn main() -> anyhow::Result<()> {
@@ -61,8 +68,32 @@ fn main() -> anyhow::Result<()> {
             );
         }
     }
-    let navigator = fusion::navigator::Navigator::new(cfg.navigator.clone())
+    let mut navigator = fusion::navigator::Navigator::new(cfg.navigator.clone())
         .with_context(|| format!("filter configuration {}", cfg.filter_path.display()))?;
+    let checkpoint = args.checkpoint.clone().unwrap_or_else(|| {
+        args.out
+            .parent()
+            .unwrap_or(std::path::Path::new(""))
+            .join("navigator.checkpoint")
+    });
+    match checkpoint::read(&checkpoint) {
+        Ok(Some(snapshot)) => {
+            let t = snapshot.gps_time_ns;
+            match navigator.warm_start(snapshot) {
+                fusion::navigator::WarmStartOutcome::Refused(r) => tracing::warn!(
+                    "checkpoint {} refused ({r}): aligning from the priors",
+                    checkpoint.display()
+                ),
+                _ => tracing::info!(
+                    "checkpoint {} of GPS time {:.3} s read: resuming if fresh at the first IMU sample",
+                    checkpoint.display(),
+                    t as f64 * 1e-9
+                ),
+            }
+        }
+        Ok(None) => tracing::info!("no checkpoint at {}: aligning", checkpoint.display()),
+        Err(e) => tracing::warn!("{e}: refused, aligning from the priors"),
+    }
     let metadata = recording_metadata(&cfg, &prefix, args.speed)?;
     let opts = daemon::DaemonOptions {
         prefix,
@@ -71,6 +102,7 @@ fn main() -> anyhow::Result<()> {
         system: cfg.system,
         node_name: "sextant-fusion".into(),
         metadata,
+        checkpoint: Some(checkpoint),
     };
     let report = daemon::run(navigator, &opts, stop)?;
     tracing::info!(
