@@ -107,8 +107,9 @@ impl Navigator {
         dt_s: f64,
     ) {
         // Only a sample of the current IMU interval (not one queued before the first IMU sample).
-        if !(self.config.motion_alignment.enabled && self.config.updates.star_tracker)
-            || !within_interval(t - ts, dt_s)
+        if !(self.config.motion_alignment.enabled
+            && self.config.updates.star_tracker
+            && within_interval(t - ts, dt_s))
         {
             return;
         }
