@@ -462,6 +462,7 @@ pub fn run<E: NavEngine>(
             chunk_size_bytes: rc.chunk_size_bytes,
             flush_interval: Duration::from_secs_f64(rc.flush_interval_s),
             metadata: opts.metadata.clone(),
+            ..Default::default()
         },
     );
     let mut st = State {

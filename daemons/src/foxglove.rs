@@ -5,10 +5,30 @@
 //! - topic `nav/pose`, schema `foxglove.PoseInFrame`: the body frame (x forward, y right,
 //!   z down) in the local NED frame `ned` whose origin is the first recorded solution
 //!   (position = NED offset from that origin, m; orientation = `q_ned_body`).
+//! - topic `tf`, schema `foxglove.FrameTransforms`: the frame tree `ecef` → `ned` (the local
+//!   NED frame at that origin) → `body` (the solution) → `imu`, `star_tracker`, `gnss_antenna`
+//!   (the sensors' mounting as the filter models it: the IMU defines the body frame, the star
+//!   tracker is mounted 180° about body x — the navigator's nominal mount, see
+//!   `docs/ARCHITECTURE.md` — times the estimated boresight misalignment κ, and the antenna
+//!   sits at the body origin, since the filter models no lever arm). Foxglove's 3D panel draws
+//!   the vehicle and its sensors from it, in any of these frames.
+//! - topic `status/plot`, schema `sextant.StatusPlot`: the status flattened into plain numbers
+//!   (mode, one 0/1 per sensor alive, deadline misses, records dropped…) so that a Plot panel
+//!   shows each as a line without decoding bit masks.
 //!
-//! Timestamps are GPS time (seconds and nanoseconds since 1980-01-06), like the MCAP log times.
+//! Foxglove's rule for a transform: `translation` is the child frame's origin in the parent
+//! frame and `rotation` the child frame's orientation in the parent, i.e. the rotation that
+//! takes child coordinates to parent coordinates (`v_parent = q ⊗ v_child ⊗ q*`); that is
+//! Sextant's `C_parent_child`, so the `ned` → `body` rotation is `q_ned_body` itself.
+//!
+//! Timestamps are Unix time (seconds and nanoseconds since 1970-01-01T00:00:00 UTC, leap
+//! seconds not counted), equal to the message's MCAP log time: the solution's GPS time of
+//! validity converted to UTC (see [`crate::recorder`]); GPS time stays in the `nav` channel's
+//! header.
 
-use msgs::NavSolution;
+use fusion::frames::Rotation;
+use msgs::{NavSolution, SensorId, Status};
+use nalgebra::{Matrix3, Vector3 as V3};
 use serde::Serialize;
 
 /// Topic of the LocationFix channel.
@@ -21,9 +41,25 @@ pub const POSE_TOPIC: &str = "nav/pose";
 pub const POSE_SCHEMA: &str = "foxglove.PoseInFrame";
 /// Frame id of the local NED frame of the pose channel.
 pub const NED_FRAME: &str = "ned";
+/// Frame id of the Earth-centred Earth-fixed frame (WGS-84).
+pub const ECEF_FRAME: &str = "ecef";
+/// Frame id of the vehicle body (x forward, y right, z down).
+pub const BODY_FRAME: &str = "body";
+/// Topic of the frame tree.
+pub const TF_TOPIC: &str = "tf";
+/// Schema name of the frame tree.
+pub const TF_SCHEMA: &str = "foxglove.FrameTransforms";
+/// Topic of the plottable status.
+pub const STATUS_PLOT_TOPIC: &str = "status/plot";
+/// Schema name of the plottable status.
+pub const STATUS_PLOT_SCHEMA: &str = "sextant.StatusPlot";
+
+/// Nominal star-tracker mount `C_s_b` (body → sensor): 180° about body x, the optical axis
+/// (sensor z) pointing up; the navigator's nominal mount (`docs/ARCHITECTURE.md`).
+const C_S_B_NOMINAL: [[f64; 3]; 3] = [[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]];
 
 /// Foxglove `time`.
-#[derive(Debug, Clone, Copy, Serialize, PartialEq)]
+#[derive(Debug, Clone, Copy, Serialize, PartialEq, schemars::JsonSchema)]
 pub struct Timestamp {
     /// Whole seconds.
     pub sec: u32,
@@ -32,12 +68,11 @@ pub struct Timestamp {
 }
 
 impl Timestamp {
-    /// From GPS ns (negative times clamp to 0).
-    pub fn from_ns(ns: i64) -> Self {
-        let ns = ns.max(0);
+    /// From Unix ns (seconds beyond 2106 saturate).
+    pub fn from_unix_ns(unix_ns: u64) -> Self {
         Self {
-            sec: u32::try_from(ns / 1_000_000_000).unwrap_or(u32::MAX),
-            nsec: (ns % 1_000_000_000) as u32,
+            sec: u32::try_from(unix_ns / 1_000_000_000).unwrap_or(u32::MAX),
+            nsec: (unix_ns % 1_000_000_000) as u32,
         }
     }
 }
@@ -105,12 +140,167 @@ pub struct PoseInFrame {
     pub pose: Pose,
 }
 
-/// LocationFix of a solution.
-pub fn location_fix(nav: &NavSolution) -> LocationFix {
+/// `foxglove.FrameTransform`: child frame in parent frame.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct FrameTransform {
+    /// Time of validity (Unix).
+    pub timestamp: Timestamp,
+    /// Parent frame id.
+    pub parent_frame_id: &'static str,
+    /// Child frame id.
+    pub child_frame_id: &'static str,
+    /// Child origin in the parent frame, m.
+    pub translation: Vector3,
+    /// Child orientation in the parent frame (child → parent coordinates).
+    pub rotation: Quaternion,
+}
+
+/// `foxglove.FrameTransforms`.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct FrameTransforms {
+    /// The transforms, parents before children.
+    pub transforms: Vec<FrameTransform>,
+}
+
+/// The plottable status (`sextant.StatusPlot`): every field a plain number.
+#[derive(Debug, Clone, Serialize, PartialEq, schemars::JsonSchema)]
+pub struct StatusPlot {
+    /// Time of the status (Unix).
+    pub timestamp: Timestamp,
+    /// `NavMode` as a number.
+    pub mode: u32,
+    /// 1 when the IMU is alive, 0 otherwise.
+    pub imu_alive: u8,
+    /// 1 when the star tracker is alive.
+    pub star_tracker_alive: u8,
+    /// 1 when the GNSS receiver is alive.
+    pub gnss_alive: u8,
+    /// 1 when the odometer is alive.
+    pub odometer_alive: u8,
+    /// 1 when the barometer is alive.
+    pub baro_alive: u8,
+    /// Deadline misses so far, per sensor in `SensorId` order.
+    pub deadline_misses: [u32; SensorId::COUNT],
+    /// Solutions published so far.
+    pub solutions_published: u64,
+    /// Records written so far.
+    pub records_written: u64,
+    /// Records dropped so far.
+    pub records_dropped: u64,
+    /// Recorder write errors so far.
+    pub recorder_errors: u64,
+    /// IMU channels excluded by fault detection (count of the mask's bits).
+    pub imu_channels_excluded: u32,
+    /// Filter re-initialisations so far.
+    pub reinitializations: u64,
+}
+
+/// The plottable view of a status stamped `unix_ns` (its log time).
+pub fn status_plot(st: &Status, unix_ns: u64) -> StatusPlot {
+    let alive = |s: SensorId| u8::from(st.alive_mask & (1 << s as u32) != 0);
+    let mut misses = [0u32; SensorId::COUNT];
+    for (m, h) in misses.iter_mut().zip(st.sensors.iter()) {
+        *m = h.deadline_misses;
+    }
+    StatusPlot {
+        timestamp: Timestamp::from_unix_ns(unix_ns),
+        mode: st.mode,
+        imu_alive: alive(SensorId::Imu),
+        star_tracker_alive: alive(SensorId::StarTracker),
+        gnss_alive: alive(SensorId::Gnss),
+        odometer_alive: alive(SensorId::Odometer),
+        baro_alive: alive(SensorId::Baro),
+        deadline_misses: misses,
+        solutions_published: st.solutions_published,
+        records_written: st.records_written,
+        records_dropped: st.records_dropped,
+        recorder_errors: st.recorder_errors,
+        imu_channels_excluded: st.imu_channels_excluded_mask.count_ones(),
+        reinitializations: st.reinitializations,
+    }
+}
+
+fn quaternion_of<F: fusion::frames::Frame, T: fusion::frames::Frame>(
+    r: &Rotation<F, T>,
+) -> Quaternion {
+    let q = r.to_quaternion();
+    Quaternion {
+        x: q.i,
+        y: q.j,
+        z: q.k,
+        w: q.w,
+    }
+}
+
+const IDENTITY: Quaternion = Quaternion {
+    x: 0.0,
+    y: 0.0,
+    z: 0.0,
+    w: 1.0,
+};
+const ZERO: Vector3 = Vector3 {
+    x: 0.0,
+    y: 0.0,
+    z: 0.0,
+};
+
+/// The frame tree of a solution stamped `unix_ns`: `ecef` → `ned` (at `origin`) → `body` →
+/// `imu`, `star_tracker`, `gnss_antenna` (see the module comment).
+pub fn frame_transforms(nav: &NavSolution, origin: &NedOrigin, unix_ns: u64) -> FrameTransforms {
+    let timestamp = Timestamp::from_unix_ns(unix_ns);
+    let c_e_n: Rotation<fusion::frames::Ned, fusion::frames::Ecef> =
+        fusion::earth::ned_to_ecef(origin.lat_rad, origin.lon_rad);
+    let p = ned_offset(origin.r_e, origin.lat_rad, origin.lon_rad, nav.pos_ecef_m);
+    let [w, x, y, z] = nav.q_ned_body;
+    // C_s_b = C_s_b,nominal · M(κ) (paper 000); the transform wants C_b_s = C_s_bᵀ.
+    let kappa = V3::from(nav.boresight_rad);
+    let c_s_b = Matrix3::from_fn(|i, j| C_S_B_NOMINAL[i][j])
+        * fusion::ekf::measurements::kappa_matrix(&kappa);
+    let c_b_s: Rotation<fusion::frames::StarSensor, fusion::frames::Body> =
+        Rotation::from_dcm_unchecked(c_s_b.transpose());
+    let tf = |parent, child, translation, rotation| FrameTransform {
+        timestamp,
+        parent_frame_id: parent,
+        child_frame_id: child,
+        translation,
+        rotation,
+    };
+    let [ox, oy, oz] = origin.r_e;
+    FrameTransforms {
+        transforms: vec![
+            tf(
+                ECEF_FRAME,
+                NED_FRAME,
+                Vector3 {
+                    x: ox,
+                    y: oy,
+                    z: oz,
+                },
+                quaternion_of(&c_e_n),
+            ),
+            tf(
+                NED_FRAME,
+                BODY_FRAME,
+                Vector3 {
+                    x: p[0],
+                    y: p[1],
+                    z: p[2],
+                },
+                Quaternion { x, y, z, w },
+            ),
+            tf(BODY_FRAME, "imu", ZERO, IDENTITY),
+            tf(BODY_FRAME, "star_tracker", ZERO, quaternion_of(&c_b_s)),
+            tf(BODY_FRAME, "gnss_antenna", ZERO, IDENTITY),
+        ],
+    }
+}
+
+/// LocationFix of a solution stamped `unix_ns` (its log time).
+pub fn location_fix(nav: &NavSolution, unix_ns: u64) -> LocationFix {
     let [sn, se, sd] = nav.pos_sigma_ned_m;
     LocationFix {
-        timestamp: Timestamp::from_ns(nav.header.time_ns),
-        frame_id: "body",
+        timestamp: Timestamp::from_unix_ns(unix_ns),
+        frame_id: BODY_FRAME,
         latitude: nav.lat_rad.to_degrees(),
         longitude: nav.lon_rad.to_degrees(),
         altitude: nav.height_m,
@@ -164,12 +354,12 @@ impl NedOrigin {
     }
 }
 
-/// Pose of the body in the local NED frame with origin `origin`.
-pub fn pose_in_frame(nav: &NavSolution, origin: &NedOrigin) -> PoseInFrame {
+/// Pose of the body in the local NED frame with origin `origin`, stamped `unix_ns`.
+pub fn pose_in_frame(nav: &NavSolution, origin: &NedOrigin, unix_ns: u64) -> PoseInFrame {
     let p = ned_offset(origin.r_e, origin.lat_rad, origin.lon_rad, nav.pos_ecef_m);
     let [w, x, y, z] = nav.q_ned_body;
     PoseInFrame {
-        timestamp: Timestamp::from_ns(nav.header.time_ns),
+        timestamp: Timestamp::from_unix_ns(unix_ns),
         frame_id: NED_FRAME,
         pose: Pose {
             position: Vector3 {
@@ -187,8 +377,24 @@ const TIME_SCHEMA: &str = r#"{"type":"object","title":"time","properties":{"sec"
 /// JSON Schema of `foxglove.LocationFix` (the fields we write).
 pub fn location_fix_schema() -> String {
     format!(
-        r#"{{"title":"foxglove.LocationFix","description":"A navigation satellite fix for any Global Navigation Satellite System","$comment":"Sextant: timestamp is GPS time","type":"object","properties":{{"timestamp":{TIME_SCHEMA},"frame_id":{{"type":"string"}},"latitude":{{"type":"number","description":"Latitude in degrees"}},"longitude":{{"type":"number","description":"Longitude in degrees"}},"altitude":{{"type":"number","description":"Altitude in meters"}},"position_covariance":{{"type":"array","items":{{"type":"number"}},"minItems":9,"maxItems":9,"description":"Position covariance (m^2), ENU, row-major"}},"position_covariance_type":{{"type":"integer","description":"0 unknown, 1 approximated, 2 diagonal known, 3 known","oneOf":[{{"title":"UNKNOWN","const":0}},{{"title":"APPROXIMATED","const":1}},{{"title":"DIAGONAL_KNOWN","const":2}},{{"title":"KNOWN","const":3}}]}}}}}}"#
+        r#"{{"title":"foxglove.LocationFix","description":"A navigation satellite fix for any Global Navigation Satellite System","$comment":"Sextant: timestamp is Unix time (UTC) of validity","type":"object","properties":{{"timestamp":{TIME_SCHEMA},"frame_id":{{"type":"string"}},"latitude":{{"type":"number","description":"Latitude in degrees"}},"longitude":{{"type":"number","description":"Longitude in degrees"}},"altitude":{{"type":"number","description":"Altitude in meters"}},"position_covariance":{{"type":"array","items":{{"type":"number"}},"minItems":9,"maxItems":9,"description":"Position covariance (m^2), ENU, row-major"}},"position_covariance_type":{{"type":"integer","description":"0 unknown, 1 approximated, 2 diagonal known, 3 known","oneOf":[{{"title":"UNKNOWN","const":0}},{{"title":"APPROXIMATED","const":1}},{{"title":"DIAGONAL_KNOWN","const":2}},{{"title":"KNOWN","const":3}}]}}}}}}"#
     )
+}
+
+/// JSON Schema of `foxglove.FrameTransforms`.
+pub fn frame_transforms_schema() -> String {
+    let v3 = r#"{"type":"object","title":"foxglove.Vector3","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"}}}"#;
+    let q = r#"{"type":"object","title":"foxglove.Quaternion","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"},"w":{"type":"number"}}}"#;
+    format!(
+        r#"{{"title":"foxglove.FrameTransforms","description":"An array of FrameTransform messages","$comment":"Sextant: ecef -> ned (origin: the first solution) -> body -> imu, star_tracker, gnss_antenna; timestamp is Unix time (UTC) of validity","type":"object","properties":{{"transforms":{{"type":"array","items":{{"title":"foxglove.FrameTransform","type":"object","properties":{{"timestamp":{TIME_SCHEMA},"parent_frame_id":{{"type":"string"}},"child_frame_id":{{"type":"string"}},"translation":{v3},"rotation":{q}}}}}}}}}}}"#
+    )
+}
+
+/// JSON Schema of `sextant.StatusPlot`.
+pub fn status_plot_schema() -> String {
+    let mut schema = serde_json::to_value(schemars::schema_for!(StatusPlot)).unwrap_or_default();
+    schema["title"] = STATUS_PLOT_SCHEMA.into();
+    schema.to_string()
 }
 
 /// JSON Schema of `foxglove.PoseInFrame`.
@@ -196,7 +402,7 @@ pub fn pose_in_frame_schema() -> String {
     let v3 = r#"{"type":"object","title":"foxglove.Vector3","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"}}}"#;
     let q = r#"{"type":"object","title":"foxglove.Quaternion","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"},"w":{"type":"number"}}}"#;
     format!(
-        r#"{{"title":"foxglove.PoseInFrame","description":"A timestamped pose for an object or reference frame in 3D space","$comment":"Sextant: body (x forward, y right, z down) in the local NED frame 'ned' whose origin is the first solution; timestamp is GPS time","type":"object","properties":{{"timestamp":{TIME_SCHEMA},"frame_id":{{"type":"string"}},"pose":{{"type":"object","title":"foxglove.Pose","properties":{{"position":{v3},"orientation":{q}}}}}}}}}"#
+        r#"{{"title":"foxglove.PoseInFrame","description":"A timestamped pose for an object or reference frame in 3D space","$comment":"Sextant: body (x forward, y right, z down) in the local NED frame 'ned' whose origin is the first solution; timestamp is Unix time (UTC) of validity","type":"object","properties":{{"timestamp":{TIME_SCHEMA},"frame_id":{{"type":"string"}},"pose":{{"type":"object","title":"foxglove.Pose","properties":{{"position":{v3},"orientation":{q}}}}}}}}}"#
     )
 }
 
@@ -209,6 +415,7 @@ mod tests {
     fn schemas_are_json_and_messages_validate() {
         let mut nav = NavSolution::default();
         nav.header.time_ns = 1_500_000_000_250_000_000;
+        let t = crate::recorder::log_time_of(nav.header.time_ns).unwrap();
         nav.lat_rad = 0.5;
         nav.lon_rad = 0.1;
         nav.q_ned_body = [1.0, 0.0, 0.0, 0.0];
@@ -216,21 +423,73 @@ mod tests {
         for (schema, msg) in [
             (
                 location_fix_schema(),
-                serde_json::to_value(location_fix(&nav)).unwrap(),
+                serde_json::to_value(location_fix(&nav, t)).unwrap(),
             ),
             (
                 pose_in_frame_schema(),
-                serde_json::to_value(pose_in_frame(&nav, &NedOrigin::at(&nav))).unwrap(),
+                serde_json::to_value(pose_in_frame(&nav, &NedOrigin::at(&nav), t)).unwrap(),
             ),
         ] {
             let s: serde_json::Value = serde_json::from_str(&schema).unwrap();
             let v = jsonschema::validator_for(&s).unwrap();
             assert!(v.is_valid(&msg), "{msg}");
         }
-        let fix = location_fix(&nav);
+        let fix = location_fix(&nav, t);
         assert_eq!(fix.position_covariance[0], 4.0); // east
         assert_eq!(fix.position_covariance[4], 1.0); // north
         assert_eq!(fix.timestamp.nsec, 250_000_000);
+    }
+
+    fn rotate(q: &Quaternion, v: [f64; 3]) -> [f64; 3] {
+        let q = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+            q.w, q.x, q.y, q.z,
+        ));
+        let r = q * V3::from(v);
+        [r.x, r.y, r.z]
+    }
+
+    /// Walking the tree from `body` up to `ecef` lands on the solution's ECEF position, and the
+    /// star tracker's optical axis (sensor z) points up for a level vehicle (nominal mount,
+    /// κ = 0): the transforms follow Foxglove's child-to-parent rule.
+    #[test]
+    fn frame_tree_composes_to_the_solution_and_the_tracker_looks_up() {
+        let ell = fusion::earth::WGS84;
+        let g0 = fusion::earth::Geodetic {
+            lat_rad: 55.655_f64.to_radians(),
+            lon_rad: 37.6_f64.to_radians(),
+            height_m: 200.0,
+        };
+        let r0 = fusion::earth::geodetic_to_ecef(&ell, &g0);
+        let origin = NedOrigin {
+            r_e: [r0.x, r0.y, r0.z],
+            lat_rad: g0.lat_rad,
+            lon_rad: g0.lon_rad,
+        };
+        let mut nav = NavSolution::default();
+        let g = fusion::earth::Geodetic {
+            lat_rad: g0.lat_rad + 1e-4,
+            lon_rad: g0.lon_rad - 2e-4,
+            height_m: 230.0,
+        };
+        let r = fusion::earth::geodetic_to_ecef(&ell, &g);
+        nav.pos_ecef_m = [r.x, r.y, r.z];
+        nav.q_ned_body = [1.0, 0.0, 0.0, 0.0];
+        let tf = frame_transforms(&nav, &origin, 1);
+        let (e_n, n_b, b_s) = (&tf.transforms[0], &tf.transforms[1], &tf.transforms[3]);
+        assert_eq!((e_n.parent_frame_id, e_n.child_frame_id), ("ecef", "ned"));
+        assert_eq!((n_b.parent_frame_id, n_b.child_frame_id), ("ned", "body"));
+        assert_eq!(b_s.child_frame_id, "star_tracker");
+        // body origin in ned, then in ecef: r = r0 + C_e_n · p_n. Exact up to rounding of
+        // ~7e6 m coordinates (1e-9 relative): 1e-6 m.
+        let p_n = [n_b.translation.x, n_b.translation.y, n_b.translation.z];
+        let p_e = rotate(&e_n.rotation, p_n);
+        for i in 0..3 {
+            let got = [e_n.translation.x, e_n.translation.y, e_n.translation.z][i] + p_e[i];
+            assert!((got - nav.pos_ecef_m[i]).abs() < 1e-6, "{i}: {got}");
+        }
+        // Sensor z in body, then in ned: up = (0, 0, −1) in NED.
+        let z_n = rotate(&n_b.rotation, rotate(&b_s.rotation, [0.0, 0.0, 1.0]));
+        assert!((z_n[2] + 1.0).abs() < 1e-12, "{z_n:?}");
     }
 
     #[test]

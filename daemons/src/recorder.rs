@@ -7,11 +7,29 @@
 //! - one channel per service, topic = channel name (`imu`, `star_tracker`, `gnss`, `odometer`,
 //!   `baro`, `truth`, `nav`, `status`), message encoding `json`, schema encoding `jsonschema`
 //!   with [`msgs::channel_schema`];
-//! - the solution also on `nav/location_fix` (`foxglove.LocationFix`) and `nav/pose`
-//!   (`foxglove.PoseInFrame`), see [`crate::foxglove`];
-//! - **log_time = the message's time of validity, GPS ns** (not Unix time), so that a recording
-//!   sorts by time of validity; **publish_time = CLOCK_MONOTONIC when the fusion daemon received
-//!   (or, for its own outputs, produced) the message**, ns;
+//! - the solution also on `nav/location_fix` (`foxglove.LocationFix`), `nav/pose`
+//!   (`foxglove.PoseInFrame`) and `tf` (`foxglove.FrameTransforms`), the status also on
+//!   `status/plot` (plain numbers), see [`crate::foxglove`];
+//! - times follow MCAP's and Foxglove's convention, Unix nanoseconds (UTC, leap seconds not
+//!   counted), stated in the metadata record [`TIME_METADATA_NAME`]:
+//!   - **log_time = the message's time of validity** (its header's GPS time converted to UTC
+//!     through the leap-second table, [`fusion::time::GpsTime::unix_ns`]), so that a recording
+//!     sorts and plots by time of validity and a simulated run shows at its simulated date. A
+//!     message whose header carries no time yet (time 0: the daemon's status and sensor-alive
+//!     events before the filter's first epoch) is logged at the time of the latest timed message
+//!     before it or, before any, of the first one after it (held back until then, order kept),
+//!     so that no channel starts in 1970; the header keeps its own time untouched;
+//!   - **publish_time = the UTC wall time at which the fusion daemon received (or, for its own
+//!     outputs, produced) the message**: its CLOCK_MONOTONIC reception time plus the offset
+//!     CLOCK_REALTIME − CLOCK_MONOTONIC taken once when the recording starts and written in the
+//!     metadata ([`TIME_KEY_UNIX_MINUS_MONOTONIC`]), so that the reception instant is both a
+//!     wall time for MCAP tools and exactly recoverable on the monotonic clock the drivers stamp
+//!     (`send_mono_ns`) for latency analysis; when no reception time is known (offline tools
+//!     pass 0) publish_time = log_time, as the MCAP specification asks. Reception time and not
+//!     the same conversion as log_time, because reception is what publish_time means and the
+//!     only place the recording keeps it;
+//!   - the Foxglove views' `timestamp` fields are the log time; GPS time stays in each
+//!     Sextant message's own header;
 //! - MCAP message `sequence` = the header's sequence number (low 32 bits);
 //! - inputs are recorded in the order they were pushed into the navigator, which is what offline
 //!   replay needs to reproduce the live solution;
@@ -77,6 +95,36 @@ pub const NON_FINITE_TOPIC: &str = "fusion/non_finite_input";
 /// JSON Schema of [`NON_FINITE_TOPIC`].
 const NON_FINITE_SCHEMA: &str = r#"{"$schema":"https://json-schema.org/draft/2020-12/schema","title":"sextant::NonFiniteInput","type":"object","properties":{"topic":{"type":"string"},"time_ns":{"type":"integer"},"seq":{"type":"integer"},"debug":{"type":"string"}},"required":["topic","time_ns","seq","debug"]}"#;
 
+/// Name of the MCAP metadata record stating the time base of `log_time` and `publish_time`.
+/// Recordings without it were written before the convention: `log_time` = GPS ns and
+/// `publish_time` = CLOCK_MONOTONIC ns (see [`crate::recording::TimeBase`]).
+pub const TIME_METADATA_NAME: &str = "sextant/time";
+
+/// Key (in [`TIME_METADATA_NAME`]) naming the convention; value [`TIME_CONVENTION_UNIX`].
+pub const TIME_KEY_CONVENTION: &str = "convention";
+
+/// The convention of this recorder: log_time = Unix ns (UTC) of the time of validity,
+/// publish_time = Unix ns (UTC wall clock) of reception.
+pub const TIME_CONVENTION_UNIX: &str =
+    "log_time=unix_utc_of_validity;publish_time=unix_utc_of_reception";
+
+/// Key (in [`TIME_METADATA_NAME`]) of CLOCK_REALTIME − CLOCK_MONOTONIC when the recording
+/// started, ns (decimal): publish_time − this = the reception time on CLOCK_MONOTONIC.
+pub const TIME_KEY_UNIX_MINUS_MONOTONIC: &str = "unix_minus_monotonic_ns";
+
+/// CLOCK_REALTIME − CLOCK_MONOTONIC now, ns.
+pub fn unix_minus_monotonic_ns() -> i64 {
+    let unix_ns = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| i64::try_from(d.as_nanos()).unwrap_or(i64::MAX));
+    unix_ns.saturating_sub(i64::try_from(msgs::monotonic_ns()).unwrap_or(i64::MAX))
+}
+
+/// MCAP log time of a GPS time of validity: Unix ns (UTC), `None` for no time (≤ 0).
+pub fn log_time_of(gps_ns: i64) -> Option<u64> {
+    (gps_ns > 0).then(|| fusion::time::GpsTime::from_ns(gps_ns).unix_ns().max(0) as u64)
+}
+
 /// Name of the MCAP metadata record holding the configuration the fusion ran with.
 pub const CONFIG_METADATA_NAME: &str = "sextant/config";
 
@@ -112,6 +160,10 @@ pub struct RecorderOptions {
     /// MCAP metadata records written first in the file (name, key/value map), e.g. the
     /// configuration under [`CONFIG_METADATA_NAME`].
     pub metadata: Vec<(String, BTreeMap<String, String>)>,
+    /// CLOCK_REALTIME − CLOCK_MONOTONIC, ns, that turns reception times into publish times;
+    /// `None`: measured when the recorder starts. Set it to reproduce another recording's
+    /// publish times (offline replay).
+    pub unix_minus_monotonic_ns: Option<i64>,
 }
 
 impl Default for RecorderOptions {
@@ -121,6 +173,20 @@ impl Default for RecorderOptions {
             chunk_size_bytes: 1 << 20,
             flush_interval: Duration::from_secs(1),
             metadata: Vec::new(),
+            unix_minus_monotonic_ns: None,
+        }
+    }
+}
+
+impl RecorderOptions {
+    /// These options with the clock offset fixed (measured now when not given).
+    fn resolved(&self) -> Self {
+        Self {
+            unix_minus_monotonic_ns: Some(
+                self.unix_minus_monotonic_ns
+                    .unwrap_or_else(unix_minus_monotonic_ns),
+            ),
+            ..self.clone()
         }
     }
 }
@@ -193,9 +259,13 @@ struct Sink {
     channels: BTreeMap<&'static str, u16>,
     location_fix: u16,
     pose: u16,
+    tf: u16,
+    status_plot: u16,
     ned_origin: Option<foxglove::NedOrigin>,
     sensor_alive: u16,
     non_finite: u16,
+    /// CLOCK_REALTIME − CLOCK_MONOTONIC, ns (publish_time = reception + this).
+    unix_minus_monotonic_ns: i64,
     buf: Vec<u8>,
     dirty: bool,
     /// Messages handed to the writer since the last successful flush: lost if the next flush
@@ -241,9 +311,27 @@ impl Sink {
             .chunk_size(Some(opts.chunk_size_bytes))
             .create(BufWriter::new(file))
             .map_err(mcap_err)?;
-        // Metadata first (top level, before any chunk), so that a reader has the configuration
-        // before the first input.
-        for (name, metadata) in &opts.metadata {
+        // Metadata first (top level, before any chunk), so that a reader has the time base and
+        // the configuration before the first input.
+        let unix_minus_monotonic_ns = opts
+            .unix_minus_monotonic_ns
+            .unwrap_or_else(unix_minus_monotonic_ns);
+        let time_meta = BTreeMap::from([
+            (
+                TIME_KEY_CONVENTION.to_string(),
+                TIME_CONVENTION_UNIX.to_string(),
+            ),
+            (
+                TIME_KEY_UNIX_MINUS_MONOTONIC.to_string(),
+                unix_minus_monotonic_ns.to_string(),
+            ),
+        ]);
+        let own = (TIME_METADATA_NAME.to_string(), time_meta);
+        for (name, metadata) in std::iter::once(&own).chain(
+            opts.metadata
+                .iter()
+                .filter(|(name, _)| name != TIME_METADATA_NAME),
+        ) {
             writer
                 .write_metadata(&mcap::records::Metadata {
                     name: name.clone(),
@@ -283,6 +371,26 @@ impl Sink {
         let pose = writer
             .add_channel(sid, foxglove::POSE_TOPIC, "json", &no_meta)
             .map_err(mcap_err)?;
+        let sid = writer
+            .add_schema(
+                foxglove::TF_SCHEMA,
+                "jsonschema",
+                foxglove::frame_transforms_schema().as_bytes(),
+            )
+            .map_err(mcap_err)?;
+        let tf = writer
+            .add_channel(sid, foxglove::TF_TOPIC, "json", &no_meta)
+            .map_err(mcap_err)?;
+        let sid = writer
+            .add_schema(
+                foxglove::STATUS_PLOT_SCHEMA,
+                "jsonschema",
+                foxglove::status_plot_schema().as_bytes(),
+            )
+            .map_err(mcap_err)?;
+        let status_plot = writer
+            .add_channel(sid, foxglove::STATUS_PLOT_TOPIC, "json", &no_meta)
+            .map_err(mcap_err)?;
         let alive_schema = serde_json::to_string(&schemars::schema_for!(SensorAliveEvent))
             .map_err(|e| RecorderError::Mcap {
                 path: path.to_path_buf(),
@@ -316,9 +424,12 @@ impl Sink {
             channels,
             location_fix,
             pose,
+            tf,
+            status_plot,
             ned_origin: None,
             sensor_alive,
             non_finite,
+            unix_minus_monotonic_ns,
             buf: Vec::with_capacity(16 * 1024),
             dirty: false,
             unflushed: 0,
@@ -336,14 +447,19 @@ impl Sink {
         &mut self,
         channel_id: u16,
         seq: u64,
-        time_ns: i64,
+        log_time: u64,
         receive_mono_ns: u64,
     ) -> Result<(), RecorderError> {
+        let publish_time = if receive_mono_ns == 0 {
+            log_time
+        } else {
+            receive_mono_ns.saturating_add_signed(self.unix_minus_monotonic_ns)
+        };
         let header = mcap::records::MessageHeader {
             channel_id,
             sequence: seq as u32,
-            log_time: time_ns.max(0) as u64,
-            publish_time: receive_mono_ns,
+            log_time,
+            publish_time,
         };
         self.writer
             .write_to_known_channel(&header, &self.buf)
@@ -353,8 +469,8 @@ impl Sink {
         Ok(())
     }
 
-    /// Write one record; returns the number of messages written.
-    fn write(&mut self, item: &Item) -> Result<u64, RecorderError> {
+    /// Write one record at `log_time` (Unix ns); returns the number of messages written.
+    fn write(&mut self, item: &Item, log_time: u64) -> Result<u64, RecorderError> {
         let cid = match item.record.channel() {
             Some(ch) => *self
                 .channels
@@ -384,24 +500,41 @@ impl Sink {
                 }),
             )
             .map_err(|e| self.err(e))?;
-            self.write_json(self.non_finite, h.seq, h.time_ns, item.receive_mono_ns)?;
+            self.write_json(self.non_finite, h.seq, log_time, item.receive_mono_ns)?;
             return Ok(1);
         }
-        self.write_json(cid, h.seq, h.time_ns, item.receive_mono_ns)?;
+        self.write_json(cid, h.seq, log_time, item.receive_mono_ns)?;
         let mut n = 1;
         if let Record::Nav(nav) = &item.record {
             let origin = *self
                 .ned_origin
                 .get_or_insert_with(|| foxglove::NedOrigin::at(nav));
             self.buf.clear();
-            serde_json::to_writer(&mut self.buf, &foxglove::location_fix(nav))
+            serde_json::to_writer(&mut self.buf, &foxglove::location_fix(nav, log_time))
                 .map_err(|e| self.err(e))?;
-            self.write_json(self.location_fix, h.seq, h.time_ns, item.receive_mono_ns)?;
+            self.write_json(self.location_fix, h.seq, log_time, item.receive_mono_ns)?;
             self.buf.clear();
-            serde_json::to_writer(&mut self.buf, &foxglove::pose_in_frame(nav, &origin))
+            serde_json::to_writer(
+                &mut self.buf,
+                &foxglove::pose_in_frame(nav, &origin, log_time),
+            )
+            .map_err(|e| self.err(e))?;
+            self.write_json(self.pose, h.seq, log_time, item.receive_mono_ns)?;
+            self.buf.clear();
+            serde_json::to_writer(
+                &mut self.buf,
+                &foxglove::frame_transforms(nav, &origin, log_time),
+            )
+            .map_err(|e| self.err(e))?;
+            self.write_json(self.tf, h.seq, log_time, item.receive_mono_ns)?;
+            n += 3;
+        }
+        if let Record::Status(st) = &item.record {
+            self.buf.clear();
+            serde_json::to_writer(&mut self.buf, &foxglove::status_plot(st, log_time))
                 .map_err(|e| self.err(e))?;
-            self.write_json(self.pose, h.seq, h.time_ns, item.receive_mono_ns)?;
-            n += 2;
+            self.write_json(self.status_plot, h.seq, log_time, item.receive_mono_ns)?;
+            n += 1;
         }
         Ok(n)
     }
@@ -485,6 +618,94 @@ impl Resume {
     }
 }
 
+/// Largest number of untimed records held back waiting for the first time of validity; beyond
+/// it (a recorder fed no timed record for that long) they are written at their publish time.
+const MAX_HELD_UNTIMED: usize = 4096;
+
+/// The log times of the records, in recording order (see the module comment): a timed record
+/// at its own time of validity, an untimed one at the latest time before it, or held back until
+/// the first.
+#[derive(Default)]
+struct LogClock {
+    /// Log time of the latest timed record, Unix ns.
+    last: Option<u64>,
+    /// Untimed records before the first timed one, in order.
+    held: Vec<Item>,
+}
+
+/// Write one record to the sink at `log_time`, or count it dropped; a failed write abandons
+/// the sink (see [`count_failure`]).
+fn deliver(
+    sink: &mut Option<Sink>,
+    item: &Item,
+    log_time: u64,
+    counters: &Counters,
+    resume: &mut Resume,
+) {
+    let Some(sk) = sink.as_mut() else {
+        counters.dropped.fetch_add(1, Ordering::Relaxed);
+        return;
+    };
+    match sk.write(item, log_time) {
+        Ok(n) => {
+            counters.written.fetch_add(n, Ordering::Relaxed);
+        }
+        Err(e) => {
+            count_failure(counters, 1 + sk.unflushed, &e);
+            resume.dropped_at_failure = counters.dropped.load(Ordering::Relaxed);
+            resume.last_attempt = Instant::now();
+            *sink = None;
+        }
+    }
+}
+
+impl LogClock {
+    /// Route `item` to the sink at its log time (writing the records held for it first).
+    fn admit(
+        &mut self,
+        item: Item,
+        sink: &mut Option<Sink>,
+        counters: &Counters,
+        resume: &mut Resume,
+    ) {
+        match log_time_of(item.record.header().time_ns) {
+            Some(t) => {
+                self.last = Some(t);
+                for held in std::mem::take(&mut self.held) {
+                    deliver(sink, &held, t, counters, resume);
+                }
+                deliver(sink, &item, t, counters, resume);
+            }
+            None => match self.last {
+                Some(t) => deliver(sink, &item, t, counters, resume),
+                None if self.held.len() < MAX_HELD_UNTIMED => self.held.push(item),
+                None => {
+                    let t = self.publish_fallback(&item, resume);
+                    deliver(sink, &item, t, counters, resume);
+                }
+            },
+        }
+    }
+
+    /// Log time of an untimed record when no time of validity ever came: its publish time (the
+    /// wall time of reception), or 0 when that is unknown too.
+    fn publish_fallback(&self, item: &Item, resume: &Resume) -> u64 {
+        if item.receive_mono_ns == 0 {
+            return 0;
+        }
+        let offset = resume.opts.unix_minus_monotonic_ns.unwrap_or(0);
+        item.receive_mono_ns.saturating_add_signed(offset)
+    }
+
+    /// At the end: write the records still held (no timed record ever came).
+    fn finish(&mut self, sink: &mut Option<Sink>, counters: &Counters, resume: &mut Resume) {
+        for held in std::mem::take(&mut self.held) {
+            let t = self.publish_fallback(&held, resume);
+            deliver(sink, &held, t, counters, resume);
+        }
+    }
+}
+
 fn run(
     sink: Option<Sink>,
     rx: Receiver<Item>,
@@ -494,29 +715,18 @@ fn run(
     let flush_interval = resume.opts.flush_interval;
     let mut last_flush = Instant::now();
     let mut sink = sink;
+    let mut clock = LogClock::default();
     loop {
         if sink.is_none() {
             sink = resume.attempt(&counters);
         }
         match rx.recv_timeout(flush_interval) {
-            Ok(item) => match sink.as_mut() {
-                Some(sk) => match sk.write(&item) {
-                    Ok(n) => {
-                        counters.written.fetch_add(n, Ordering::Relaxed);
-                    }
-                    Err(e) => {
-                        count_failure(&counters, 1 + sk.unflushed, &e);
-                        resume.dropped_at_failure = counters.dropped.load(Ordering::Relaxed);
-                        resume.last_attempt = Instant::now();
-                        sink = None;
-                    }
-                },
-                None => {
-                    counters.dropped.fetch_add(1, Ordering::Relaxed);
-                }
-            },
+            Ok(item) => clock.admit(item, &mut sink, &counters, &mut resume),
             Err(RecvTimeoutError::Timeout) => {}
-            Err(RecvTimeoutError::Disconnected) => break,
+            Err(RecvTimeoutError::Disconnected) => {
+                clock.finish(&mut sink, &counters, &mut resume);
+                break;
+            }
         }
         if last_flush.elapsed() >= flush_interval {
             last_flush = Instant::now();
@@ -544,6 +754,7 @@ fn run(
 impl Recorder {
     /// Create the MCAP file at `path` (header, schemas, channels) and start the writer thread.
     pub fn start(path: &Path, opts: &RecorderOptions) -> Result<Self, RecorderError> {
+        let opts = &opts.resolved();
         let sink = Sink::create(path, opts)?;
         let counters = Arc::new(Counters::default());
         counters.add_segment(path);
@@ -556,6 +767,7 @@ impl Recorder {
     /// the fusion keeps navigating without a recording and records again when it can.
     /// [`Recorder::failure`] tells why it could not start.
     pub fn start_or_degrade(path: &Path, opts: &RecorderOptions) -> Self {
+        let opts = &opts.resolved();
         let counters = Arc::new(Counters::default());
         let (sink, failure) = match Sink::create(path, opts) {
             Ok(sink) => {
@@ -762,7 +974,8 @@ mod tests {
         }
         let stats = rec.finish().unwrap();
         assert_eq!(stats.dropped, 0);
-        assert_eq!(stats.written, records.len() as u64 + 2 * 5);
+        // Each solution also as LocationFix, pose and frame tree; the status also as a plot.
+        assert_eq!(stats.written, records.len() as u64 + 3 * 5 + 1);
 
         let bytes = std::fs::read(&path).unwrap();
         let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
@@ -797,10 +1010,75 @@ mod tests {
             let validator = jsonschema::validator_for(&schema).unwrap();
             assert!(validator.is_valid(&v), "{}: {v}", m.channel.topic);
         }
+        // log_time = Unix ns of the time of validity (GPS 5 ms after the GPS epoch, when
+        // TAI − UTC was 19 s = TAI − GPS: Unix 315964800 s + 5 ms); publish_time = reception
+        // (1000 ns on CLOCK_MONOTONIC) + the offset stated in the metadata.
         let first = &msgs[0];
         assert_eq!(first.channel.topic, "imu");
-        assert_eq!(first.log_time, 5_000_000);
-        assert_eq!(first.publish_time, 1000);
+        assert_eq!(first.log_time, 315_964_800_000_000_000 + 5_000_000);
+        let meta = mcap::read::Summary::read(&bytes).unwrap().unwrap();
+        assert!(
+            meta.metadata_indexes
+                .iter()
+                .any(|m| m.name == TIME_METADATA_NAME)
+        );
+        let base = crate::recording::Recording::open(&path)
+            .unwrap()
+            .time_base();
+        let crate::recording::TimeBase::Unix {
+            unix_minus_monotonic_ns,
+        } = base
+        else {
+            panic!("{base:?}");
+        };
+        assert_eq!(first.publish_time as i64, 1000 + unix_minus_monotonic_ns);
+        // The untimed status (header time 0) is logged at the latest time before it.
+        let status = msgs.iter().find(|m| m.channel.topic == "status").unwrap();
+        assert_eq!(status.log_time, 315_964_800_000_000_000 + 25_000_000);
+    }
+
+    /// Records without a time of validity before the first timed one are held back and logged
+    /// at its time, in order; those of a recorder that never sees a time go out at their
+    /// publish time (reception), or at their log time 0 when none is known.
+    #[test]
+    fn untimed_records_before_the_first_time_take_it_in_order() {
+        let path = tmp("untimed");
+        let rec = Recorder::start(&path, &RecorderOptions::default()).unwrap();
+        rec.record(Record::Status(Box::default()), 0);
+        rec.record(Record::SensorAlive(SensorAliveEvent::default()), 0);
+        let mut imu = ImuSample::default();
+        imu.header.time_ns = fusion::time::GpsTime::from_utc(2025, 3, 20, 21, 0, 0.0).ns;
+        rec.record(Record::Imu(imu), 0);
+        rec.finish().unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        let msgs: Vec<_> = MessageStream::new(&bytes)
+            .unwrap()
+            .collect::<Result<_, _>>()
+            .unwrap();
+        let topics: Vec<_> = msgs.iter().map(|m| m.channel.topic.as_str()).collect();
+        assert_eq!(
+            topics,
+            [
+                "status",
+                foxglove::STATUS_PLOT_TOPIC,
+                SENSOR_ALIVE_TOPIC,
+                "imu"
+            ]
+        );
+        for m in &msgs {
+            // 2025-03-20T21:00:00Z = Unix 1742504400 s; no reception time: publish = log.
+            assert_eq!(m.log_time, 1_742_504_400_000_000_000, "{}", m.channel.topic);
+            assert_eq!(m.publish_time, m.log_time);
+        }
+
+        let path = tmp("untimed-only");
+        let rec = Recorder::start(&path, &RecorderOptions::default()).unwrap();
+        rec.record(Record::Status(Box::default()), 5_000);
+        rec.finish().unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        let m = MessageStream::new(&bytes).unwrap().next().unwrap().unwrap();
+        assert_eq!(m.log_time, m.publish_time);
+        assert!(m.log_time > 1_742_504_400_000_000_000, "{}", m.log_time);
     }
 
     #[test]

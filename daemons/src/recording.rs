@@ -11,7 +11,12 @@
 //! produces a plausible but wrong record.
 //!
 //! The configuration the fusion ran with is the MCAP metadata record
-//! [`crate::recorder::CONFIG_METADATA_NAME`], read by `open` (it precedes every chunk).
+//! [`crate::recorder::CONFIG_METADATA_NAME`], read by `open` (it precedes every chunk), and so
+//! is the time base of log and publish times ([`crate::recorder::TIME_METADATA_NAME`]; a file
+//! without it is of the earlier convention, [`TimeBase::GpsMonotonic`]). Readers that need a
+//! time of validity take it from the message's own header (GPS time, the same in every
+//! convention); [`Entry::receive_mono_ns`] gives the reception time on CLOCK_MONOTONIC in
+//! either convention.
 
 use msgs::{Record, RecordKind};
 use std::collections::{BTreeMap, HashMap, HashSet, VecDeque};
@@ -79,15 +84,74 @@ impl RecordingError {
     }
 }
 
+/// The time base of a recording's MCAP log and publish times.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TimeBase {
+    /// MCAP's and Foxglove's convention: log_time = Unix ns (UTC) of the time of validity,
+    /// publish_time = Unix ns (UTC wall clock) of reception, or = log_time when not known.
+    Unix {
+        /// CLOCK_REALTIME − CLOCK_MONOTONIC of the recording, ns.
+        unix_minus_monotonic_ns: i64,
+    },
+    /// Recordings written before it (no [`crate::recorder::TIME_METADATA_NAME`] record):
+    /// log_time = GPS ns of validity, publish_time = CLOCK_MONOTONIC ns of reception (0 when
+    /// not known).
+    GpsMonotonic,
+}
+
+impl TimeBase {
+    /// The time base stated by a recording's metadata records.
+    pub fn from_metadata(metadata: &BTreeMap<String, BTreeMap<String, String>>) -> Self {
+        use crate::recorder::{
+            TIME_CONVENTION_UNIX, TIME_KEY_CONVENTION, TIME_KEY_UNIX_MINUS_MONOTONIC,
+            TIME_METADATA_NAME,
+        };
+        let Some(m) = metadata.get(TIME_METADATA_NAME) else {
+            return Self::GpsMonotonic;
+        };
+        if m.get(TIME_KEY_CONVENTION).map(String::as_str) != Some(TIME_CONVENTION_UNIX) {
+            return Self::GpsMonotonic;
+        }
+        Self::Unix {
+            unix_minus_monotonic_ns: m
+                .get(TIME_KEY_UNIX_MINUS_MONOTONIC)
+                .and_then(|v| v.parse().ok())
+                .unwrap_or(0),
+        }
+    }
+
+    /// CLOCK_MONOTONIC reception time of a message with these log and publish times, ns; 0
+    /// when the recording does not know it.
+    pub fn receive_mono_ns(&self, log_time_ns: u64, publish_time_ns: u64) -> u64 {
+        match *self {
+            Self::GpsMonotonic => publish_time_ns,
+            Self::Unix {
+                unix_minus_monotonic_ns,
+            } => {
+                if publish_time_ns == log_time_ns {
+                    return 0;
+                }
+                let mono = i128::from(publish_time_ns) - i128::from(unix_minus_monotonic_ns);
+                u64::try_from(mono).unwrap_or(0)
+            }
+        }
+    }
+}
+
 /// One message of a recording.
 #[derive(Debug, Clone)]
 pub struct Entry {
     /// Byte offset of the message record, or of the chunk containing it.
     pub offset: u64,
-    /// MCAP log time = the message's time of validity, GPS ns.
+    /// MCAP log time, ns: the time of validity as Unix time (UTC), or GPS time in recordings
+    /// of [`TimeBase::GpsMonotonic`].
     pub log_time_ns: u64,
-    /// MCAP publish time = CLOCK_MONOTONIC when the daemon received or produced it, ns.
+    /// MCAP publish time, ns: the UTC wall time at which the daemon received or produced the
+    /// message, or CLOCK_MONOTONIC in recordings of [`TimeBase::GpsMonotonic`].
     pub publish_time_ns: u64,
+    /// CLOCK_MONOTONIC when the daemon received or produced the message, ns (0 when not
+    /// known), whatever the time base.
+    pub receive_mono_ns: u64,
     /// MCAP sequence (low 32 bits of the header's sequence number).
     pub sequence: u32,
     /// The topic.
@@ -121,6 +185,8 @@ pub struct Recording {
     file_len: u64,
     offset: u64,
     metadata: BTreeMap<String, BTreeMap<String, String>>,
+    /// Time base, from the metadata (read before any message).
+    time_base: TimeBase,
     channels: HashMap<u16, ChannelInfo>,
     schemas: HashMap<u16, String>,
     pending: VecDeque<Entry>,
@@ -178,6 +244,7 @@ impl Recording {
             file_len,
             offset: 8,
             metadata: BTreeMap::new(),
+            time_base: TimeBase::GpsMonotonic,
             channels: HashMap::new(),
             schemas: HashMap::new(),
             pending: VecDeque::new(),
@@ -203,7 +270,13 @@ impl Recording {
                 }
             }
         }
+        rec.time_base = TimeBase::from_metadata(&rec.metadata);
         Ok(rec)
+    }
+
+    /// The time base of the log and publish times.
+    pub fn time_base(&self) -> TimeBase {
+        self.time_base
     }
 
     /// The file.
@@ -516,6 +589,7 @@ impl Recording {
                     offset: at,
                     log_time_ns,
                     publish_time_ns,
+                    receive_mono_ns: self.time_base.receive_mono_ns(log_time_ns, publish_time_ns),
                     sequence,
                     topic,
                     record,
@@ -765,9 +839,14 @@ mod tests {
             }
         }
         // Foxglove views are entries without a record.
-        assert_eq!(out.entries.len(), records.len() + 2 * 300);
-        assert_eq!(out.entries[0].log_time_ns, 5_000_000);
-        assert_eq!(out.entries[0].publish_time_ns, 7);
+        assert_eq!(out.entries.len(), records.len() + 3 * 300);
+        // Unix ns of GPS 5 ms (TAI − UTC = TAI − GPS at the GPS epoch); reception time 7 ns on
+        // CLOCK_MONOTONIC comes back through the time base.
+        assert_eq!(
+            out.entries[0].log_time_ns,
+            315_964_800_000_000_000 + 5_000_000
+        );
+        assert_eq!(out.entries[0].receive_mono_ns, 7);
     }
 
     #[test]

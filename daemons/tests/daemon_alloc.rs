@@ -217,6 +217,7 @@ fn each_step_of_the_loop_costs_what_it_costs() {
             chunk_size_bytes: 1 << 20,
             flush_interval: Duration::from_secs(1),
             metadata: Vec::new(),
+            ..Default::default()
         },
     )
     .expect("recorder");

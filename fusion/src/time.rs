@@ -142,6 +142,8 @@ pub const JD_GPS_EPOCH: f64 = 2_444_244.5;
 pub const JD_J2000: f64 = 2_451_545.0;
 /// Days from 1970-01-01 to the GPS epoch date 1980-01-06 (proleptic Gregorian).
 const GPS_EPOCH_DAYS_FROM_1970: i64 = 3657;
+/// Unix time of the GPS epoch 1980-01-06T00:00:00 UTC, ns (3657 days after 1970-01-01).
+pub const GPS_EPOCH_UNIX_NS: i64 = GPS_EPOCH_DAYS_FROM_1970 * NS_PER_DAY;
 /// TAI nanoseconds from 1958-01-01T00:00:00 TAI to the GPS epoch (8040 days + 19 s).
 const TAI1958_AT_GPS_EPOCH_NS: i64 = 8040 * NS_PER_DAY + TAI_MINUS_GPS_NS;
 /// TT nanoseconds from J2000.0 TT back to the GPS epoch: the GPS epoch is 7300.5 days minus
@@ -432,6 +434,16 @@ impl GpsTime {
         self.ns + TAI_MINUS_GPS_NS - self.tai_minus_utc_s() as i64 * NS_PER_S
     }
 
+    /// Unix time (POSIX: nanoseconds since 1970-01-01T00:00:00 UTC, leap seconds not counted)
+    /// of this instant, the time base of MCAP `log_time` and Foxglove `time`. During a leap
+    /// second the value repeats the first second of the next day, as POSIX time does (see
+    /// [`GpsTime::utc_ns`]). Saturates at the ends of `i64` instead of overflowing.
+    pub fn unix_ns(&self) -> i64 {
+        self.ns
+            .saturating_add(TAI_MINUS_GPS_NS - self.tai_minus_utc_s() as i64 * NS_PER_S)
+            .saturating_add(GPS_EPOCH_UNIX_NS)
+    }
+
     /// Julian centuries of TT since J2000.0 (single `f64`, for series arguments).
     pub fn tt_centuries(&self) -> f64 {
         let (a, b) = self.tt_jd();
@@ -488,6 +500,21 @@ fn split_jd(ns: i64, extra_s: f64) -> (f64, f64) {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn unix_time_counts_leap_seconds_out() {
+        // 2025-03-20T21:00:00Z is Unix 1742504400 s (date -d @1742504400 -u); GPS is 18 s ahead
+        // of UTC since 2017.
+        let t = super::GpsTime::from_utc(2025, 3, 20, 21, 0, 0.0);
+        assert_eq!(t.unix_ns(), 1_742_504_400 * super::NS_PER_S);
+        // The GPS epoch itself: Unix 315964800 s.
+        assert_eq!(
+            super::GpsTime::from_ns(0).unix_ns(),
+            315_964_800 * super::NS_PER_S
+        );
+        // No overflow at the ends of the range.
+        assert!(super::GpsTime::from_ns(i64::MAX).unix_ns() > 0);
+    }
+
     use super::*;
     use proptest::prelude::*;
 

@@ -175,7 +175,7 @@ fn stop(child: &mut Child, timeout: Duration) {
 }
 
 /// Latencies of every solution in a recording, µs: (total, transport, processing). Transport =
-/// the IMU record's MCAP publish time (CLOCK_MONOTONIC when the daemon received it) − the IMU
+/// the IMU record's reception time on CLOCK_MONOTONIC (from its MCAP publish time) − the IMU
 /// sample's send time: iceoryx2 delivery and the daemon's wake-up. Processing = the solution's
 /// send time − that receive time: the filter step and the recorder hand-off.
 fn latencies_us(recording: &Path) -> anyhow::Result<(Vec<f64>, Vec<f64>, Vec<f64>)> {
@@ -187,7 +187,7 @@ fn latencies_us(recording: &Path) -> anyhow::Result<(Vec<f64>, Vec<f64>, Vec<f64
         let e = e?;
         match e.record {
             Some(Record::Imu(imu)) => {
-                received.insert(imu.header.send_mono_ns, e.publish_time_ns);
+                received.insert(imu.header.send_mono_ns, e.receive_mono_ns);
             }
             Some(Record::Nav(nav))
                 if nav.imu_send_mono_ns > 0 && nav.header.send_mono_ns >= nav.imu_send_mono_ns =>
@@ -746,6 +746,7 @@ mod tests {
                 chunk_size_bytes: 4096,
                 flush_interval: Duration::from_secs(1),
                 metadata: Vec::new(),
+                ..Default::default()
             },
         )
         .expect("recorder");

@@ -44,7 +44,7 @@ use crate::daemon::{engine_status, feed, stamp_solution};
 use crate::recorder::{
     CONFIG_KEY_FILTER_TOML, CONFIG_METADATA_NAME, Record, Recorder, RecorderOptions,
 };
-use crate::recording::{Recording, RecordingError};
+use crate::recording::{Recording, RecordingError, TimeBase};
 use fusion::navigator::{Navigator, NavigatorConfig};
 use msgs::{MAX_SENSORS, NavSolution, Status};
 use serde::Serialize;
@@ -260,6 +260,13 @@ pub fn replay_offline(opts: &OfflineOptions) -> Result<OfflineSummary, ReplayErr
         &out,
         &RecorderOptions {
             metadata: vec![(CONFIG_METADATA_NAME.to_string(), meta)],
+            // The replayed records keep the source's publish times (its reception clock).
+            unix_minus_monotonic_ns: match rec.time_base() {
+                TimeBase::Unix {
+                    unix_minus_monotonic_ns,
+                } => Some(unix_minus_monotonic_ns),
+                TimeBase::GpsMonotonic => None,
+            },
             ..Default::default()
         },
     )?;
@@ -335,10 +342,10 @@ pub fn replay_offline(opts: &OfflineOptions) -> Result<OfflineSummary, ReplayErr
                         mine.alive_mask |= 1 << i;
                     }
                 }
-                recorder.record_blocking(Record::Status(Box::new(mine)), e.publish_time_ns);
+                recorder.record_blocking(Record::Status(Box::new(mine)), e.receive_mono_ns);
             }
             Record::Truth(_) => {
-                recorder.record_blocking(r, e.publish_time_ns);
+                recorder.record_blocking(r, e.receive_mono_ns);
             }
             input => {
                 s.inputs_fed += 1;
@@ -358,15 +365,15 @@ pub fn replay_offline(opts: &OfflineOptions) -> Result<OfflineSummary, ReplayErr
                     }
                     _ => None,
                 };
-                recorder.record_blocking(r.clone(), e.publish_time_ns);
+                recorder.record_blocking(r.clone(), e.receive_mono_ns);
                 match result {
                     Ok(Some(mut sol)) => {
                         s.solutions_replayed += 1;
                         if let Some(imu) = imu {
                             stamp_solution(&mut sol, &imu, s.solutions_replayed);
                         }
-                        sol.header.send_mono_ns = e.publish_time_ns;
-                        recorder.record_blocking(Record::Nav(sol), e.publish_time_ns);
+                        sol.header.send_mono_ns = e.receive_mono_ns;
+                        recorder.record_blocking(Record::Nav(sol), e.receive_mono_ns);
                         if compare {
                             pending.push_back(sol);
                         }
@@ -637,7 +644,8 @@ pub fn replay_live(opts: &LiveOptions, stop: &AtomicBool) -> Result<LiveSummary,
         }
         // Schedule by time of validity, like the drivers; keep the file order (never send a
         // sample before one recorded earlier).
-        let t = e.log_time_ns;
+        // The header's GPS time of validity: the same in every recording's time base.
+        let t = u64::try_from(r.time_ns()).unwrap_or(0);
         let (due, now) = match followed {
             None => {
                 let base = *t0.get_or_insert(t);

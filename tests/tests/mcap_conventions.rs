@@ -1,0 +1,265 @@
+//! Recordings follow MCAP's and Foxglove's time conventions, read back with the independent
+//! `mcap` reader: every message's `log_time` is the Unix time (UTC) of its time of validity,
+//! `publish_time` the wall time of its reception, the summary statistics span the run's real
+//! (simulated) UTC times, and recordings of the earlier convention (log time in GPS ns,
+//! publish time on CLOCK_MONOTONIC) still replay bit for bit. The Foxglove well-known-schema
+//! messages validate against Foxglove's own published JSON Schemas (`tests/data/foxglove-schemas`,
+//! from the npm package `@foxglove/schemas`).
+
+use sextant_tests::*;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{SystemTime, UNIX_EPOCH};
+
+/// Simulated seconds of the run: the default scenario aligns for 100 s before it navigates, so
+/// 120 s give 20 s of solutions (4000 at 200 Hz) on every channel.
+const DURATION_S: f64 = 120.0;
+const SPEED: f64 = 25.0;
+
+/// Start of the default scenario (`config/scenarios/vehicle.toml`, `start_utc`
+/// 2025-03-20T21:00:00Z) as Unix seconds (`date -u -d 2025-03-20T21:00:00Z +%s`).
+const START_UNIX_S: i64 = 1_742_504_400;
+
+/// GPS − UTC in 2025: 18 s (TAI − UTC = 37 s since 2017-01-01, IERS Bulletin C; TAI − GPS =
+/// 19 s). Unix time of the GPS epoch 1980-01-06: 315 964 800 s. Written out here rather than
+/// taken from `fusion::time`, so that the check is independent of the conversion it checks.
+const GPS_MINUS_UTC_2025_NS: i64 = 18_000_000_000;
+const GPS_EPOCH_UNIX_NS: i64 = 315_964_800_000_000_000;
+
+fn out_dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("sextant-mcapconv-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn unix_now_ns() -> u64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .unwrap()
+        .as_nanos() as u64
+}
+
+/// The message's own time of validity in GPS ns (Sextant channels' header), if it has one.
+fn header_gps_ns(json: &serde_json::Value) -> Option<i64> {
+    json.get("header")
+        .and_then(|h| h.get("time_ns"))
+        .or_else(|| json.get("time_ns"))
+        .and_then(serde_json::Value::as_i64)
+}
+
+/// A Foxglove `time` field as Unix ns.
+fn foxglove_time_ns(t: &serde_json::Value) -> u64 {
+    t["sec"].as_u64().unwrap() * 1_000_000_000 + t["nsec"].as_u64().unwrap()
+}
+
+/// Foxglove's published JSON Schema of a well-known schema name (`foxglove.LocationFix`).
+fn foxglove_schema(name: &str) -> Option<serde_json::Value> {
+    let file = repo_root()
+        .join("tests/data/foxglove-schemas")
+        .join(format!("{}.json", name.strip_prefix("foxglove.")?));
+    let text = std::fs::read_to_string(&file)
+        .unwrap_or_else(|e| panic!("{}: {e} (schema {name} not shipped)", file.display()));
+    Some(serde_json::from_str(&text).unwrap())
+}
+
+fn replay_offline(rec: &Path, out: &Path) -> serde_json::Value {
+    let o = Command::new(bin("sextant").unwrap())
+        .current_dir(repo_root())
+        .args(["replay", "--offline"])
+        .arg(rec)
+        .arg("--out")
+        .arg(out)
+        .output()
+        .unwrap();
+    assert!(
+        o.status.success(),
+        "{}\n{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap()
+}
+
+/// Rewrite a recording into the earlier convention (log time = GPS ns of validity, publish
+/// time = CLOCK_MONOTONIC of reception, no time-base metadata), as recordings written before
+/// the change are.
+fn to_gps_monotonic(bytes: &[u8], out: &Path) {
+    let summary = mcap::Summary::read(bytes).unwrap().unwrap();
+    let mut metadata = BTreeMap::new();
+    for idx in &summary.metadata_indexes {
+        let m = mcap::read::metadata(bytes, idx).unwrap();
+        metadata.insert(m.name.clone(), m.metadata);
+    }
+    let time = metadata.remove("sextant/time").expect("time-base metadata");
+    let offset: i64 = time["unix_minus_monotonic_ns"].parse().unwrap();
+    let mut w = mcap::WriteOptions::new()
+        .compression(Some(mcap::Compression::Zstd))
+        .create(std::io::BufWriter::new(std::fs::File::create(out).unwrap()))
+        .unwrap();
+    for (name, m) in metadata {
+        w.write_metadata(&mcap::records::Metadata { name, metadata: m })
+            .unwrap();
+    }
+    let mut ids = BTreeMap::new();
+    for m in mcap::MessageStream::new(bytes).unwrap() {
+        let m = m.unwrap();
+        let id = *ids.entry(m.channel.id).or_insert_with(|| {
+            let s = m.channel.schema.as_ref().unwrap();
+            let sid = w.add_schema(&s.name, &s.encoding, &s.data).unwrap();
+            w.add_channel(sid, &m.channel.topic, "json", &BTreeMap::new())
+                .unwrap()
+        });
+        let json: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
+        let gps = header_gps_ns(&json).unwrap_or(0).max(0) as u64;
+        let mono = if m.publish_time == m.log_time {
+            0
+        } else {
+            (m.publish_time as i64 - offset) as u64
+        };
+        w.write_to_known_channel(
+            &mcap::records::MessageHeader {
+                channel_id: id,
+                sequence: m.sequence,
+                log_time: gps,
+                publish_time: mono,
+            },
+            &m.data,
+        )
+        .unwrap();
+    }
+    w.finish().unwrap();
+}
+
+#[test]
+fn default_run_logs_at_utc_validates_against_foxglove_and_replays_in_both_time_bases() {
+    let out = out_dir("run");
+    let prefix = format!("sextant_mcapconv_{}", std::process::id());
+    let wall_start = unix_now_ns();
+    let status = Command::new(bin("sextant").unwrap())
+        .current_dir(repo_root())
+        .args(["run", "--duration", &DURATION_S.to_string()])
+        .args(["--speed", &SPEED.to_string(), "--prefix", &prefix, "--out"])
+        .arg(&out)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .unwrap();
+    let wall_end = unix_now_ns();
+    assert!(status.success(), "sextant run failed: {status}");
+    let path = out.join("recording.mcap");
+    let bytes = std::fs::read(&path).unwrap();
+
+    // The summary statistics start and end at the run's simulated UTC times, within the 1 s
+    // the convention promises (the first message is a sample at or just after the start, the
+    // last one a status or sample within the last second).
+    let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
+    let stats = summary.stats.expect("statistics record");
+    let start_ns = (START_UNIX_S * 1_000_000_000) as u64;
+    let end_ns = start_ns + (DURATION_S * 1e9) as u64;
+    let s = 1_000_000_000u64;
+    assert!(
+        stats.message_start_time.abs_diff(start_ns) < s,
+        "statistics start at {} ns, the run at {start_ns}",
+        stats.message_start_time
+    );
+    assert!(
+        stats.message_end_time.abs_diff(end_ns) < s,
+        "statistics end at {} ns, the run at {end_ns}",
+        stats.message_end_time
+    );
+    let run_span = start_ns - s..=end_ns + s;
+
+    // Every message: log_time is the UTC of its header's GPS time (the conversion is exact, the
+    // convention promises 1 s); untimed records (header time 0) inside the run; Foxglove
+    // timestamps equal the log time; publish_time is a wall time of this test's run.
+    let mut validators: BTreeMap<String, jsonschema::Validator> = BTreeMap::new();
+    let mut validated: BTreeMap<String, usize> = BTreeMap::new();
+    let mut untimed = 0;
+    let mut n = 0;
+    for m in mcap::MessageStream::new(&bytes).unwrap() {
+        let m = m.unwrap();
+        n += 1;
+        let topic = &m.channel.topic;
+        let json: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
+        match header_gps_ns(&json) {
+            Some(t) if t > 0 => {
+                let utc = (t - GPS_MINUS_UTC_2025_NS + GPS_EPOCH_UNIX_NS) as u64;
+                assert!(
+                    m.log_time.abs_diff(utc) < s,
+                    "{topic}: log_time {} for UTC {utc}",
+                    m.log_time
+                );
+            }
+            Some(_) => {
+                untimed += 1;
+                assert!(
+                    run_span.contains(&m.log_time),
+                    "{topic}: untimed record at log_time {}",
+                    m.log_time
+                );
+            }
+            None => {
+                let t = json
+                    .get("timestamp")
+                    .or_else(|| json.pointer("/transforms/0/timestamp"))
+                    .unwrap_or_else(|| panic!("{topic}: neither header nor timestamp: {json}"));
+                assert_eq!(foxglove_time_ns(t), m.log_time, "{topic}");
+            }
+        }
+        assert!(
+            run_span.contains(&m.log_time),
+            "{topic}: log_time {} outside the run",
+            m.log_time
+        );
+        assert!(
+            m.publish_time == m.log_time || (wall_start..=wall_end).contains(&m.publish_time),
+            "{topic}: publish_time {} not a wall time of the run [{wall_start}, {wall_end}]",
+            m.publish_time
+        );
+        let schema = m.channel.schema.as_ref().unwrap();
+        if let Some(official) = foxglove_schema(&schema.name) {
+            let v = validators
+                .entry(schema.name.clone())
+                .or_insert_with(|| jsonschema::validator_for(&official).unwrap());
+            if let Err(e) = v.validate(&json) {
+                panic!("{topic} ({}): {e}\n{json}", schema.name);
+            }
+            *validated.entry(schema.name.clone()).or_default() += 1;
+        }
+    }
+    // The default run navigates 20 s at 200 Hz: thousands of solutions, each with its views.
+    for name in [
+        "foxglove.LocationFix",
+        "foxglove.PoseInFrame",
+        "foxglove.FrameTransforms",
+    ] {
+        assert!(
+            validated.get(name).copied().unwrap_or(0) >= 3000,
+            "{name}: {validated:?}"
+        );
+    }
+    eprintln!(
+        "{n} messages, {untimed} without a time of validity; statistics {} .. {} ns; validated against Foxglove's schemas: {validated:?}",
+        stats.message_start_time, stats.message_end_time
+    );
+
+    // Offline replay reproduces the solution bit for bit from this recording and from the same
+    // recording in the earlier time base.
+    let replayed = replay_offline(&path, &out_dir("replay-unix"));
+    let legacy = out.join("recording-gps-monotonic.mcap");
+    to_gps_monotonic(&bytes, &legacy);
+    let replayed_legacy = replay_offline(&legacy, &out_dir("replay-legacy"));
+    for r in [&replayed, &replayed_legacy] {
+        assert_eq!(r["replay"]["bit_exact"], true, "{r}");
+        assert!(
+            r["replay"]["solutions_bit_identical"].as_u64().unwrap() >= 3000,
+            "{r}"
+        );
+    }
+    assert_eq!(
+        replayed["replay"]["solutions_bit_identical"],
+        replayed_legacy["replay"]["solutions_bit_identical"]
+    );
+}
