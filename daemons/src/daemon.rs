@@ -526,6 +526,8 @@ pub fn run<E: NavEngine>(
         opts.out.display()
     );
     let started = Instant::now();
+    // Readiness, status and watchdog for a service manager (no-op without NOTIFY_SOCKET).
+    let mut service = crate::sd_notify::Service::from_env();
 
     let drain_all = |st: &mut State<'_, E>| {
         st.got = PerSensor::splat(false);
@@ -569,7 +571,9 @@ pub fn run<E: NavEngine>(
         if status_due {
             st.publish_status();
         }
+        service.tick(st.engine.mode(), st.solutions, st.recorder.dropped());
     }
+    service.stopping();
     tracing::info!(
         "stopping after {:.1} s (signal {})",
         started.elapsed().as_secs_f64(),

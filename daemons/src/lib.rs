@@ -24,5 +24,6 @@ pub mod foxglove;
 pub mod logging;
 pub mod recorder;
 pub mod recording;
+pub mod sd_notify;
 pub mod signals;
 pub mod supervisor;
