@@ -12,7 +12,12 @@ use std::time::{Duration, Instant};
 
 /// Sextant navigation computer.
 #[derive(Debug, Parser)]
-#[command(name = "sextant", version, about)]
+#[command(
+    name = "sextant",
+    version,
+    about,
+    after_help = "Examples:\n  sextant run                                  the live system on the default configuration\n  sextant report out/run/recording.mcap --out out/report\n  sextant completions bash > ~/.local/share/bash-completion/completions/sextant\n\nExit status: 0 success; 1 error (the message says why); 2 bad command line;\n3 `run` ended but its recording is incomplete."
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -21,25 +26,50 @@ struct Cli {
 #[derive(Debug, Subcommand)]
 enum Command {
     /// Run the live system: drivers, fusion and recorder; then summarise the recording.
+    #[command(
+        after_help = "Example:\n  sextant run --duration 300 --speed 20 --out out/short\n\nExit status: 0 complete recording; 3 the run ended but its recording is incomplete;\n1 the fusion daemon failed or the run was refused."
+    )]
     Run(RunArgs),
     /// Run a named offline experiment; prints its table, writes summary.json and PNG plots.
+    #[command(
+        after_help = "Examples:\n  sextant experiment schuler --out out/schuler\n  sextant experiment all --out docs"
+    )]
     Experiment(ExperimentArgs),
     /// Measure latency through the real processes (200 Hz and 1 kHz IMU), offline fusion and
     /// recorder throughput, CPU and memory; prints a table, writes summary.json and a histogram.
+    #[command(after_help = "Example:\n  sextant bench --out out/bench")]
     Bench(BenchArgs),
     /// Replay a recording: offline through the fusion (bit-exact check, or other settings with
     /// --config), or live onto the iceoryx2 services (bench).
+    #[command(
+        after_help = "Examples:\n  sextant replay --offline out/run/recording.mcap --out out/replay\n  sextant replay --offline out/run/recording.mcap --config my-filter.toml --out out/tuned\n  sextant replay --live out/run/recording.mcap --speed 10 --prefix bench"
+    )]
     Replay(ReplayArgs),
     /// Post-analysis of a recording: errors against truth, NIS per sensor, rejections, mode
     /// changes, dropouts; REPORT.md, summary.json and PNG plots.
+    #[command(after_help = "Example:\n  sextant report out/run/recording.mcap --out out/report")]
     Report(ReportArgs),
     /// Calibrate a sensor from a recording: `calibrate boresight REC.mcap --site LAT,LON,H`
     /// estimates the star-tracker / IMU boresight angles κ1..κ3 (paper 000) from a static log.
+    #[command(
+        after_help = "Example:\n  sextant calibrate boresight static.mcap --site 55.655,37.534,200 --out out/calibrate"
+    )]
     Calibrate(CalibrateArgs),
     /// Import real data into a recording: `import rinex OBS NAV --out REC.mcap` fixes every
     /// epoch of a RINEX 3 observation file with the GPS broadcast ephemerides of a navigation
     /// file and writes the GNSS samples (measurements and fix) for `report` and `replay`.
+    #[command(
+        after_help = "Example:\n  sextant import rinex tests/data/rinex-esbc/ESBC00DNK_R_20201770000_01H_30S_MO.rnx.gz \\\n    tests/data/rinex-esbc/ESBC00DNK_R_20201770000_01D_GN.rnx.gz --out out/import/esbc.mcap"
+    )]
     Import(ImportArgs),
+    /// Print a shell completion script for SHELL (bash, zsh, fish, elvish, powershell).
+    #[command(
+        after_help = "Examples:\n  sextant completions bash > ~/.local/share/bash-completion/completions/sextant\n  sextant completions zsh > ~/.zfunc/_sextant\n  sextant completions fish > ~/.config/fish/completions/sextant.fish"
+    )]
+    Completions {
+        /// The shell.
+        shell: clap_complete::Shell,
+    },
 }
 
 #[derive(Debug, clap::Args)]
@@ -53,6 +83,9 @@ enum ImportWhat {
     /// RINEX 3 observations (GPS C1C, C2W, D1C, S1C) + GPS broadcast navigation (`.rnx` or
     /// `.rnx.gz`). Pseudoranges are written corrected for the satellite clock and the modelled
     /// atmosphere, as the GNSS message defines them.
+    #[command(
+        after_help = "Example:\n  sextant import rinex tests/data/rinex-esbc/ESBC00DNK_R_20201770000_01H_30S_MO.rnx.gz \\\n    tests/data/rinex-esbc/ESBC00DNK_R_20201770000_01D_GN.rnx.gz --out out/import/esbc.mcap"
+    )]
     Rinex {
         /// Observation file.
         observation: PathBuf,
@@ -188,6 +221,9 @@ struct CalibrateArgs {
 enum CalibrateWhat {
     /// Star-tracker boresight from a static recording at a known site: the paper's three
     /// stages and least squares; prints a table, writes summary.json and a PNG plot.
+    #[command(
+        after_help = "Example:\n  sextant calibrate boresight static.mcap --site 55.655,37.534,200 --out out/calibrate"
+    )]
     Boresight {
         /// The recording (MCAP) of a static run with star-tracker and IMU channels.
         recording: PathBuf,
@@ -274,6 +310,12 @@ fn main() -> anyhow::Result<()> {
             };
             let s = sextant_lab::import_rinex::import_rinex(&opts)?;
             out!("{}", sextant_lab::import_rinex::format_table(&s, &out));
+            Ok(())
+        }
+        Command::Completions { shell } => {
+            use clap::CommandFactory;
+            let mut cmd = Cli::command();
+            clap_complete::generate(shell, &mut cmd, "sextant", &mut std::io::stdout());
             Ok(())
         }
         Command::Report(args) => {
@@ -888,4 +930,47 @@ fn replay(args: ReplayArgs) -> anyhow::Result<()> {
     )?;
     out!("{}", serde_json::to_string_pretty(&s)?);
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::CommandFactory;
+
+    /// The clap definitions are consistent, and every command and subcommand's `--help` ends
+    /// with an example (the command line a user copies first).
+    #[test]
+    fn every_help_has_an_example() {
+        Cli::command().debug_assert();
+        fn walk(cmd: &mut clap::Command, path: &str, missing: &mut Vec<String>) {
+            let name = format!("{path} {}", cmd.get_name()).trim().to_string();
+            let help = cmd.render_long_help().to_string();
+            if !help.contains("Example") {
+                missing.push(name.clone());
+            }
+            for sub in cmd.get_subcommands_mut() {
+                if sub.get_name() != "help" {
+                    walk(sub, &name, missing);
+                }
+            }
+        }
+        let mut missing = Vec::new();
+        walk(&mut Cli::command(), "", &mut missing);
+        assert!(missing.is_empty(), "--help without an example: {missing:?}");
+    }
+
+    #[test]
+    fn completions_name_every_subcommand() {
+        let mut out = Vec::new();
+        clap_complete::generate(
+            clap_complete::Shell::Bash,
+            &mut Cli::command(),
+            "sextant",
+            &mut out,
+        );
+        let script = String::from_utf8(out).unwrap();
+        for sub in Cli::command().get_subcommands() {
+            assert!(script.contains(sub.get_name()), "{}", sub.get_name());
+        }
+    }
 }
