@@ -9,8 +9,9 @@
 //!   NED frame at that origin) → `body` (the solution) → `imu`, `star_tracker`, `gnss_antenna`
 //!   (the sensors' mounting as the filter models it: the IMU defines the body frame, the star
 //!   tracker is mounted 180° about body x — the navigator's nominal mount, see
-//!   `docs/ARCHITECTURE.md` — times the estimated boresight misalignment κ, and the antenna
-//!   sits at the body origin, since the filter models no lever arm). Foxglove's 3D panel draws
+//!   `docs/ARCHITECTURE.md` — times the estimated boresight misalignment κ; the antenna is
+//!   drawn at the body origin: the filter's configured lever arm, `[gnss] lever_arm_b_m`, is
+//!   not in the recorder's hands yet). Foxglove's 3D panel draws
 //!   the vehicle and its sensors from it, in any of these frames.
 //! - topic `status/plot`, schema `sextant.StatusPlot`: the status flattened into plain numbers
 //!   (mode, one 0/1 per sensor alive, deadline misses, records dropped…) so that a Plot panel
