@@ -14,6 +14,7 @@
 //! - [`experiments`]: the named offline experiments of `sextant experiment`.
 //! - [`shipped_config`]: where they find their scenarios (embedded, or `--config DIR`).
 //! - [`import_rinex`]: RINEX 3 observation + navigation files to a recording of GNSS samples.
+//! - [`interchange`]: KF-GINS text logs and described CSV logs into and out of recordings.
 //!
 //! The runtime modules the lab reads (configuration, daemon, recorder, recording reader,
 //! Foxglove conversion, signals, supervisor) are those of `sextant-daemons`, re-exported here under the
@@ -30,6 +31,7 @@ pub mod calibrate;
 pub mod experiments;
 pub mod fonts;
 pub mod import_rinex;
+pub mod interchange;
 pub mod plots;
 pub mod replay;
 pub mod report;

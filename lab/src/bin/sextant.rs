@@ -70,6 +70,38 @@ enum Command {
         /// The shell.
         shell: clap_complete::Shell,
     },
+    /// Export a recording to other tools' formats: `export kfgins REC.mcap --out DIR` (KF-GINS
+    /// text files), `export csv REC.mcap --out DIR` (CSV with a TOML description).
+    Export(ExportArgs),
+}
+
+#[derive(Debug, clap::Args)]
+struct ExportArgs {
+    #[command(subcommand)]
+    what: ExportWhat,
+}
+
+#[derive(Debug, Subcommand)]
+enum ExportWhat {
+    /// KF-GINS text files: imu.txt (GPS seconds of week, Δθ rad, Δv m/s), gnss.txt (seconds of
+    /// week, lat, lon deg, height m, σ N/E/D m), truth.nav and nav.nav (week, seconds of week,
+    /// lat, lon, height, v N/E/D, roll, pitch, yaw deg), filter.toml.
+    Kfgins {
+        /// The recording.
+        recording: PathBuf,
+        /// Output directory.
+        #[arg(long, default_value = "out/export/kfgins")]
+        out: PathBuf,
+    },
+    /// CSV files (GPS seconds, ECEF GNSS with full covariances, IMU increments) and the
+    /// description.toml that `import csv --describe` reads back bit for bit.
+    Csv {
+        /// The recording.
+        recording: PathBuf,
+        /// Output directory.
+        #[arg(long, default_value = "out/export/csv")]
+        out: PathBuf,
+    },
 }
 
 #[derive(Debug, clap::Args)]
@@ -100,6 +132,44 @@ enum ImportWhat {
         /// Elevation mask, degrees.
         #[arg(long, default_value_t = 10.0)]
         elevation_mask: f64,
+    },
+    /// KF-GINS text files (plain or `.gz`): IMU increments (GPS seconds of week, Δθ rad, Δv
+    /// m/s, front-right-down axes), GNSS positions (seconds of week, lat, lon deg, height m,
+    /// σ N/E/D m) and a reference trajectory (recorded as the truth).
+    Kfgins {
+        /// IMU increment file.
+        #[arg(long)]
+        imu: Option<PathBuf>,
+        /// GNSS position file.
+        #[arg(long)]
+        gnss: Option<PathBuf>,
+        /// Reference trajectory (week, seconds of week, lat, lon, height, v N/E/D, roll,
+        /// pitch, yaw deg).
+        #[arg(long)]
+        truth: Option<PathBuf>,
+        /// GPS week of the first rows of the IMU and GNSS files (else the trajectory's).
+        #[arg(long)]
+        week: Option<i64>,
+        /// Filter configuration to embed (filter.toml or a system configuration; default:
+        /// the built-in one).
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// The recording to write.
+        #[arg(long, default_value = "out/import/recording.mcap")]
+        out: PathBuf,
+    },
+    /// CSV files described by a TOML file (columns, units, frames, time base; see
+    /// docs/DATA.md).
+    Csv {
+        /// The description.
+        #[arg(long)]
+        describe: PathBuf,
+        /// Filter configuration to embed (default: the built-in one).
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// The recording to write.
+        #[arg(long, default_value = "out/import/recording.mcap")]
+        out: PathBuf,
     },
 }
 
@@ -316,6 +386,53 @@ fn main() -> anyhow::Result<()> {
             use clap::CommandFactory;
             let mut cmd = Cli::command();
             clap_complete::generate(shell, &mut cmd, "sextant", &mut std::io::stdout());
+            Ok(())
+        }
+        Command::Import(ImportArgs {
+            what:
+                ImportWhat::Kfgins {
+                    imu,
+                    gnss,
+                    truth,
+                    week,
+                    config,
+                    out,
+                },
+        }) => {
+            use sextant_lab::interchange::{format_counts, kfgins};
+            if imu.is_none() && gnss.is_none() {
+                bail!("give --imu and/or --gnss");
+            }
+            let files = kfgins::ImportFiles {
+                imu,
+                gnss,
+                truth,
+                week,
+            };
+            let c = kfgins::import(&files, config.as_deref(), &out)?;
+            out!("{}", format_counts("imported", &c));
+            Ok(())
+        }
+        Command::Import(ImportArgs {
+            what:
+                ImportWhat::Csv {
+                    describe,
+                    config,
+                    out,
+                },
+        }) => {
+            use sextant_lab::interchange::{csv_log, format_counts};
+            let c = csv_log::import(&describe, config.as_deref(), &out)?;
+            out!("{}", format_counts("imported", &c));
+            Ok(())
+        }
+        Command::Export(ExportArgs { what }) => {
+            use sextant_lab::interchange::{csv_log, format_counts, kfgins};
+            let c = match what {
+                ExportWhat::Kfgins { recording, out } => kfgins::export(&recording, &out)?,
+                ExportWhat::Csv { recording, out } => csv_log::export(&recording, &out)?,
+            };
+            out!("{}", format_counts("exported", &c));
             Ok(())
         }
         Command::Report(args) => {
