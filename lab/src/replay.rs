@@ -440,7 +440,12 @@ pub fn format_offline_table(s: &OfflineSummary) -> String {
         "solutions recorded / replayed",
         format!("{} / {}", s.solutions_recorded, s.solutions_replayed),
     );
-    if s.config_source == "embedded" {
+    if s.config_source == "embedded" && s.solutions_recorded == 0 {
+        row(
+            "bit exact",
+            "- (the recording has no solutions to compare: inputs only)".into(),
+        );
+    } else if s.config_source == "embedded" {
         row(
             "solutions bit-identical",
             format!("{} of {}", s.solutions_bit_identical, s.solutions_compared),
