@@ -394,14 +394,17 @@ impl Clock {
     }
 }
 
-/// Row iteration with the time read and checked increasing: (line, fields, time).
+/// A data row with its time: (line, fields, time of validity).
+type TimedRow<'a> = (u64, &'a [String], GpsTime);
+
+/// Row iteration with the time read and checked increasing.
 fn timed_rows<'a>(
     table: &'a Table,
     spec: &TimeSpec,
-) -> Result<Vec<(u64, &'a [String], GpsTime)>, InterchangeError> {
+) -> Result<Vec<TimedRow<'a>>, InterchangeError> {
     let tcol = table.column(&spec.column)?;
     let mut clock = Clock::new(spec, &table.path)?;
-    let mut out: Vec<(u64, &[String], GpsTime)> = Vec::with_capacity(table.rows.len());
+    let mut out: Vec<TimedRow> = Vec::with_capacity(table.rows.len());
     for (line, f) in &table.rows {
         let t = clock.time(&table.path, *line, tcol, &f[tcol])?;
         check_increasing(&table.path, *line, out.last().map(|r| r.2.ns), t.ns)?;

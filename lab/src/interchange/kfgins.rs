@@ -129,14 +129,14 @@ pub fn check_increasing(
     }
 }
 
+/// One IMU row as read: line, GPS ns, Δθ (rad), Δv (m/s), interval (s) if the file gives it.
+pub type ImuRow = (u64, i64, [f64; 3], [f64; 3], Option<f64>);
+
 /// IMU samples from increments at strictly increasing times: `rows` are (line, GPS ns, Δθ rad,
 /// Δv m/s, interval s if the file gives it). Without a given interval, sample k's is
 /// `t_k − t_(k−1)` and the first sample's that of the second (an interval of a single sample
 /// is unknown: error).
-pub fn imu_samples(
-    path: &Path,
-    rows: &[(u64, i64, [f64; 3], [f64; 3], Option<f64>)],
-) -> Result<Vec<ImuSample>, TextError> {
+pub fn imu_samples(path: &Path, rows: &[ImuRow]) -> Result<Vec<ImuSample>, TextError> {
     let mut out = Vec::with_capacity(rows.len());
     for (k, &(line, t, dtheta, dv, dt)) in rows.iter().enumerate() {
         check_increasing(path, line, k.checked_sub(1).map(|j| rows[j].1), t)?;
