@@ -256,9 +256,9 @@ pub fn write_recording(
             ..Default::default()
         },
     )?;
+    // A log has no reception clock: 0 makes the recorder's publish time the log time.
     for r in records {
-        let mono = record_time_ns(&r).max(0) as u64;
-        recorder.record_blocking(r, mono);
+        recorder.record_blocking(r, 0);
     }
     Ok(recorder.finish()?.written)
 }
