@@ -102,17 +102,6 @@ fn wait_for(child: &mut Child, timeout: Duration) -> std::process::ExitStatus {
     }
 }
 
-fn pid_of(prefix: &str, program: &str) -> Option<i32> {
-    processes_matching(prefix)
-        .into_iter()
-        .find(|(_, cmd)| {
-            cmd.split_whitespace()
-                .next()
-                .is_some_and(|exe| exe.ends_with(program))
-        })
-        .map(|(pid, _)| pid)
-}
-
 fn log_text(out: &Path) -> String {
     let mut s = std::fs::read_to_string(out.join("sextant.log")).unwrap_or_default();
     s += &std::fs::read_to_string(out.join("logs/sextant-fusion.log")).unwrap_or_default();

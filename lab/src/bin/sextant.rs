@@ -72,6 +72,9 @@ enum Command {
     },
     /// Export a recording to other tools' formats: `export kfgins REC.mcap --out DIR` (KF-GINS
     /// text files), `export csv REC.mcap --out DIR` (CSV with a TOML description).
+    #[command(
+        after_help = "Examples:\n  sextant export kfgins out/run/recording.mcap --out out/export/kfgins\n  sextant export csv out/run/recording.mcap --out out/export/csv"
+    )]
     Export(ExportArgs),
 }
 
@@ -86,6 +89,9 @@ enum ExportWhat {
     /// KF-GINS text files: imu.txt (GPS seconds of week, Δθ rad, Δv m/s), gnss.txt (seconds of
     /// week, lat, lon deg, height m, σ N/E/D m), truth.nav and nav.nav (week, seconds of week,
     /// lat, lon, height, v N/E/D, roll, pitch, yaw deg), filter.toml.
+    #[command(
+        after_help = "Example:\n  sextant export kfgins out/run/recording.mcap --out out/export/kfgins"
+    )]
     Kfgins {
         /// The recording.
         recording: PathBuf,
@@ -95,6 +101,9 @@ enum ExportWhat {
     },
     /// CSV files (GPS seconds, ECEF GNSS with full covariances, IMU increments) and the
     /// description.toml that `import csv --describe` reads back bit for bit.
+    #[command(
+        after_help = "Example:\n  sextant export csv out/run/recording.mcap --out out/export/csv"
+    )]
     Csv {
         /// The recording.
         recording: PathBuf,
@@ -136,6 +145,9 @@ enum ImportWhat {
     /// KF-GINS text files (plain or `.gz`): IMU increments (GPS seconds of week, Δθ rad, Δv
     /// m/s, front-right-down axes), GNSS positions (seconds of week, lat, lon deg, height m,
     /// σ N/E/D m) and a reference trajectory (recorded as the truth).
+    #[command(
+        after_help = "Example:\n  sextant import kfgins --gnss tests/data/kfgins-rtk/GNSS-RTK-slice.txt --week 2100 --out out/import/rtk.mcap"
+    )]
     Kfgins {
         /// IMU increment file.
         #[arg(long)]
@@ -160,6 +172,9 @@ enum ImportWhat {
     },
     /// CSV files described by a TOML file (columns, units, frames, time base; see
     /// docs/DATA.md).
+    #[command(
+        after_help = "Example:\n  sextant export csv out/run/recording.mcap --out out/export/csv\n  sextant import csv --describe out/export/csv/description.toml --out out/import/csv.mcap"
+    )]
     Csv {
         /// The description.
         #[arg(long)]
