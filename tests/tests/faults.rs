@@ -167,8 +167,10 @@ fn killed_driver_is_reported_degrades_and_is_used_again_after_restart() {
 
     // Status: GNSS declared dead (alive bit cleared, a deadline miss) while the others stay
     // alive. Deadline 3 s simulated; the status comes every 1 s wall = 20 s simulated, so the
-    // first status after the deadline has filter time at most 3 + 20 s (+1 s slack) after the
-    // last fix.
+    // first status after the deadline has filter time at most 3 + 20 s after the last fix,
+    // plus the scheduling delay of the wall-clock status timer: on a loaded 2-core machine
+    // that delay reaches tens of milliseconds (22 ms seen, = 0.44 s simulated); 0.25 s wall
+    // (5 s simulated) is allowed for it.
     let status: Vec<&serde_json::Value> = rec.topic("status").map(|r| &r.json).collect();
     let gnss_bit = 1 << 2;
     let first_dead = status
@@ -184,7 +186,7 @@ fn killed_driver_is_reported_degrades_and_is_used_again_after_restart() {
         "GNSS reported dead only after it came back"
     );
     assert!(
-        (t_dead - gap_start) as f64 * 1e-9 <= 3.0 + speed + 1.0,
+        (t_dead - gap_start) as f64 * 1e-9 <= 3.0 + speed * (1.0 + 0.25),
         "dead reported {} s after the last fix",
         (t_dead - gap_start) as f64 * 1e-9
     );

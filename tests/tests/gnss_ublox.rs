@@ -36,7 +36,10 @@ const TOW0_MS: u32 = (4 * 86_400 + 21 * 3600 + 18) * 1000;
 const TOD0_MS: u32 = 21 * 3600 * 1000;
 /// Simulated seconds: 100 s of alignment (config/filter.toml), then GNSS-inertial.
 const EPOCHS: u32 = 130;
-const SPEED: f64 = 20.0;
+/// Ten times real time: the delayed-fusion window (1 s simulated) is then 100 ms of wall time,
+/// enough for the pty, the driver and the IPC hop on a loaded 2-core machine (at 20× its 50 ms
+/// were once exceeded under load and fixes arrived too late to fuse).
+const SPEED: f64 = 10.0;
 
 fn tempdir(tag: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("sextant-{tag}-{}", std::process::id()));
