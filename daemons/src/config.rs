@@ -115,6 +115,17 @@ pub struct RecorderSection {
     pub flush_interval_s: f64,
 }
 
+/// `[foxglove]` (optional): the live view. When present, `sextant run` starts the live
+/// Foxglove server (`sextant-foxglove`) on `listen` beside the fusion daemon; `--foxglove ADDR`
+/// does the same from the command line.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct FoxgloveSection {
+    /// Address of the WebSocket server, `IP:PORT` (e.g. `127.0.0.1:8765`; `0.0.0.0:8765` to
+    /// serve other computers).
+    pub listen: std::net::SocketAddr,
+}
+
 /// The whole system configuration file.
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
@@ -127,6 +138,9 @@ pub struct SystemConfig {
     pub fusion: FusionSection,
     /// `[recorder]`.
     pub recorder: RecorderSection,
+    /// `[foxglove]`: the live view (absent: not started unless `sextant run --foxglove`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub foxglove: Option<FoxgloveSection>,
 }
 
 /// A loaded and validated configuration with the file it came from.
@@ -393,6 +407,22 @@ mod tests {
         let e = SystemConfig::parse(&text, &f()).unwrap_err().to_string();
         assert!(e.contains("nav_decimaton"), "{e}");
         assert!(e.contains("test/sextant.toml"), "{e}");
+    }
+
+    /// `[foxglove]` is optional; its address must be `IP:PORT`, and a bad one is named.
+    #[test]
+    fn foxglove_section_is_optional_and_checked() {
+        let c = SystemConfig::parse(GOOD, &f()).unwrap();
+        assert_eq!(c.foxglove, None);
+        let text = format!("{GOOD}\n[foxglove]\nlisten = \"127.0.0.1:8765\"\n");
+        let c = SystemConfig::parse(&text, &f()).unwrap();
+        assert_eq!(
+            c.foxglove.map(|s| s.listen),
+            Some(([127, 0, 0, 1], 8765).into())
+        );
+        let text = format!("{GOOD}\n[foxglove]\nlisten = \"localhost\"\n");
+        let e = SystemConfig::parse(&text, &f()).unwrap_err().to_string();
+        assert!(e.contains("listen"), "{e}");
     }
 
     #[test]

@@ -1,6 +1,7 @@
-//! The supervisor of `sextant run`: starts the driver processes and the fusion daemon, restarts
-//! one that dies unexpectedly, stops them in order when the run ends or `sextant` is told to
-//! stop (SIGINT/SIGTERM), and shows a live one-line status read from `<prefix>/status`.
+//! The supervisor of `sextant run`: starts the driver processes, the fusion daemon and the
+//! auxiliary services (the live Foxglove server), restarts one that dies unexpectedly, stops
+//! them in order when the run ends or `sextant` is told to stop (SIGINT/SIGTERM), and shows a
+//! live one-line status read from `<prefix>/status`.
 //!
 //! Every child runs in its own process group (a terminal Ctrl-C reaches only `sextant`, which
 //! then stops the drivers first and the fusion daemon last, so that the recorder sees every
@@ -44,6 +45,10 @@ pub struct RunPlan {
     /// The fusion daemon; its arguments contain `--out RECORDING`, replaced by
     /// [`recording_path`]`(out, k)` on its k-th restart.
     pub fusion: ChildSpec,
+    /// Auxiliary services (the live Foxglove server): started after the fusion daemon, run
+    /// until the run ends, restarted like a driver whenever they exit, stopped with the
+    /// drivers; the run never waits for them and goes on when one is given up on.
+    pub services: Vec<ChildSpec>,
     /// Output directory of the run (recordings of restarted fusion daemons).
     pub out: PathBuf,
     /// Restarts allowed per child.
@@ -84,6 +89,8 @@ pub struct RunOutcome {
     pub fusion_restarts: u32,
     /// Restarts per driver, in the order of [`RunPlan::drivers`].
     pub driver_restarts: Vec<(String, u32)>,
+    /// Restarts per service, in the order of [`RunPlan::services`].
+    pub service_restarts: Vec<(String, u32)>,
     /// Recordings written, in order: the first fusion daemon's, then one per restart.
     pub recordings: Vec<PathBuf>,
     /// The exit reports of the fusion daemons that reported (one per clean exit, in order);
@@ -126,6 +133,8 @@ pub enum Role {
     Driver,
     /// The fusion daemon: it ends only when stopped, so any exit during the run is a death.
     Fusion,
+    /// An auxiliary service: it too ends only when stopped.
+    Service,
 }
 
 /// What to do about a child that exited during the run.
@@ -140,8 +149,9 @@ pub enum ExitAction {
 }
 
 /// The restart policy: a driver that exits 0 is finished; a driver that dies otherwise, or the
-/// fusion daemon whatever its status, is restarted while it has had fewer than `max_restarts`
-/// restarts (a driver after `restart_delay`, the fusion daemon at once), else given up on.
+/// fusion daemon or a service whatever its status, is restarted while it has had fewer than
+/// `max_restarts` restarts (a driver or a service after `restart_delay`, the fusion daemon at
+/// once), else given up on.
 pub fn on_exit(
     role: Role,
     exited_ok: bool,
@@ -152,7 +162,7 @@ pub fn on_exit(
     match role {
         Role::Driver if exited_ok => ExitAction::Finished,
         _ if restarts >= max_restarts => ExitAction::GiveUp,
-        Role::Driver => ExitAction::Restart(restart_delay),
+        Role::Driver | Role::Service => ExitAction::Restart(restart_delay),
         Role::Fusion => ExitAction::Restart(Duration::ZERO),
     }
 }
@@ -483,10 +493,12 @@ pub async fn supervise(
         ..new_slot(&plan.fusion)
     });
     let driver_idx: Vec<usize> = (0..fusion_idx).collect();
+    slots.extend(plan.services.iter().map(new_slot));
+    let service_idx: Vec<usize> = (fusion_idx + 1..slots.len()).collect();
 
     let (tx, mut rx) = mpsc::unbounded_channel();
     spawn(fusion_idx, &mut slots[fusion_idx], &tx)?;
-    for &i in &driver_idx {
+    for &i in service_idx.iter().chain(&driver_idx) {
         if let Err(e) = spawn(i, &mut slots[i], &tx) {
             let mut results = HashMap::new();
             let all: Vec<usize> = (0..slots.len()).collect();
@@ -572,8 +584,9 @@ pub async fn supervise(
                     }
                     continue;
                 }
+                let role = if service_idx.contains(&i) { Role::Service } else { Role::Driver };
                 let slot = &mut slots[i];
-                match on_exit(Role::Driver, ok, slot.restarts, max, plan.restart_delay) {
+                match on_exit(role, ok, slot.restarts, max, plan.restart_delay) {
                     ExitAction::Finished => {
                         slot.finished = true;
                         if let Ok(st) = r { results.insert(i, st); }
@@ -604,15 +617,10 @@ pub async fn supervise(
         crate::logging::stderr_text("\n");
         tracing::info!("stopping ({end:?})");
     }
-    // Drivers first, then the fusion daemon (which drains, finishes the recording and exits).
-    stop_and_wait(
-        &mut slots,
-        &driver_idx,
-        &mut rx,
-        plan.stop_timeout,
-        &mut results,
-    )
-    .await;
+    // Drivers and services first, then the fusion daemon (which drains, finishes the recording
+    // and exits).
+    let first: Vec<usize> = driver_idx.iter().chain(&service_idx).copied().collect();
+    stop_and_wait(&mut slots, &first, &mut rx, plan.stop_timeout, &mut results).await;
     stop_and_wait(
         &mut slots,
         &[fusion_idx],
@@ -635,6 +643,10 @@ pub async fn supervise(
         fusion_exit: results.get(&fusion_idx).copied(),
         fusion_restarts: slots[fusion_idx].restarts,
         driver_restarts: slots[..fusion_idx]
+            .iter()
+            .map(|s| (s.spec.name.clone(), s.restarts))
+            .collect(),
+        service_restarts: slots[fusion_idx + 1..]
             .iter()
             .map(|s| (s.spec.name.clone(), s.restarts))
             .collect(),
@@ -682,6 +694,7 @@ mod tests {
         RunPlan {
             drivers,
             fusion,
+            services: Vec::new(),
             out: dir.to_path_buf(),
             max_restarts: 2,
             restart_delay: Duration::from_millis(20),
@@ -727,6 +740,9 @@ mod tests {
                 ExitAction::Restart(Duration::ZERO)
             );
             assert_eq!(on_exit(Role::Fusion, ok, 3, 3, d), ExitAction::GiveUp);
+            // A service runs until stopped: any exit is a death, restarted after the delay.
+            assert_eq!(on_exit(Role::Service, ok, 0, 3, d), ExitAction::Restart(d));
+            assert_eq!(on_exit(Role::Service, ok, 3, 3, d), ExitAction::GiveUp);
         }
     }
 
@@ -817,6 +833,44 @@ mod tests {
         assert!(o.fusion_ok(), "{:?}", o.fusion_exit);
         assert_eq!(o.fusion_restarts, 0);
         assert_eq!(o.recordings, [PathBuf::from(rec)]);
+    }
+
+    /// A service that dies is restarted after the delay; the run ends when the drivers end,
+    /// whatever the service does, and the service is stopped then.
+    #[test]
+    fn service_is_restarted_and_never_holds_the_run() {
+        let dir = tmp_dir("service");
+        let driver = sh(&dir, "driver", "sleep 1; exit 0", &[]);
+        let fusion = sh(&dir, "fusion", &stoppable(&dir), &[]);
+        // First start: exits at once (as a server whose port is busy would); later: runs.
+        let flaky = sh(
+            &dir,
+            "flaky",
+            &format!(
+                "echo started; if [ ! -e {d}/ran ]; then touch {d}/ran; exit 1; fi; {}",
+                stoppable(&dir),
+                d = dir.display()
+            ),
+            &[],
+        );
+        let mut p = plan(&dir, vec![driver], fusion);
+        p.services = vec![flaky];
+        let t0 = Instant::now();
+        let o = run(&p, std::future::pending());
+        assert_eq!(o.end, End::Completed);
+        assert_eq!(o.service_restarts, [("flaky".to_string(), 1)]);
+        assert_eq!(o.driver_restarts, [("driver".to_string(), 0)]);
+        let log = std::fs::read_to_string(dir.join("flaky.log")).unwrap();
+        assert_eq!(log.matches("started").count(), 2, "{log}");
+        // Stopped by SIGTERM at the end (its trap wrote its name), before the fusion daemon.
+        let order = std::fs::read_to_string(dir.join("order")).unwrap();
+        assert_eq!(
+            order.lines().collect::<Vec<_>>(),
+            ["flaky", "fusion"],
+            "{order}"
+        );
+        assert!(o.fusion_ok(), "{:?}", o.fusion_exit);
+        assert!(t0.elapsed() < 10 * SECOND, "{:?}", t0.elapsed());
     }
 
     #[test]

@@ -27,7 +27,7 @@ struct Cli {
 enum Command {
     /// Run the live system: drivers, fusion and recorder; then summarise the recording.
     #[command(
-        after_help = "Example:\n  sextant run --duration 300 --speed 20 --out out/short\n\nExit status: 0 complete recording; 3 the run ended but its recording is incomplete;\n1 the fusion daemon failed or the run was refused."
+        after_help = "Examples:\n  sextant run --duration 300 --speed 20 --out out/short\n  sextant run --foxglove        then in Foxglove: Open connection → Foxglove WebSocket → ws://127.0.0.1:8765\n\nExit status: 0 complete recording; 3 the run ended but its recording is incomplete;\n1 the fusion daemon failed or the run was refused."
     )]
     Run(RunArgs),
     /// Run a named offline experiment; prints its table, writes summary.json and PNG plots.
@@ -294,6 +294,11 @@ struct RunArgs {
     /// The fusion daemon is restarted at once.
     #[arg(long, default_value_t = 0.5)]
     restart_delay: f64,
+    /// Serve the live channels (solution, status, frame tree, sensor inputs) to Foxglove over
+    /// its WebSocket protocol on ADDR (default 127.0.0.1:8765; `[foxglove] listen` of the
+    /// configuration without this option), by the process `sextant-foxglove`.
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = "127.0.0.1:8765")]
+    foxglove: Option<std::net::SocketAddr>,
 }
 
 #[derive(Debug, clap::Args)]
@@ -794,7 +799,19 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
         .context("no directory of the current executable")?;
     let mut names: Vec<String> = rc.drivers.clone();
     names.push("sextant-fusion".into());
+    let foxglove = args
+        .foxglove
+        .or(cfg.system.foxglove.as_ref().map(|f| f.listen));
+    if foxglove.is_some() {
+        names.push("sextant-foxglove".into());
+    }
     ensure_binaries(&bin_dir, &names)?;
+    // Refuse a busy or foreign address now, with a clear message, rather than watch the live
+    // server die at start-up (it is restarted, then given up on).
+    if let Some(addr) = foxglove {
+        std::net::TcpListener::bind(addr)
+            .with_context(|| format!("--foxglove {addr}: cannot listen there"))?;
+    }
 
     let interrupt = supervisor::stop_signals()?;
     let start_mono_ns = msgs::monotonic_ns() + (rc.start_delay_s * 1e9) as u64;
@@ -815,11 +832,26 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
         log: out.join("logs").join("sextant-fusion.log"),
     };
     let fusion_log = fusion.log.clone();
+    let services: Vec<ChildSpec> = foxglove
+        .map(|addr| ChildSpec {
+            name: "sextant-foxglove".into(),
+            program: bin_dir.join("sextant-foxglove"),
+            args: vec![
+                "--prefix".into(),
+                prefix.clone(),
+                "--listen".into(),
+                addr.to_string(),
+            ],
+            log: out.join("logs").join("sextant-foxglove.log"),
+        })
+        .into_iter()
+        .collect();
     // The drivers end by themselves; a watchdog stops a run that overruns by far.
     let expected = Duration::from_secs_f64(rc.start_delay_s + duration / speed);
     let plan = supervisor::RunPlan {
         drivers,
         fusion,
+        services,
         out: out.clone(),
         max_restarts: rc.max_restarts,
         restart_delay,
@@ -834,6 +866,11 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
         scen.name,
         out.display()
     );
+    if let Some(addr) = foxglove {
+        err!(
+            "sextant run: live view for Foxglove on ws://{addr} (Open connection → Foxglove WebSocket)"
+        );
+    }
     let outcome = supervisor::supervise(&plan, interrupt).await?;
     let end = outcome.end;
     let fusion_ok = outcome.fusion_ok();
@@ -937,6 +974,18 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
                     .collect(),
             ),
         );
+        if !outcome.service_restarts.is_empty() {
+            m.insert(
+                "service_restarts".into(),
+                serde_json::Value::Object(
+                    outcome
+                        .service_restarts
+                        .iter()
+                        .map(|(name, n)| (name.clone(), (*n).into()))
+                        .collect(),
+                ),
+            );
+        }
         m.insert("recording_complete".into(), complete.into());
         m.insert(
             "counters_source".into(),
