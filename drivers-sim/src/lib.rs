@@ -12,6 +12,7 @@ pub mod driver;
 pub mod gnss;
 pub mod imu;
 pub mod offline;
+pub mod reference_trajectory;
 pub mod scenario;
 pub mod sensors;
 pub mod sources;

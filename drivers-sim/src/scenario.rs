@@ -90,6 +90,34 @@ pub enum Trajectory {
     /// A fixed-wing aircraft (UAV, paper 004): take-off roll, climb, cruise with coordinated
     /// (banked) turns, descent.
     Aircraft(AircraftTrajectory),
+    /// Follows a recorded reference trajectory: a smooth spline through its points
+    /// ([`crate::reference_trajectory`]); `[site]` is replaced by the spline's start.
+    Reference(ReferenceTrajectorySpec),
+}
+
+/// `kind = "reference"`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ReferenceTrajectorySpec {
+    /// Text file of the points, relative to the scenario file: one point per line,
+    /// `t_s x_m y_m z_m` (time from the first point, ECEF position), optionally after a leading
+    /// tag word (the smartLoc ground-truth `point3` lines) and before further columns (ignored);
+    /// `#` starts a comment. May be absent only when the caller sets `spline` itself.
+    #[serde(default)]
+    pub file: Option<String>,
+    /// Intervals `[start_s, end_s]` in which the vehicle stands still.
+    #[serde(default)]
+    pub still_s: Vec<[f64; 2]>,
+    /// Smallest chord length between the path spline's nodes, m.
+    #[serde(default = "default_path_node_spacing_m")]
+    pub path_node_spacing_m: f64,
+    /// The spline: built from `file` at validation, or set by the caller.
+    #[serde(skip)]
+    pub spline: Option<std::sync::Arc<crate::reference_trajectory::ReferenceTrajectory>>,
+}
+
+fn default_path_node_spacing_m() -> f64 {
+    crate::reference_trajectory::ReferenceSettings::default().path_node_spacing_m
 }
 
 /// `kind = "aircraft"`.
@@ -874,8 +902,32 @@ impl Scenario {
     }
 
     /// Second pass: check values, resolve grades. Errors name `file` and the dotted key.
-    pub fn validate(spec: ScenarioFile, file: &Path, sensors_dir: &Path) -> Result<Self, SimError> {
+    pub fn validate(
+        mut spec: ScenarioFile,
+        file: &Path,
+        sensors_dir: &Path,
+    ) -> Result<Self, SimError> {
         let f = file;
+        if let Trajectory::Reference(r) = &mut spec.trajectory {
+            let spline = crate::reference_trajectory::load_spec(r, f)?;
+            if spec.scenario.duration_s > spline.end_s() {
+                return Err(invalid(
+                    f,
+                    "scenario.duration_s",
+                    format!(
+                        "{} s runs past the reference trajectory's last point at {} s",
+                        spec.scenario.duration_s,
+                        spline.end_s()
+                    ),
+                ));
+            }
+            let g = spline.start();
+            spec.site = Site {
+                lat_deg: g.lat_rad.to_degrees(),
+                lon_deg: g.lon_rad.to_degrees(),
+                height_m: g.height_m,
+            };
+        }
         let finite = |key: &str, v: f64| -> Result<(), SimError> {
             if v.is_finite() {
                 Ok(())
@@ -963,6 +1015,7 @@ impl Scenario {
         }
         match &spec.trajectory {
             Trajectory::Aircraft(ac) => validate_aircraft(f, ac)?,
+            Trajectory::Reference(_) => {} // checked when its spline was built above
             Trajectory::Static(st) => {
                 finite("trajectory.roll_deg", st.roll_deg)?;
                 finite("trajectory.pitch_deg", st.pitch_deg)?;

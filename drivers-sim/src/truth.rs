@@ -93,6 +93,8 @@ pub enum Profile {
         /// Pieces in time order.
         pieces: Vec<AircraftPiece>,
     },
+    /// A spline through a recorded reference trajectory.
+    Reference(std::sync::Arc<crate::reference_trajectory::ReferenceTrajectory>),
 }
 
 /// An aircraft segment resolved to start time and the start/change of speed, heading and
@@ -261,6 +263,16 @@ impl Profile {
                 });
                 Profile::Aircraft { pieces }
             }
+            Trajectory::Reference(r) => match &r.spline {
+                Some(spline) => Profile::Reference(spline.clone()),
+                // Scenario::validate builds the spline; an unvalidated spec stands still.
+                None => Profile::Static {
+                    roll_rad: 0.0,
+                    pitch_rad: 0.0,
+                    heading_rad: 0.0,
+                    moves: Vec::new(),
+                },
+            },
         }
     }
 
@@ -313,6 +325,7 @@ impl Profile {
                 let i = pieces.partition_point(|p| p.t0_s <= t_s).saturating_sub(1);
                 pieces[i].kinematics(t_s)
             }
+            Profile::Reference(spline) => spline.kinematics(t_s),
         }
     }
 }
@@ -493,8 +506,11 @@ pub struct TruthGenerator {
 impl TruthGenerator {
     /// Start at grid point 0 of the scenario.
     pub fn new(scn: &Scenario) -> Self {
-        let profile = Profile::new(scn);
-        let s = scn.spec.site;
+        Self::from_profile(Profile::new(scn), scn.spec.site)
+    }
+
+    /// Start at grid point 0 of `profile` from the geodetic point `s`.
+    pub fn from_profile(profile: Profile, s: crate::scenario::Site) -> Self {
         let ell = WGS84;
         let lat = s.lat_deg.to_radians();
         let lon = s.lon_deg.to_radians();
