@@ -53,12 +53,19 @@ pub struct ReferenceSettings {
     /// Smallest chord length between two nodes of the path spline, m: the points closer to
     /// their predecessor node are smoothed onto the path instead of interpolated.
     pub path_node_spacing_m: f64,
+    /// A moving point farther than this from the quadratic in time through its two
+    /// neighbours on each side is an outlier of the reference and left out, m.
+    pub outlier_threshold_m: f64,
 }
 
 impl Default for ReferenceSettings {
+    /// 0.5 m node spacing; 0.3 m outlier threshold: the quadratic through ±2 points 0.2–0.3 s
+    /// apart predicts a vehicle with jerk ≤ 3 m/s³ to j·τ³/6 ≤ 0.1 m over τ ≤ 0.6 s, so
+    /// 0.3 m is three times the largest kinematic prediction error.
     fn default() -> Self {
         Self {
             path_node_spacing_m: 0.5,
+            outlier_threshold_m: 0.3,
         }
     }
 }
@@ -108,8 +115,8 @@ pub enum ReferenceError {
         /// Its end, s.
         end_s: f64,
     },
-    /// A path node spacing that is not a positive finite length.
-    #[error("path_node_spacing_m must be positive and finite, got {0}")]
+    /// A path node spacing or outlier threshold that is not a positive finite length.
+    #[error("path_node_spacing_m and outlier_threshold_m must be positive and finite, got {0}")]
     BadSpacing(f64),
 }
 
@@ -277,6 +284,8 @@ fn quintic(h: f64, u: f64, p: [f64; 2], v: [f64; 2], a: [f64; 2]) -> [f64; 3] {
 #[derive(Debug, Clone)]
 pub struct ReferenceTrajectory {
     frame: LocalFrame,
+    /// Times of the points left out as outliers, s.
+    rejected: Vec<f64>,
     /// Node times of the time law, s.
     t_s: Vec<f64>,
     /// Chord length at the nodes, m.
@@ -297,8 +306,10 @@ impl ReferenceTrajectory {
         settings: &ReferenceSettings,
     ) -> Result<Self, ReferenceError> {
         let spacing = settings.path_node_spacing_m;
-        if !(spacing.is_finite() && spacing > 0.0) {
-            return Err(ReferenceError::BadSpacing(spacing));
+        for v in [spacing, settings.outlier_threshold_m] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(ReferenceError::BadSpacing(v));
+            }
         }
         if points.len() < 2 {
             return Err(ReferenceError::TooFewPoints(points.len()));
@@ -328,12 +339,11 @@ impl ReferenceTrajectory {
             }
         }
         let frame = LocalFrame::new(earth::ecef_to_geodetic(&WGS84, &points[0].r_e_m));
-        let t: Vec<f64> = points.iter().map(|p| p.t_s).collect();
+        let mut t: Vec<f64> = points.iter().map(|p| p.t_s).collect();
         let mut x: Vec<Vector3<f64>> = points.iter().map(|p| frame.local_of(&p.r_e_m)).collect();
-        let still: Vec<bool> = t
-            .iter()
-            .map(|&ti| still_s.iter().any(|w| ti >= w[0] && ti <= w[1]))
-            .collect();
+        let is_still = |ti: f64| still_s.iter().any(|w| ti >= w[0] && ti <= w[1]);
+        let rejected = reject_outliers(&mut t, &mut x, &is_still, settings.outlier_threshold_m);
+        let still: Vec<bool> = t.iter().map(|&ti| is_still(ti)).collect();
         // Each run of standing points collapses to its mean.
         let mut i = 0;
         while i < x.len() {
@@ -379,6 +389,7 @@ impl ReferenceTrajectory {
         }
         Ok(Self {
             frame,
+            rejected,
             t_s: t,
             s_m: s,
             sd_m_s: sd,
@@ -391,6 +402,11 @@ impl ReferenceTrajectory {
     pub fn start(&self) -> Geodetic {
         let [x, _, _] = self.path.eval(self.s_m[0]);
         self.frame.geodetic(&x)
+    }
+
+    /// Times of the reference points left out as outliers (`outlier_threshold_m`), s.
+    pub fn rejected_s(&self) -> &[f64] {
+        &self.rejected
     }
 
     /// Time of the last point, s.
@@ -465,6 +481,49 @@ impl ReferenceTrajectory {
             roll_rate_rad_s: 0.0,
             turntable_rad: 0.0,
         }
+    }
+}
+
+/// Remove, worst first, every moving point farther than `threshold_m` from the least-squares
+/// quadratic in time through its two neighbours on each side (the first and last two points
+/// are kept). Returns the removed points' times.
+fn reject_outliers(
+    t: &mut Vec<f64>,
+    x: &mut Vec<Vector3<f64>>,
+    is_still: &dyn Fn(f64) -> bool,
+    threshold_m: f64,
+) -> Vec<f64> {
+    let mut removed = Vec::new();
+    loop {
+        let n = t.len();
+        let mut worst = (threshold_m, None);
+        for k in 2..n.saturating_sub(2) {
+            if is_still(t[k]) {
+                continue;
+            }
+            let idx = [k - 2, k - 1, k + 1, k + 2];
+            // Normal equations of x(τ) = c0 + c1 τ + c2 τ², τ = t − t_k.
+            let mut a = nalgebra::Matrix3::<f64>::zeros();
+            let mut b = nalgebra::Matrix3::<f64>::zeros();
+            for &j in &idx {
+                let tau = t[j] - t[k];
+                let phi = Vector3::new(1.0, tau, tau * tau);
+                a += phi * phi.transpose();
+                b += phi * x[j].transpose();
+            }
+            let Some(c) = a.lu().solve(&b) else {
+                continue;
+            };
+            let d = (x[k] - c.row(0).transpose()).norm();
+            if d > worst.0 {
+                worst = (d, Some(k));
+            }
+        }
+        let Some(k) = worst.1 else {
+            return removed;
+        };
+        removed.push(t.remove(k));
+        x.remove(k);
     }
 }
 
@@ -613,6 +672,7 @@ pub fn load_spec(
         .map_err(|e| invalid("trajectory.file", format!("{}: {e}", path.display())))?;
     let settings = ReferenceSettings {
         path_node_spacing_m: spec.path_node_spacing_m,
+        outlier_threshold_m: spec.outlier_threshold_m,
     };
     let spline = ReferenceTrajectory::new(&points, &spec.still_s, &settings)
         .map_err(|e| invalid("trajectory", format!("{}: {e}", path.display())))?;
@@ -729,6 +789,37 @@ mod tests {
         // σ is the horizontal arc length; the 2 % climb makes the path √(1 + 0.02²) longer.
         let dl = spline.length_m() - Drive::arc(pts.last().unwrap().t_s) * 1.0004f64.sqrt();
         assert!(dl.abs() < 0.03, "length off by {dl} m");
+    }
+
+    /// A point thrown 0.9 m sideways (a reference glitch) is left out, and the spline does not
+    /// follow it: its heading rate stays that of the drive's turns, 8/20 = 0.4 rad/s, plus the
+    /// cubic path's curvature overshoot where the line meets the arc (bound 0.5 rad/s; a path
+    /// through the glitch would turn by ±2·atan(0.9/1.6) within 0.4 s, ≈ 5 rad/s).
+    #[test]
+    fn an_outlier_of_the_reference_is_left_out() {
+        let (d, mut pts, _) = drive();
+        let k = pts.iter().position(|p| p.t_s > 30.0).expect("point");
+        let g = earth::ecef_to_geodetic(&WGS84, &pts[k].r_e_m);
+        let east = earth::c_e_n(g.lat_rad, g.lon_rad).column(1).into_owned();
+        pts[k].r_e_m += east * 0.9;
+        let spline = ReferenceTrajectory::new(&pts, &[[8.0, 12.0]], &ReferenceSettings::default())
+            .expect("spline");
+        assert_eq!(spline.rejected_s(), &[pts[k].t_s]);
+        let max_rate = (0..4000)
+            .map(|i| spline.kinematics(i as f64 * 0.01).heading_rate_rad_s.abs())
+            .fold(0.0, f64::max);
+        let clean = ReferenceTrajectory::new(
+            &d.points(40.0),
+            &[[8.0, 12.0]],
+            &ReferenceSettings::default(),
+        )
+        .expect("spline");
+        assert!(clean.rejected_s().is_empty(), "{:?}", clean.rejected_s());
+        let clean_max = (0..4000)
+            .map(|i| clean.kinematics(i as f64 * 0.01).heading_rate_rad_s.abs())
+            .fold(0.0, f64::max);
+        eprintln!("max heading rate: clean {clean_max}, outlier left out {max_rate} rad/s");
+        assert!(max_rate < 0.5, "{max_rate}");
     }
 
     /// Between the points inside the standstill interval the body does not move or turn at all, and its heading
@@ -865,6 +956,18 @@ mod tests {
             r_e_m: Vector3::new(3.785e6 + x, 9.0e5, 5.037e6),
         };
         let s = ReferenceSettings::default();
+        assert_eq!(
+            ReferenceTrajectory::new(
+                &[p(0.0, 0.0), p(1.0, 5.0)],
+                &[],
+                &ReferenceSettings {
+                    outlier_threshold_m: 0.0,
+                    ..s
+                }
+            )
+            .err(),
+            Some(ReferenceError::BadSpacing(0.0))
+        );
         assert_eq!(
             ReferenceTrajectory::new(&[p(0.0, 0.0)], &[], &s).err(),
             Some(ReferenceError::TooFewPoints(1))

@@ -111,6 +111,9 @@ pub struct ReferenceTrajectorySpec {
     /// Smallest chord length between the path spline's nodes, m.
     #[serde(default = "default_path_node_spacing_m")]
     pub path_node_spacing_m: f64,
+    /// Points farther than this from the quadratic through their neighbours are left out, m.
+    #[serde(default = "default_outlier_threshold_m")]
+    pub outlier_threshold_m: f64,
     /// The spline: built from `file` at validation, or set by the caller.
     #[serde(skip)]
     pub spline: Option<std::sync::Arc<crate::reference_trajectory::ReferenceTrajectory>>,
@@ -118,6 +121,10 @@ pub struct ReferenceTrajectorySpec {
 
 fn default_path_node_spacing_m() -> f64 {
     crate::reference_trajectory::ReferenceSettings::default().path_node_spacing_m
+}
+
+fn default_outlier_threshold_m() -> f64 {
+    crate::reference_trajectory::ReferenceSettings::default().outlier_threshold_m
 }
 
 /// `kind = "aircraft"`.

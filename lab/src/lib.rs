@@ -15,6 +15,7 @@
 //! - [`shipped_config`]: where they find their scenarios (embedded, or `--config DIR`).
 //! - [`import_rinex`]: RINEX 3 observation + navigation files to a recording of GNSS samples.
 //! - [`interchange`]: KF-GINS text logs and described CSV logs into and out of recordings.
+//! - [`smartloc`]: the smartLoc dataset's text format (pseudoranges, odometry, reference).
 //!
 //! The runtime modules the lab reads (configuration, daemon, recorder, recording reader,
 //! Foxglove conversion, signals, supervisor) are those of `sextant-daemons`, re-exported here under the
@@ -37,4 +38,5 @@ pub mod replay;
 pub mod report;
 pub mod scenario;
 pub mod shipped_config;
+pub mod smartloc;
 pub mod stats;

@@ -32,7 +32,7 @@ enum Command {
     Run(RunArgs),
     /// Run a named offline experiment; prints its table, writes summary.json and PNG plots.
     #[command(
-        after_help = "Examples:\n  sextant experiment schuler --out out/schuler\n  sextant experiment all --out docs"
+        after_help = "Examples:\n  sextant experiment schuler --out out/schuler\n  sextant experiment all --out docs\n  sextant experiment hybrid-berlin --data DIR --out out/berlin"
     )]
     Experiment(ExperimentArgs),
     /// Measure latency through the real processes (200 Hz and 1 kHz IMU), offline fusion and
@@ -267,6 +267,11 @@ struct ExperimentArgs {
     /// binary).
     #[arg(long)]
     config: Option<PathBuf>,
+    /// Directory of a dataset an experiment reads instead of its shipped slice: for
+    /// `hybrid-berlin`, the smartLoc files Berlin_Potsdamer_Platz_Input.txt.gz and
+    /// Berlin_Potsdamer_Platz_GT.txt.gz (the whole drive).
+    #[arg(long)]
+    data: Option<PathBuf>,
 }
 
 #[derive(Debug, clap::Args)]
@@ -576,6 +581,12 @@ fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
             bail!("--config {}: no scenarios/ directory there", dir.display());
         }
         experiments_config::use_dir(dir);
+    }
+    if let Some(d) = args.data {
+        if !d.is_dir() {
+            bail!("--data {}: not a directory", d.display());
+        }
+        experiments::hybrid_berlin::use_data_dir(d);
     }
     let out = args
         .out

@@ -52,6 +52,7 @@ pub mod baseline_attitude;
 pub mod consistency;
 pub mod gnss_denied_astro;
 pub mod gravity;
+pub mod hybrid_berlin;
 pub mod hybrid_esbc;
 pub mod inertial_budget;
 pub mod integrators;
@@ -237,6 +238,7 @@ registry! {
     redundancy::Redundancy => Redundancy,
     inertial_budget::InertialBudget => InertialBudget,
     hybrid_esbc::HybridEsbc => HybridEsbc,
+    hybrid_berlin::HybridBerlin => HybridBerlin,
 }
 
 fn unknown(name: &str) -> ExperimentError {
