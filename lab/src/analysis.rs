@@ -217,6 +217,17 @@ pub fn analyze_recording(path: &Path, outages: &[TimeWindow]) -> Result<Summary,
 
 /// Like [`analyze_recording`], with the time series for plots.
 pub fn analyze(path: &Path, outages: &[TimeWindow]) -> Result<Analysis, AnalysisError> {
+    analyze_with_progress(path, outages, false)
+}
+
+/// [`analyze`] with a progress bar over the file on stderr when `progress` (see
+/// [`crate::progress`]): the analysis at the end of `sextant run` and `replay`.
+pub fn analyze_with_progress(
+    path: &Path,
+    outages: &[TimeWindow],
+    progress: bool,
+) -> Result<Analysis, AnalysisError> {
+    let pb = crate::progress::bytes(progress, crate::progress::file_len(path), "analysis");
     let rec = Recording::open(path).map_err(|e| match e {
         RecordingError::Io { path, source } => AnalysisError::Read { path, source },
         other => AnalysisError::NotMcap {
@@ -235,6 +246,7 @@ pub fn analyze(path: &Path, outages: &[TimeWindow]) -> Result<Analysis, Analysis
     let mut fixes: Vec<(i64, [f64; 3])> = Vec::new();
     let mut last_status: Option<Status> = None;
     let (mut t_min, mut t_max) = (i64::MAX, i64::MIN);
+    let mut n = 0u64;
     for m in rec {
         let m = match m {
             Ok(m) => m,
@@ -244,6 +256,10 @@ pub fn analyze(path: &Path, outages: &[TimeWindow]) -> Result<Analysis, Analysis
                 break;
             }
         };
+        n += 1;
+        if n.is_multiple_of(4096) {
+            pb.set_position(m.offset);
+        }
         *s.messages_per_channel
             .entry(m.topic.to_string())
             .or_insert(0) += 1;
@@ -283,6 +299,7 @@ pub fn analyze(path: &Path, outages: &[TimeWindow]) -> Result<Analysis, Analysis
             _ => {}
         }
     }
+    pb.finish_and_clear();
     if let Some(st) = &last_status {
         s.records_dropped = st.records_dropped;
         s.final_mode = Some(

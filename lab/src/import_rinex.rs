@@ -170,6 +170,26 @@ pub fn epoch_samples(
     obs_path: &Path,
     nav_path: &Path,
 ) -> Result<(Vec<GnssSample>, ImportSummary), ImportError> {
+    let hidden = indicatif::ProgressBar::hidden();
+    epoch_samples_showing(
+        obs,
+        nav,
+        mode,
+        elevation_mask_deg,
+        (obs_path, nav_path),
+        &hidden,
+    )
+}
+
+/// [`epoch_samples`], advancing `bar` by one per epoch.
+fn epoch_samples_showing(
+    obs: &ObservationFile,
+    nav: &NavigationFile,
+    mode: ImportMode,
+    elevation_mask_deg: f64,
+    (obs_path, nav_path): (&Path, &Path),
+    bar: &indicatif::ProgressBar,
+) -> Result<(Vec<GnssSample>, ImportSummary), ImportError> {
     let l2 = matches!(mode, ImportMode::IonoFree).then_some("C2W");
     let codes = GpsCodes::select(obs, "C1C", l2).map_err(|source| ImportError::Code {
         path: obs_path.to_path_buf(),
@@ -220,7 +240,9 @@ pub fn epoch_samples(
             }
         };
         samples.push(sample);
+        bar.inc(1);
     }
+    bar.finish_and_clear();
     summary.mean_satellites = if summary.fixed > 0 {
         sats_total as f64 / summary.fixed as f64
     } else {
@@ -243,13 +265,14 @@ pub fn antenna_reference_point(obs: &ObservationFile) -> Option<nalgebra::Vector
 pub fn import_rinex(opts: &ImportOptions) -> Result<ImportSummary, ImportError> {
     let obs = sextant_rinex::read_observation(&opts.observation)?;
     let nav = sextant_rinex::read_navigation(&opts.navigation)?;
-    let (samples, mut summary) = epoch_samples(
+    let bar = crate::progress::steps(true, obs.epochs.len() as u64, "fixing epochs");
+    let (samples, mut summary) = epoch_samples_showing(
         &obs,
         &nav,
         opts.mode,
         opts.elevation_mask_deg,
-        &opts.observation,
-        &opts.navigation,
+        (&opts.observation, &opts.navigation),
+        &bar,
     )?;
     let filter_toml = toml::to_string(&NavigatorConfig::default())
         .map_err(|e| ImportError::Config(e.to_string()))?;

@@ -34,6 +34,7 @@ pub mod fonts;
 pub mod import_rinex;
 pub mod interchange;
 pub mod plots;
+pub mod progress;
 pub mod replay;
 pub mod report;
 pub mod scenario;

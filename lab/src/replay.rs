@@ -215,17 +215,7 @@ fn first_difference(a: &serde_json::Value, b: &serde_json::Value, path: String) 
 }
 
 fn progress_bar(len: u64, show: bool, what: &str) -> indicatif::ProgressBar {
-    if !show {
-        return indicatif::ProgressBar::hidden();
-    }
-    let pb = indicatif::ProgressBar::new(len);
-    if let Ok(style) = indicatif::ProgressStyle::with_template(
-        "{msg} [{elapsed_precise}] {wide_bar} {bytes}/{total_bytes} ({eta})",
-    ) {
-        pb.set_style(style);
-    }
-    pb.set_message(what.to_string());
-    pb
+    crate::progress::bytes(show, len, what)
 }
 
 /// Replay a recording offline; see the module documentation.

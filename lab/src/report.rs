@@ -282,6 +282,8 @@ pub fn report(path: &Path, out_dir: &Path) -> Result<ReportSummary, ReportError>
     let mut t_start = i64::MAX;
     let (mut sextant_records, mut foreign) = (0u64, 0u64);
     let mut foreign_topics: Vec<String> = Vec::new();
+    let pb = crate::progress::bytes(true, crate::progress::file_len(path), "report");
+    let mut n = 0u64;
     for e in &mut rec {
         let e = match e {
             Ok(e) => e,
@@ -291,6 +293,10 @@ pub fn report(path: &Path, out_dir: &Path) -> Result<ReportSummary, ReportError>
                 break;
             }
         };
+        n += 1;
+        if n.is_multiple_of(4096) {
+            pb.set_position(e.offset);
+        }
         let Some(r) = e.record else {
             foreign += 1;
             if foreign_topics.len() < 5 && !foreign_topics.iter().any(|t| **t == *e.topic) {
@@ -318,6 +324,7 @@ pub fn report(path: &Path, out_dir: &Path) -> Result<ReportSummary, ReportError>
             Record::SensorAlive(ev) => alive.push((t, ev.sensor, ev.alive)),
         }
     }
+    pb.finish_and_clear();
     s.recording_complete = rec.is_complete();
     if sextant_records == 0 {
         return Err(ReportError::NotSextant {

@@ -21,6 +21,9 @@ use std::time::{Duration, Instant};
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// No progress bars (they are drawn only when stderr is a terminal anyway).
+    #[arg(long, short, global = true)]
+    quiet: bool,
 }
 
 #[derive(Debug, Subcommand)]
@@ -352,6 +355,7 @@ fn main() -> anyhow::Result<()> {
     // iceoryx2's own log: warnings and errors only unless IOX2_LOG_LEVEL says otherwise.
     iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
     let cli = Cli::parse();
+    sextant_lab::progress::set_quiet(cli.quiet);
     match cli.command {
         Command::Run(args) => {
             let rt = tokio::runtime::Builder::new_current_thread()
@@ -923,7 +927,7 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
     // The table is of the last fusion's recording (the whole run when it never crashed).
     let recording = outcome.recordings.last().cloned().unwrap_or(recording);
     let analysis = if recording.exists() {
-        match analysis::analyze(&recording, &scen.gnss_outages) {
+        match analysis::analyze_with_progress(&recording, &scen.gnss_outages, true) {
             Ok(a) => Some(a),
             Err(e) => {
                 tracing::error!("analysis of {}: {e}", recording.display());
@@ -1081,7 +1085,7 @@ fn replay(args: ReplayArgs) -> anyhow::Result<()> {
         })?;
         out!("{}", rp::format_offline_table(&s));
         let replayed = std::path::Path::new(&s.replayed_recording);
-        let analysis = analysis::analyze(replayed, &[]).ok();
+        let analysis = analysis::analyze_with_progress(replayed, &[], true).ok();
         if let Some(a) = &analysis {
             out!("{}", analysis::format_table(&a.summary));
             let _ = plots::write_plots(&args.out, &a.series);

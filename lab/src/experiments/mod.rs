@@ -279,19 +279,10 @@ pub(crate) fn create_out_dir(out_dir: &Path) -> Result<(), ExperimentError> {
     })
 }
 
-/// A progress bar of `len` steps on stderr, hidden when `progress` is false.
+/// A progress bar of `len` steps on stderr, hidden when `progress` is false (and see
+/// [`crate::progress`]).
 pub(crate) fn progress_bar(progress: bool, len: u64, what: &str) -> indicatif::ProgressBar {
-    if !progress {
-        return indicatif::ProgressBar::hidden();
-    }
-    let bar = indicatif::ProgressBar::new(len);
-    if let Ok(style) = indicatif::ProgressStyle::with_template(
-        "{msg:28} [{bar:40}] {percent:>3}% {elapsed_precise} eta {eta}",
-    ) {
-        bar.set_style(style.progress_chars("=> "));
-    }
-    bar.set_message(what.to_string());
-    bar
+    crate::progress::steps(progress, len, what)
 }
 
 /// `x` with `prec` decimals for a table (or `prec` significant digits in scientific notation

@@ -257,9 +257,14 @@ pub fn write_recording(
         },
     )?;
     // A log has no reception clock: 0 makes the recorder's publish time the log time.
-    for r in records {
+    let pb = crate::progress::steps(true, records.len() as u64, "writing the recording");
+    for (k, r) in records.into_iter().enumerate() {
         recorder.record_blocking(r, 0);
+        if k % 4096 == 0 {
+            pb.set_position(k as u64);
+        }
     }
+    pb.finish_and_clear();
     Ok(recorder.finish()?.written)
 }
 
@@ -273,6 +278,8 @@ pub fn read_streams(path: &Path) -> Result<(Streams, Option<String>), Interchang
         .and_then(|m| m.get(CONFIG_KEY_FILTER_TOML))
         .cloned();
     let mut s = Streams::default();
+    let pb = crate::progress::bytes(true, crate::progress::file_len(path), "reading");
+    let mut n = 0u64;
     for entry in rec {
         let e = match entry {
             Ok(e) => e,
@@ -281,6 +288,10 @@ pub fn read_streams(path: &Path) -> Result<(Streams, Option<String>), Interchang
                 break;
             }
         };
+        n += 1;
+        if n.is_multiple_of(4096) {
+            pb.set_position(e.offset);
+        }
         let Some(r) = e.record else { continue };
         match r {
             Record::Imu(x) => s.imu.push(x),
@@ -293,6 +304,7 @@ pub fn read_streams(path: &Path) -> Result<(Streams, Option<String>), Interchang
             Record::Status(_) | Record::SensorAlive(_) => {}
         }
     }
+    pb.finish_and_clear();
     Ok((s, filter))
 }
 
