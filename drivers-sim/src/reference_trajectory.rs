@@ -949,6 +949,60 @@ mod tests {
         assert!(max_att < 1e-5, "attitude {max_att} rad");
     }
 
+    /// A scenario file with `kind = "reference"` reads its points file (relative to it),
+    /// starts the truth at the first point, and refuses a duration past the last point or a
+    /// missing file, naming the key.
+    #[test]
+    fn scenario_file_with_a_reference_trajectory() {
+        let (d, pts, _) = drive();
+        let dir = std::env::temp_dir().join(format!("sextant-reference-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let text: String = pts
+            .iter()
+            .map(|p| format!("{} {} {} {}\n", p.t_s, p.r_e_m.x, p.r_e_m.y, p.r_e_m.z))
+            .collect();
+        std::fs::write(dir.join("points.txt"), text).unwrap();
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+        let shipped =
+            std::fs::read_to_string(root.join("config/scenarios/berlin_reference.toml")).unwrap();
+        let sensors = root.join("config/sensors");
+        let with = |extra: &str, duration: &str| {
+            shipped
+                .replace(
+                    "kind = \"reference\"",
+                    &format!("kind = \"reference\"\n{extra}"),
+                )
+                .replace("duration_s = 60.0", duration)
+                .replace(
+                    "seed = 1",
+                    &format!(
+                        "seed = 1\nsensors_dir = {:?}",
+                        sensors.display().to_string()
+                    ),
+                )
+        };
+        let path = dir.join("s.toml");
+        let ok = with(
+            "file = \"points.txt\"\nstill_s = [[8.0, 12.0]]",
+            "duration_s = 30.0",
+        );
+        let scn = crate::scenario::Scenario::from_toml_str(&ok, &path).expect("valid");
+        let r0 = TruthGenerator::new(&scn).current().r_e_m;
+        assert!(
+            (r0 - pts[0].r_e_m).norm() < 1e-6,
+            "{}",
+            (r0 - pts[0].r_e_m).norm()
+        );
+        let long = with("file = \"points.txt\"", "duration_s = 100.0");
+        let e = crate::scenario::Scenario::from_toml_str(&long, &path).unwrap_err();
+        assert!(e.to_string().contains("scenario.duration_s"), "{e}");
+        let missing = with("", "duration_s = 30.0");
+        let e = crate::scenario::Scenario::from_toml_str(&missing, &path).unwrap_err();
+        assert!(e.to_string().contains("trajectory.file"), "{e}");
+        let _ = d;
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
     #[test]
     fn bad_input_is_named() {
         let p = |t: f64, x: f64| ReferencePoint {

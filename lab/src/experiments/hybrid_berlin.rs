@@ -907,7 +907,7 @@ pub fn table(s: &Summary) -> String {
     let mut t = format!(
         "hybrid-berlin: {}\ndata: {}\n{} s from the reference's first epoch, statistics after \
          {} s; IMU {}; {} GPS epochs, {:.1} GPS pseudoranges per epoch, {} without a fix; \
-         FDE excluded {}; standing still (odometer zero) {:?} s\nspline (IMU truth) vs \
+         FDE excluded {}; standing still (odometer zero) {} s\nspline (IMU truth) vs \
          reference, horizontal: p50 {} m, p95 {} m, max {} m ({} reference points left out \
          as outliers)\n",
         s.data,
@@ -919,7 +919,11 @@ pub fn table(s: &Summary) -> String {
         s.mean_gps_satellites,
         s.epochs_without_fix,
         s.fde_excluded,
-        s.standstill_s,
+        s.standstill_s
+            .iter()
+            .map(|w| format!("{:.1}–{:.1}", w[0], w[1]))
+            .collect::<Vec<_>>()
+            .join(", "),
         f2(s.spline_vs_reference_m[0]),
         f2(s.spline_vs_reference_m[1]),
         f2(s.spline_vs_reference_m[2]),
