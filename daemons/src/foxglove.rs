@@ -7,12 +7,12 @@
 //!   (position = NED offset from that origin, m; orientation = `q_ned_body`).
 //! - topic `tf`, schema `foxglove.FrameTransforms`: the frame tree `ecef` → `ned` (the local
 //!   NED frame at that origin) → `body` (the solution) → `imu`, `star_tracker`, `gnss_antenna`
-//!   (the sensors' mounting as the filter models it: the IMU defines the body frame, the star
-//!   tracker is mounted 180° about body x — the navigator's nominal mount, see
-//!   `docs/ARCHITECTURE.md` — times the estimated boresight misalignment κ; the antenna is
-//!   drawn at the body origin: the filter's configured lever arm, `[gnss] lever_arm_b_m`, is
-//!   not in the recorder's hands yet). Foxglove's 3D panel draws
-//!   the vehicle and its sensors from it, in any of these frames.
+//!   (the sensors' mounting as the filter models it, [`SensorMounts`]: the IMU defines the body
+//!   frame, the star tracker is mounted 180° about body x — the navigator's nominal mount, see
+//!   `docs/ARCHITECTURE.md` — times the estimated boresight misalignment κ; the antenna sits at
+//!   the filter's configured lever arm `[gnss] lever_arm_b_m`, read from the filter
+//!   configuration a recording carries). Foxglove's 3D panel draws the vehicle and its sensors
+//!   from it, in any of these frames.
 //! - topic `status/plot`, schema `sextant.StatusPlot`: the status flattened into plain numbers
 //!   (mode, one 0/1 per sensor alive, deadline misses, records dropped…) so that a Plot panel
 //!   shows each as a line without decoding bit masks.
@@ -28,9 +28,11 @@
 //! header.
 
 use fusion::frames::Rotation;
+use fusion::navigator::NavigatorConfig;
 use msgs::{NavSolution, SensorId, Status};
 use nalgebra::{Matrix3, Vector3 as V3};
 use serde::Serialize;
+use std::collections::BTreeMap;
 
 /// Topic of the LocationFix channel.
 pub const LOCATION_FIX_TOPIC: &str = "nav/location_fix";
@@ -245,9 +247,55 @@ const ZERO: Vector3 = Vector3 {
     z: 0.0,
 };
 
+/// Where the filter models the sensors in the body frame (the star tracker's mount is the
+/// nominal one times the solution's estimated boresight, not configured here).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct SensorMounts {
+    /// GNSS antenna phase centre from the IMU (body origin), body axes, m (`[gnss]
+    /// lever_arm_b_m` of the filter configuration).
+    pub gnss_lever_arm_b_m: [f64; 3],
+}
+
+impl SensorMounts {
+    /// The mounts of a filter configuration.
+    pub fn of_filter(cfg: &NavigatorConfig) -> Self {
+        Self {
+            gnss_lever_arm_b_m: cfg.gnss.lever_arm_b_m,
+        }
+    }
+
+    /// The mounts of the filter configuration in a recording's metadata (the TOML under
+    /// [`crate::recorder::CONFIG_KEY_FILTER_TOML`] of [`crate::recorder::CONFIG_METADATA_NAME`]);
+    /// all at the body origin when there is none or it does not parse (a recording of another
+    /// version), with a warning for the latter.
+    pub fn of_metadata(metadata: &[(String, BTreeMap<String, String>)]) -> Self {
+        let Some(text) = metadata
+            .iter()
+            .find(|(name, _)| name == crate::recorder::CONFIG_METADATA_NAME)
+            .and_then(|(_, m)| m.get(crate::recorder::CONFIG_KEY_FILTER_TOML))
+        else {
+            return Self::default();
+        };
+        match toml::from_str::<NavigatorConfig>(text) {
+            Ok(cfg) => Self::of_filter(&cfg),
+            Err(e) => {
+                tracing::warn!(
+                    "frame tree: filter configuration unreadable ({e}): sensors drawn at the body origin"
+                );
+                Self::default()
+            }
+        }
+    }
+}
+
 /// The frame tree of a solution stamped `unix_ns`: `ecef` → `ned` (at `origin`) → `body` →
-/// `imu`, `star_tracker`, `gnss_antenna` (see the module comment).
-pub fn frame_transforms(nav: &NavSolution, origin: &NedOrigin, unix_ns: u64) -> FrameTransforms {
+/// `imu`, `star_tracker`, `gnss_antenna` (at `mounts`; see the module comment).
+pub fn frame_transforms(
+    nav: &NavSolution,
+    origin: &NedOrigin,
+    mounts: &SensorMounts,
+    unix_ns: u64,
+) -> FrameTransforms {
     let timestamp = Timestamp::from_unix_ns(unix_ns);
     let c_e_n: Rotation<fusion::frames::Ned, fusion::frames::Ecef> =
         fusion::earth::ned_to_ecef(origin.lat_rad, origin.lon_rad);
@@ -291,7 +339,16 @@ pub fn frame_transforms(nav: &NavSolution, origin: &NedOrigin, unix_ns: u64) -> 
             ),
             tf(BODY_FRAME, "imu", ZERO, IDENTITY),
             tf(BODY_FRAME, "star_tracker", ZERO, quaternion_of(&c_b_s)),
-            tf(BODY_FRAME, "gnss_antenna", ZERO, IDENTITY),
+            tf(
+                BODY_FRAME,
+                "gnss_antenna",
+                Vector3 {
+                    x: mounts.gnss_lever_arm_b_m[0],
+                    y: mounts.gnss_lever_arm_b_m[1],
+                    z: mounts.gnss_lever_arm_b_m[2],
+                },
+                IDENTITY,
+            ),
         ],
     }
 }
@@ -475,8 +532,28 @@ mod tests {
         let r = fusion::earth::geodetic_to_ecef(&ell, &g);
         nav.pos_ecef_m = [r.x, r.y, r.z];
         nav.q_ned_body = [1.0, 0.0, 0.0, 0.0];
-        let tf = frame_transforms(&nav, &origin, 1);
-        let (e_n, n_b, b_s) = (&tf.transforms[0], &tf.transforms[1], &tf.transforms[3]);
+        // A level vehicle heading east (90° about down): body x = east, y = south.
+        let h = std::f64::consts::FRAC_PI_4;
+        nav.q_ned_body = [h.cos(), 0.0, 0.0, h.sin()];
+        let mounts = SensorMounts {
+            gnss_lever_arm_b_m: [0.3, 0.2, -1.5],
+        };
+        let tf = frame_transforms(&nav, &origin, &mounts, 1);
+        let (e_n, n_b, b_s, b_a) = (
+            &tf.transforms[0],
+            &tf.transforms[1],
+            &tf.transforms[3],
+            &tf.transforms[4],
+        );
+        assert_eq!(b_a.child_frame_id, "gnss_antenna");
+        // The antenna in ned: p + C_n_b·l = p + (north −0.2, east 0.3, down −1.5).
+        let l_n = rotate(
+            &n_b.rotation,
+            [b_a.translation.x, b_a.translation.y, b_a.translation.z],
+        );
+        for (got, want) in l_n.iter().zip([-0.2, 0.3, -1.5]) {
+            assert!((got - want).abs() < 1e-12, "{l_n:?}");
+        }
         assert_eq!((e_n.parent_frame_id, e_n.child_frame_id), ("ecef", "ned"));
         assert_eq!((n_b.parent_frame_id, n_b.child_frame_id), ("ned", "body"));
         assert_eq!(b_s.child_frame_id, "star_tracker");

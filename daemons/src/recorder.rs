@@ -262,6 +262,8 @@ struct Sink {
     tf: u16,
     status_plot: u16,
     ned_origin: Option<foxglove::NedOrigin>,
+    /// The sensors' mounts of the frame tree, from the filter configuration in the metadata.
+    mounts: foxglove::SensorMounts,
     sensor_alive: u16,
     non_finite: u16,
     /// CLOCK_REALTIME − CLOCK_MONOTONIC, ns (publish_time = reception + this).
@@ -427,6 +429,7 @@ impl Sink {
             tf,
             status_plot,
             ned_origin: None,
+            mounts: foxglove::SensorMounts::of_metadata(&opts.metadata),
             sensor_alive,
             non_finite,
             unix_minus_monotonic_ns,
@@ -523,7 +526,7 @@ impl Sink {
             self.buf.clear();
             serde_json::to_writer(
                 &mut self.buf,
-                &foxglove::frame_transforms(nav, &origin, log_time),
+                &foxglove::frame_transforms(nav, &origin, &self.mounts, log_time),
             )
             .map_err(|e| self.err(e))?;
             self.write_json(self.tf, h.seq, log_time, item.receive_mono_ns)?;

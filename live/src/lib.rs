@@ -94,6 +94,8 @@ pub struct LiveChannels {
     tf: Arc<RawChannel>,
     status_plot: Arc<RawChannel>,
     ned_origin: Option<views::NedOrigin>,
+    /// The sensors' mounts of the frame tree.
+    mounts: views::SensorMounts,
     /// Log time of the latest timed message, Unix ns.
     last_log_time: Option<u64>,
     buf: Vec<u8>,
@@ -124,8 +126,9 @@ pub fn unix_now_ns() -> u64 {
 }
 
 impl LiveChannels {
-    /// Create the channels in `ctx` (a server on `ctx` advertises them to every client).
-    pub fn new(ctx: &Arc<Context>) -> Result<Self, LiveError> {
+    /// Create the channels in `ctx` (a server on `ctx` advertises them to every client); the
+    /// frame tree draws the sensors at `mounts`.
+    pub fn new(ctx: &Arc<Context>, mounts: views::SensorMounts) -> Result<Self, LiveError> {
         let bus = msgs::Channel::ALL
             .into_iter()
             .map(|ch| {
@@ -160,6 +163,7 @@ impl LiveChannels {
                 views::status_plot_schema(),
             )?,
             ned_origin: None,
+            mounts,
             last_log_time: None,
             buf: Vec::with_capacity(16 * 1024),
             counters: LiveCounters::default(),
@@ -221,6 +225,7 @@ impl LiveChannels {
                 let origin = *self
                     .ned_origin
                     .get_or_insert_with(|| views::NedOrigin::at(nav));
+                let mounts = self.mounts;
                 let (fix, pose, tf) = (
                     self.location_fix.clone(),
                     self.pose.clone(),
@@ -233,7 +238,7 @@ impl LiveChannels {
                     self.log_view(&pose, &views::pose_in_frame(nav, &origin, t), t);
                 }
                 if tf.has_sinks() {
-                    self.log_view(&tf, &views::frame_transforms(nav, &origin, t), t);
+                    self.log_view(&tf, &views::frame_transforms(nav, &origin, &mounts, t), t);
                 }
             }
             Record::Status(st) => {
@@ -256,6 +261,8 @@ pub struct ServeOptions {
     pub listen: SocketAddr,
     /// Name of the iceoryx2 node.
     pub node_name: String,
+    /// The sensors' mounts of the frame tree (the filter configuration's).
+    pub mounts: views::SensorMounts,
 }
 
 /// Subscribers of every bus channel.
@@ -302,7 +309,7 @@ pub fn serve(
         detail,
     };
     let ctx = Context::new();
-    let mut live = LiveChannels::new(&ctx)?;
+    let mut live = LiveChannels::new(&ctx, opts.mounts)?;
     // One worker thread: the server only moves queued frames to sockets.
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(1)
@@ -388,7 +395,7 @@ mod tests {
     #[test]
     fn log_times_follow_the_recording_convention() {
         let ctx = Context::new();
-        let mut live = LiveChannels::new(&ctx).unwrap();
+        let mut live = LiveChannels::new(&ctx, views::SensorMounts::default()).unwrap();
         let untimed = Record::Status(Box::default());
         // Before any timed message: the wall clock given.
         assert_eq!(live.log_time(untimed.time_ns(), 42), 42);
@@ -408,7 +415,7 @@ mod tests {
     #[test]
     fn channels_carry_the_recording_schemas() {
         let ctx = Context::new();
-        let live = LiveChannels::new(&ctx).unwrap();
+        let live = LiveChannels::new(&ctx, views::SensorMounts::default()).unwrap();
         for (ch, raw) in msgs::Channel::ALL.iter().zip(&live.bus) {
             let (name, schema) = msgs::channel_schema(*ch);
             assert_eq!(raw.topic(), ch.name());
@@ -433,7 +440,13 @@ mod tests {
             ),
             (
                 &live.tf,
-                serde_json::to_value(views::frame_transforms(&nav, &origin, 5)).unwrap(),
+                serde_json::to_value(views::frame_transforms(
+                    &nav,
+                    &origin,
+                    &views::SensorMounts::default(),
+                    5,
+                ))
+                .unwrap(),
             ),
             (
                 &live.status_plot,

@@ -856,6 +856,8 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
                 prefix.clone(),
                 "--listen".into(),
                 addr.to_string(),
+                "--config".into(),
+                cfg.path.display().to_string(),
             ],
             log: out.join("logs").join("sextant-foxglove.log"),
         })

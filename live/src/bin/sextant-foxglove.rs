@@ -1,12 +1,13 @@
-//! The live view: `sextant-foxglove --prefix P --listen ADDR` serves the bus channels of the
+//! The live view: `sextant-foxglove --prefix P --listen ADDR [--config FILE]` serves the bus channels of the
 //! run with prefix `P` to Foxglove over its WebSocket protocol on `ADDR` (see
 //! `sextant_live`) until SIGINT/SIGTERM, then exits 0. `sextant run --foxglove [ADDR]` starts
 //! it (and restarts it when it dies); it can also be started by hand beside any running system.
 
 use anyhow::Context;
 use clap::Parser;
-use sextant_daemons::{bus_check, logging, signals};
+use sextant_daemons::{bus_check, config, foxglove, logging, signals};
 use std::net::SocketAddr;
+use std::path::PathBuf;
 
 /// Sextant live view: the bus channels of a running system served to Foxglove (WebSocket).
 #[derive(Debug, Parser)]
@@ -23,6 +24,10 @@ struct Args {
     /// Address of the WebSocket server (port 0: any free port, printed at start).
     #[arg(long, default_value = "127.0.0.1:8765")]
     listen: SocketAddr,
+    /// System configuration of the run: its filter's GNSS lever arm places the antenna in the
+    /// frame tree (without it the sensors are drawn at the body origin).
+    #[arg(long)]
+    config: Option<PathBuf>,
 }
 
 fn main() -> anyhow::Result<()> {
@@ -32,10 +37,15 @@ fn main() -> anyhow::Result<()> {
     let stop = signals::install()?;
     bus_check::validate_prefix(&args.prefix)
         .with_context(|| format!("--prefix {:?}", args.prefix))?;
+    let mounts = match &args.config {
+        Some(path) => foxglove::SensorMounts::of_filter(&config::load(path)?.navigator),
+        None => foxglove::SensorMounts::default(),
+    };
     let opts = sextant_live::ServeOptions {
         prefix: args.prefix.clone(),
         listen: args.listen,
         node_name: "sextant-foxglove".into(),
+        mounts,
     };
     let counters = sextant_live::serve(&opts, stop, |addr| {
         tracing::info!(
