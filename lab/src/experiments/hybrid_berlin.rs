@@ -27,7 +27,8 @@
 //! snapshot fault detection and exclusion (FDE: the epoch's weighted least-squares χ² test at
 //! 99.9 %, then Baarda's w-test excluding the worst satellite, repeated while at least six
 //! satellites remain); loose coupling through the least-squares fix of all satellites with the
-//! gate. Figures against the NovAtel reference at its epochs after `converge_s`: horizontal
+//! gate; and the IMU with the odometer alone (no GNSS after the start), the dead-reckoning
+//! baseline — optimistic here, since the simulated IMU moves exactly along the reference. Figures against the NovAtel reference at its epochs after `converge_s`: horizontal
 //! error p50/p95/max, vertical RMS, position NEES (3 dof) and its share above χ²₃(0.99), the
 //! GNSS NIS per degree of freedom; beside them the epoch-by-epoch least-squares fixes (all
 //! satellites, and after FDE) and the spline's own distance from the reference.
