@@ -800,6 +800,16 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
         );
     }
 
+    let foxglove = args
+        .foxglove
+        .or(cfg.system.foxglove.as_ref().map(|f| f.listen));
+    // Refuse a busy or foreign address now, with a clear message and before anything is
+    // created, rather than watch the live server die at start-up (restarted, then given up on).
+    if let Some(addr) = foxglove {
+        std::net::TcpListener::bind(addr)
+            .with_context(|| format!("--foxglove {addr}: cannot listen there"))?;
+    }
+
     let (out, _out_lock) = claim_out_dir(
         &args.out.clone().unwrap_or_else(|| rc.out.clone()),
         args.out.is_some(),
@@ -814,19 +824,10 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
         .context("no directory of the current executable")?;
     let mut names: Vec<String> = rc.drivers.clone();
     names.push("sextant-fusion".into());
-    let foxglove = args
-        .foxglove
-        .or(cfg.system.foxglove.as_ref().map(|f| f.listen));
     if foxglove.is_some() {
         names.push("sextant-foxglove".into());
     }
     ensure_binaries(&bin_dir, &names)?;
-    // Refuse a busy or foreign address now, with a clear message, rather than watch the live
-    // server die at start-up (it is restarted, then given up on).
-    if let Some(addr) = foxglove {
-        std::net::TcpListener::bind(addr)
-            .with_context(|| format!("--foxglove {addr}: cannot listen there"))?;
-    }
 
     let interrupt = supervisor::stop_signals()?;
     let start_mono_ns = msgs::monotonic_ns() + (rc.start_delay_s * 1e9) as u64;
