@@ -74,6 +74,11 @@ pub struct RunSection {
     pub stop_timeout_s: f64,
     /// How many times a driver that died is restarted.
     pub max_restarts: u32,
+    /// A process that sends no heartbeat (`WATCHDOG=1` of the `sd_notify` protocol, sent every
+    /// half of this) for this long is killed as hung and restarted, s of wall time; 0 disables
+    /// the watch.
+    #[serde(default = "default_heartbeat_timeout_s")]
+    pub heartbeat_timeout_s: f64,
     /// Driver binaries to start (names next to the `sextant` executable).
     pub drivers: Vec<String>,
 }
@@ -97,6 +102,19 @@ pub struct FusionSection {
     /// recording) every this many seconds of filter (GPS) time; 0 disables it.
     #[serde(default = "default_checkpoint_interval_s")]
     pub checkpoint_interval_s: f64,
+    /// A solution published more than this many ms of simulated time (divided by the speed-up,
+    /// never less than 20 ms of wall time) behind its time of validity, relative to the fastest
+    /// delivery seen, is flagged stale (`NavSolution.stale`).
+    #[serde(default = "default_stale_after_ms")]
+    pub stale_after_ms: f64,
+}
+
+fn default_stale_after_ms() -> f64 {
+    100.0
+}
+
+fn default_heartbeat_timeout_s() -> f64 {
+    5.0
 }
 
 fn default_checkpoint_interval_s() -> f64 {
@@ -273,6 +291,7 @@ impl SystemConfig {
         }
         positive(file, "fusion.status_period_s", f.status_period_s)?;
         positive(file, "fusion.min_wall_deadline_ms", f.min_wall_deadline_ms)?;
+        positive(file, "fusion.stale_after_ms", f.stale_after_ms)?;
         if !(f.checkpoint_interval_s.is_finite() && f.checkpoint_interval_s >= 0.0) {
             return Err(invalid(
                 file,

@@ -9,6 +9,7 @@
 use crate::checkpoint::CheckpointWriter;
 use crate::config::SystemConfig;
 use crate::recorder::{Recorder, RecorderError, RecorderOptions, RecorderStats};
+use crate::staleness::Staleness;
 use fusion::Rejection;
 use fusion::navigator::{Input, NavSnapshot, Navigator, WarmStartOutcome};
 use iceoryx2::prelude::*;
@@ -230,6 +231,8 @@ pub struct DaemonReport {
     pub recorder: RecorderStats,
     /// Files of the recording, in order (more than one when writing failed and resumed).
     pub segments: Vec<PathBuf>,
+    /// Solutions flagged stale (published late behind their time of validity).
+    pub solutions_stale: u64,
 }
 
 struct State<'a, E: NavEngine> {
@@ -259,6 +262,12 @@ struct State<'a, E: NavEngine> {
     last_checkpoint_ns: i64,
     /// The warm-start outcome last logged.
     warm_logged: Option<WarmStartOutcome>,
+    /// Judges each solution's lag behind its time of validity.
+    staleness: Staleness,
+    /// Solutions flagged stale.
+    stale: u64,
+    /// Stale solutions since the last fresh one (logged once per backlog).
+    stale_run: u64,
 }
 
 impl<E: NavEngine> State<'_, E> {
@@ -325,8 +334,9 @@ impl<E: NavEngine> State<'_, E> {
             Record::Imu(s) => Some(*s),
             _ => None,
         };
-        if imu.is_some() {
+        if let Some(s) = &imu {
             self.imu_received += 1;
+            self.staleness.observe(s.header.time_ns, now);
         }
         self.mark_received(sensor);
         let r = feed(&mut self.engine, &rec);
@@ -337,6 +347,7 @@ impl<E: NavEngine> State<'_, E> {
                 self.solutions += 1;
                 stamp_solution(&mut sol, &s, self.solutions);
                 sol.header.send_mono_ns = msgs::monotonic_ns();
+                self.judge_staleness(&mut sol);
                 if self.solutions.is_multiple_of(self.decimation) {
                     match self.nav_pub.send_raw(sol) {
                         Ok(()) => self.published += 1,
@@ -350,6 +361,26 @@ impl<E: NavEngine> State<'_, E> {
             (Ok(_), Some(s)) => self.filter_time_ns = s.header.time_ns,
             (Ok(_), None) => {}
             (Err(e), _) => self.log_push_error(e),
+        }
+    }
+
+    /// Flag a solution published late behind its time of validity (a backlog being caught
+    /// up), count it, and log each backlog once when it ends.
+    fn judge_staleness(&mut self, sol: &mut NavSolution) {
+        if self
+            .staleness
+            .is_stale(sol.header.time_ns, sol.header.send_mono_ns)
+        {
+            sol.stale = 1;
+            self.stale += 1;
+            self.stale_run += 1;
+        } else if self.stale_run > 0 {
+            tracing::warn!(
+                "caught up after a backlog: {} solutions published stale (flagged), fresh again at filter time {:.3} s",
+                self.stale_run,
+                sol.header.time_ns as f64 * 1e-9
+            );
+            self.stale_run = 0;
         }
     }
 
@@ -407,6 +438,7 @@ impl<E: NavEngine> State<'_, E> {
             records_written: self.recorder.written(),
             records_dropped: self.recorder.dropped(),
             recorder_errors: self.recorder.errors(),
+            solutions_stale: self.stale,
             ..engine_status(&self.engine)
         };
         st.header.time_ns = self.filter_time_ns;
@@ -486,6 +518,12 @@ pub fn run<E: NavEngine>(
         checkpoint_interval_ns: (opts.system.fusion.checkpoint_interval_s * 1e9) as i64,
         last_checkpoint_ns: i64::MIN / 2,
         warm_logged: None,
+        staleness: Staleness::new(
+            opts.speed,
+            Duration::from_secs_f64(opts.system.fusion.stale_after_ms * 1e-3),
+        ),
+        stale: 0,
+        stale_run: 0,
     };
     if let Some(path) = &opts.checkpoint
         && opts.system.fusion.checkpoint_interval_s > 0.0
@@ -582,7 +620,7 @@ pub fn run<E: NavEngine>(
     drain_all(&mut st);
     st.publish_status();
     st.log_warm_start();
-    let report_base = (st.imu_received, st.solutions, st.published);
+    let report_base = (st.imu_received, st.solutions, st.published, st.stale);
     let State {
         recorder,
         checkpoint,
@@ -605,6 +643,7 @@ pub fn run<E: NavEngine>(
         solutions_published: report_base.2,
         recorder,
         segments,
+        solutions_stale: report_base.3,
     })
 }
 

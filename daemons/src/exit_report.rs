@@ -34,6 +34,9 @@ pub struct ExitReport {
     pub segments: Vec<PathBuf>,
     /// Log lines that could not be written (the log on a full disk).
     pub log_lines_lost: u64,
+    /// Solutions published with the stale flag (a backlog caught up after a stall).
+    #[serde(default)]
+    pub solutions_stale: u64,
 }
 
 impl ExitReport {

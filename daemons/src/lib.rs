@@ -24,6 +24,7 @@ pub mod foxglove;
 pub mod logging;
 pub mod recorder;
 pub mod recording;
-pub mod sd_notify;
+pub use msgs::sd_notify;
 pub mod signals;
+pub mod staleness;
 pub mod supervisor;

@@ -7,6 +7,12 @@
 //! then stops the drivers first and the fusion daemon last, so that the recorder sees every
 //! sample) and gets SIGTERM if `sextant` itself dies, even by SIGKILL.
 //!
+//! `sextant run` also plays the service manager for its children (the `sd_notify` protocol,
+//! [`msgs::sd_notify`]): each gets a notification socket of its own and `WATCHDOG_USEC`; a child
+//! that sends nothing for [`RunPlan::heartbeat_timeout`] is hung (stopped, deadlocked, spinning
+//! outside its loop) and is killed with SIGKILL, after which the restart policy applies to it
+//! as to any other death.
+//!
 //! The policy is in plain functions ([`on_exit`], [`driver_args`], [`fusion_args`],
 //! [`recording_path`]); [`supervise`] is the event loop that applies it to real processes.
 
@@ -17,6 +23,8 @@ use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
 use std::collections::HashMap;
 use std::future::Future;
+use std::os::linux::net::SocketAddrExt;
+use std::os::unix::net::{SocketAddr, UnixDatagram};
 use std::path::{Path, PathBuf};
 use std::process::{ExitStatus, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -61,6 +69,9 @@ pub struct RunPlan {
     pub stop_timeout: Duration,
     /// Wall time after which a run that has not completed is stopped.
     pub watchdog: Duration,
+    /// Wall time a child may go without a notification (`WATCHDOG=1`, sent every half of it)
+    /// before it is killed as hung and restarted; `None`: children are not watched.
+    pub heartbeat_timeout: Option<Duration>,
     /// Service-name prefix whose status is shown as a live line on stderr; `None`: no display.
     pub status_prefix: Option<String>,
 }
@@ -91,6 +102,9 @@ pub struct RunOutcome {
     pub driver_restarts: Vec<(String, u32)>,
     /// Restarts per service, in the order of [`RunPlan::services`].
     pub service_restarts: Vec<(String, u32)>,
+    /// Children killed because their heartbeat stopped, per child (drivers, then the fusion
+    /// daemon); each kill is also counted in that child's restarts when it was restarted.
+    pub hung_kills: Vec<(String, u32)>,
     /// Recordings written, in order: the first fusion daemon's, then one per restart.
     pub recordings: Vec<PathBuf>,
     /// The exit reports of the fusion daemons that reported (one per clean exit, in order);
@@ -113,6 +127,14 @@ pub enum SuperviseError {
     Log {
         /// The log file.
         path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// The child's heartbeat socket could not be created.
+    #[error("heartbeat socket @{name}: {source}")]
+    Heartbeat {
+        /// Its abstract name.
+        name: String,
         /// Why.
         source: std::io::Error,
     },
@@ -267,6 +289,70 @@ struct Slot {
     /// For the fusion daemon: its stdout is read (and copied into its log) for the exit
     /// reports of each of its runs ([`crate::exit_report`]).
     reports: Option<Arc<Mutex<Vec<ExitReport>>>>,
+    /// The service-manager end of its notification socket, when heartbeats are watched.
+    heartbeat: Option<Heartbeat>,
+    /// Killed as hung, its exit not yet seen.
+    hung_kill_sent: bool,
+    /// Kills for a stopped heartbeat.
+    hung_kills: u32,
+}
+
+/// The supervisor's end of one child's notification socket.
+struct Heartbeat {
+    socket: UnixDatagram,
+    /// When a notification was last seen (or the child started), CLOCK_MONOTONIC ns.
+    last_mono_ns: u64,
+}
+
+/// Bind the notification socket of the `generation`-th start of child `idx` in the abstract
+/// namespace (no file to clean up, no path-length limit), non-blocking: it is drained by
+/// [`check_heartbeats`].
+fn heartbeat_socket(idx: usize, generation: u32) -> Result<(String, UnixDatagram), SuperviseError> {
+    let name = format!(
+        "sextant-heartbeat-{}-{idx}-{generation}",
+        std::process::id()
+    );
+    let err = |source| SuperviseError::Heartbeat {
+        name: name.clone(),
+        source,
+    };
+    let addr = SocketAddr::from_abstract_name(name.as_bytes()).map_err(err)?;
+    let socket = UnixDatagram::bind_addr(&addr).map_err(err)?;
+    socket.set_nonblocking(true).map_err(err)?;
+    Ok((name, socket))
+}
+
+/// Take every notification the children sent since the last check; SIGKILL each running child
+/// that has sent none for `timeout` (its exit then goes through the restart policy).
+fn check_heartbeats(slots: &mut [Slot], timeout: Duration) {
+    let now = msgs::monotonic_ns();
+    let mut buf = [0u8; 512];
+    for slot in slots.iter_mut() {
+        let Some(hb) = &mut slot.heartbeat else {
+            continue;
+        };
+        while let Ok(n) = hb.socket.recv(&mut buf) {
+            if n > 0 {
+                hb.last_mono_ns = now;
+            }
+        }
+        if slot.pid.is_none() || slot.hung_kill_sent {
+            continue;
+        }
+        let silent = Duration::from_nanos(now.saturating_sub(hb.last_mono_ns));
+        if silent > timeout {
+            crate::logging::stderr_text("\n");
+            tracing::error!(
+                "{} sent no heartbeat for {:.1} s (limit {:.1} s): hung, killing it",
+                slot.spec.name,
+                silent.as_secs_f64(),
+                timeout.as_secs_f64()
+            );
+            signal_pid(slot, Signal::SIGKILL);
+            slot.hung_kill_sent = true;
+            slot.hung_kills += 1;
+        }
+    }
 }
 
 /// Copy a child's stdout into its log file line by line, keeping its exit reports. A failed
@@ -290,7 +376,12 @@ fn read_reports(
     })
 }
 
-fn spawn(idx: usize, slot: &mut Slot, tx: &Exits) -> Result<(), SuperviseError> {
+fn spawn(
+    idx: usize,
+    slot: &mut Slot,
+    tx: &Exits,
+    heartbeat_timeout: Option<Duration>,
+) -> Result<(), SuperviseError> {
     let spec = &slot.spec;
     let log = std::fs::OpenOptions::new()
         .create(true)
@@ -327,7 +418,22 @@ fn spawn(idx: usize, slot: &mut Slot, tx: &Exits) -> Result<(), SuperviseError> 
         .stderr(log_err)
         // Own process group: a terminal Ctrl-C reaches only `sextant`, which stops the children
         // in order (drivers, then fusion, so that the recorder sees everything).
-        .process_group(0);
+        .process_group(0)
+        // `sextant run` is the children's service manager, never one of its own (under systemd
+        // it is `sextant run` that reports to systemd).
+        .env_remove("NOTIFY_SOCKET")
+        .env_remove("WATCHDOG_USEC")
+        .env_remove("WATCHDOG_PID");
+    let mut heartbeat = None;
+    if let Some(timeout) = heartbeat_timeout {
+        let (name, socket) = heartbeat_socket(idx, slot.restarts)?;
+        cmd.env("NOTIFY_SOCKET", format!("@{name}"))
+            .env("WATCHDOG_USEC", timeout.as_micros().to_string());
+        heartbeat = Some(Heartbeat {
+            socket,
+            last_mono_ns: msgs::monotonic_ns(),
+        });
+    }
     // SAFETY: only calls prctl(2), async-signal-safe, between fork and exec.
     unsafe {
         cmd.pre_exec(|| {
@@ -343,6 +449,8 @@ fn spawn(idx: usize, slot: &mut Slot, tx: &Exits) -> Result<(), SuperviseError> 
     drop(cmd);
     let copier = reader.map(|(r, reports)| read_reports(r, log, reports));
     slot.pid = child.id().map(|p| p as i32);
+    slot.heartbeat = heartbeat;
+    slot.hung_kill_sent = false;
     tracing::debug!("started {} (pid {:?})", spec.name, slot.pid);
     let tx = tx.clone();
     tokio::spawn(async move {
@@ -484,6 +592,9 @@ pub async fn supervise(
         finished: false,
         pid: None,
         reports: None,
+        heartbeat: None,
+        hung_kill_sent: false,
+        hung_kills: 0,
     };
     let mut slots: Vec<Slot> = plan.drivers.iter().map(new_slot).collect();
     let fusion_idx = slots.len();
@@ -497,9 +608,10 @@ pub async fn supervise(
     let service_idx: Vec<usize> = (fusion_idx + 1..slots.len()).collect();
 
     let (tx, mut rx) = mpsc::unbounded_channel();
-    spawn(fusion_idx, &mut slots[fusion_idx], &tx)?;
+    let hb_timeout = plan.heartbeat_timeout;
+    spawn(fusion_idx, &mut slots[fusion_idx], &tx, hb_timeout)?;
     for &i in service_idx.iter().chain(&driver_idx) {
-        if let Err(e) = spawn(i, &mut slots[i], &tx) {
+        if let Err(e) = spawn(i, &mut slots[i], &tx, hb_timeout) {
             let mut results = HashMap::new();
             let all: Vec<usize> = (0..slots.len()).collect();
             stop_and_wait(
@@ -521,6 +633,10 @@ pub async fn supervise(
 
     let watchdog = tokio::time::sleep(plan.watchdog);
     tokio::pin!(watchdog);
+    // Heartbeats are checked four times per timeout: a hung child is killed between 1 and
+    // 1.25 timeouts after its last notification.
+    let mut heartbeat_check =
+        tokio::time::interval(hb_timeout.map_or(Duration::from_secs(3600), |t| t / 4));
     tokio::pin!(interrupt);
     let mut results: HashMap<usize, ExitStatus> = HashMap::new();
     // Recordings written, in order: the first fusion writes recording.mcap, the k-th restart
@@ -540,10 +656,15 @@ pub async fn supervise(
         tokio::select! {
             sig = &mut interrupt => break End::Interrupted(sig),
             _ = &mut watchdog => break End::Watchdog,
+            _ = heartbeat_check.tick(), if hb_timeout.is_some() => {
+                if let Some(t) = hb_timeout {
+                    check_heartbeats(&mut slots, t);
+                }
+            }
             Some(i) = respawn_rx.recv() => {
                 clean_dead_nodes();
                 let slot = &mut slots[i];
-                if let Err(e) = spawn(i, slot, &tx) {
+                if let Err(e) = spawn(i, slot, &tx, hb_timeout) {
                     tracing::error!("restart of {} failed: {e:#}", slot.spec.name);
                     slot.finished = true;
                     if driver_idx.iter().all(|&d| slots[d].finished) {
@@ -578,7 +699,7 @@ pub async fn supervise(
                     recordings.push(next);
                     // The dead daemon's ports still occupy the services: free them first.
                     clean_dead_nodes();
-                    if let Err(e) = spawn(i, slot, &tx) {
+                    if let Err(e) = spawn(i, slot, &tx, hb_timeout) {
                         tracing::error!("restart of sextant-fusion failed: {e:#}");
                         break End::FusionDied;
                     }
@@ -650,6 +771,10 @@ pub async fn supervise(
             .iter()
             .map(|s| (s.spec.name.clone(), s.restarts))
             .collect(),
+        hung_kills: slots
+            .iter()
+            .map(|s| (s.spec.name.clone(), s.hung_kills))
+            .collect(),
         recordings,
         fusion_reports: fusion_reports.lock().map(|v| v.clone()).unwrap_or_default(),
     })
@@ -700,6 +825,7 @@ mod tests {
             restart_delay: Duration::from_millis(20),
             stop_timeout: 2 * SECOND,
             watchdog: 30 * SECOND,
+            heartbeat_timeout: None,
             status_prefix: None,
         }
     }
@@ -807,6 +933,29 @@ mod tests {
         );
         assert!(line.contains("alive: imu,gnss "), "{line}");
         assert!(line.contains("nav 7 rec 9 dropped 1 gated 5"), "{line}");
+    }
+
+    #[test]
+    fn silent_children_are_killed_as_hung_and_restarted() {
+        // Shell stand-ins never notify: with a 200 ms heartbeat timeout each is killed as hung
+        // within 200–250 ms of its start; the driver is restarted, the fusion daemon too until
+        // it is given up on (2 restarts).
+        let dir = tmp_dir("hung");
+        let rec = recording_path(&dir, 0).display().to_string();
+        let driver = sh(&dir, "driver", "echo started; exec sleep 30", &[]);
+        let fusion = sh(&dir, "fusion", "exec sleep 30", &["--out".into(), rec]);
+        let mut p = plan(&dir, vec![driver], fusion);
+        p.heartbeat_timeout = Some(Duration::from_millis(200));
+        let t0 = Instant::now();
+        let o = run(&p, after(10 * SECOND));
+        assert_eq!(o.end, End::FusionDied);
+        assert!(t0.elapsed() < 5 * SECOND, "{:?}", t0.elapsed());
+        let kills: HashMap<_, _> = o.hung_kills.iter().cloned().collect();
+        assert_eq!(kills["fusion"], 3, "{kills:?}");
+        assert!(kills["driver"] >= 1, "{kills:?}");
+        assert!(o.driver_restarts[0].1 >= 1, "{:?}", o.driver_restarts);
+        let log = std::fs::read_to_string(dir.join("driver.log")).unwrap();
+        assert!(log.matches("started").count() >= 2, "{log}");
     }
 
     #[test]

@@ -5,7 +5,9 @@
 //! sent at CLOCK_MONOTONIC `start_mono_ns + t_k/speed` (absolute `clock_nanosleep`, woken at
 //! least every 100 ms to notice a stop request). The process exits after the last sample with
 //! `t_k ≤ duration`, or as soon as SIGINT/SIGTERM arrives; either way the iceoryx2 ports and
-//! node are dropped cleanly.
+//! node are dropped cleanly. A sample found overdue by more than [`max_lag_ns`] when its turn
+//! comes (the process was stopped or starved) is dropped, not sent late: the driver resumes with
+//! current data and the lost samples show as sequence gaps at every subscriber.
 
 use crate::SimError;
 use crate::scenario::Scenario;
@@ -88,6 +90,21 @@ pub fn sleep_until_mono(target_ns: u64) -> bool {
     }
 }
 
+/// [`sleep_until_mono`] in steps of at most 100 ms, pinging the service manager's watchdog
+/// before each: a driver waiting for its next sample (1 s for a 1 Hz receiver) is not hung.
+fn sleep_pinging(target_ns: u64, service: &mut msgs::sd_notify::Service) -> bool {
+    loop {
+        service.ping();
+        let now = msgs::monotonic_ns();
+        if now >= target_ns {
+            return !stop_requested();
+        }
+        if !sleep_until_mono(target_ns.min(now + 100_000_000)) {
+            return false;
+        }
+    }
+}
+
 /// Log to stderr, filter from `RUST_LOG` (default `info`). A failed write (the log file on a
 /// full disk) is dropped, never fatal: `tracing-subscriber` would report it with `eprintln!`,
 /// which panics when stderr is the failing file.
@@ -122,6 +139,27 @@ pub struct RunSummary {
     pub published: u64,
     /// True when stopped by a signal before the end.
     pub interrupted: bool,
+    /// Samples dropped because they were overdue by more than [`max_lag_ns`] (the process was
+    /// stopped or starved); each consumed a sequence number, so subscribers count them as lost.
+    pub overdue_dropped: u64,
+}
+
+/// Simulated time by which a sample may be late and still be sent: 1 s, the fusion daemon's
+/// default delayed-fusion window (`buffer_window_s`) — an aiding sample older than that could
+/// not be fused, and an IMU burst older than that would only produce stale solutions.
+const MAX_LAG_SIM_S: f64 = 1.0;
+/// Floor of the allowed lateness in wall time: scheduling delays of a loaded machine
+/// (tens of milliseconds) must not drop samples at high speed-ups.
+const MIN_LAG_WALL_S: f64 = 0.25;
+
+/// Wall-clock lateness (ns) beyond which a driver running at `speed` drops a sample instead
+/// of sending it: like a real sensor whose FIFO overflows while nobody reads it, a driver that
+/// was stopped (SIGSTOP, a debugger, a starved CPU) resumes with current data instead of
+/// flooding the bus with an overdue burst. `None` at infinite speed (no clock to be late on).
+pub fn max_lag_ns(speed: f64) -> Option<u64> {
+    speed
+        .is_finite()
+        .then(|| ((MAX_LAG_SIM_S / speed).max(MIN_LAG_WALL_S) * 1e9) as u64)
 }
 
 fn cli_invalid(key: &str, reason: String) -> SimError {
@@ -169,7 +207,13 @@ where
     let mut summary = RunSummary {
         published: 0,
         interrupted: false,
+        overdue_dropped: 0,
     };
+    let max_lag = max_lag_ns(args.speed);
+    // Readiness and watchdog pings to `sextant run` (or systemd); inert without NOTIFY_SOCKET.
+    let mut service = msgs::sd_notify::Service::from_env();
+    // Overdue samples dropped since the last one sent (logged once per stall).
+    let mut dropping = 0u64;
     // A driver restarted mid-run (by `sextant run` after a crash) must not replay the samples
     // that fell due while it was dead: like a real sensor it resumes with current data. Their
     // values are still computed, because every source is a sequential process (random streams,
@@ -186,10 +230,30 @@ where
         let offset = t_ns as f64 / args.speed;
         let target = start_mono.saturating_add(if offset.is_finite() { offset as u64 } else { 0 });
         if args.speed.is_finite() && target < started_mono {
+            // Lost while the driver was down: the sequence number is consumed, so the sample
+            // numbering continues where an uninterrupted driver's would be and subscribers
+            // count the samples missed across the restart as a sequence gap.
+            publisher.skip();
             k += 1;
             continue;
         }
-        if !sleep_until_mono(target) {
+        if let Some(lag) = max_lag
+            && msgs::monotonic_ns() > target.saturating_add(lag)
+        {
+            publisher.skip();
+            dropping += 1;
+            summary.overdue_dropped += 1;
+            k += 1;
+            continue;
+        }
+        if dropping > 0 {
+            tracing::warn!(
+                "{node_name} fell behind its clock (stopped or starved): {dropping} overdue samples dropped, resuming at {:.3} s",
+                t_ns as f64 * 1e-9
+            );
+            dropping = 0;
+        }
+        if !sleep_pinging(target, &mut service) {
             summary.interrupted = true;
             break;
         }
@@ -199,6 +263,7 @@ where
     }
     tracing::info!(
         published = summary.published,
+        overdue_dropped = summary.overdue_dropped,
         interrupted = summary.interrupted,
         "{node_name} finished"
     );

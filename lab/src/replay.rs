@@ -178,12 +178,15 @@ pub fn embedded_filter_config(rec: &Recording) -> Result<NavigatorConfig, Replay
     config::parse_navigator_config(text, &origin).map_err(|e| ReplayError::Config(e.to_string()))
 }
 
-/// Compare two solutions bit for bit, except `header.send_mono_ns`. `Err` names the first
-/// differing field. (JSON of f64 is the shortest round-trip representation, so equal JSON text
-/// means equal bits, −0.0 included; NaN is written as null and compares equal to any NaN.)
+/// Compare two solutions bit for bit, except `header.send_mono_ns` and `stale` (facts of the
+/// live publication's wall clock). `Err` names the first differing field. (JSON of f64 is the
+/// shortest round-trip representation, so equal JSON text means equal bits, −0.0 included;
+/// NaN is written as null and compares equal to any NaN.)
 pub fn compare_solutions(recorded: &NavSolution, replayed: &NavSolution) -> Result<(), String> {
     let mut b = *replayed;
+    // Wall-clock facts of the live publication, not of the navigation: not reproducible.
     b.header.send_mono_ns = recorded.header.send_mono_ns;
+    b.stale = recorded.stale;
     let (ja, jb) = (
         serde_json::to_string(recorded).unwrap_or_default(),
         serde_json::to_string(&b).unwrap_or_default(),

@@ -362,7 +362,11 @@ pub fn serve(
         );
     }
     let mut receive_errors = 0;
+    // Readiness and watchdog pings to `sextant run` (or systemd); the loop wakes at least every
+    // 500 ms, so an idle bus does not look like a hung server.
+    let mut service = msgs::sd_notify::Service::from_env();
     while !stop.load(Ordering::SeqCst) {
+        service.ping();
         ws.wait_and_process_once_with_timeout(
             |_| CallbackProgression::Continue,
             Duration::from_millis(500),

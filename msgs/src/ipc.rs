@@ -302,6 +302,13 @@ impl<T: Message> Pub<T> {
         Ok(msg)
     }
 
+    /// Account for a sample the source produced but will never deliver (a driver that fell
+    /// behind its sensor's clock drops the overdue samples, as a real sensor's FIFO does): its
+    /// sequence number is consumed, so every subscriber counts the loss as a sequence gap.
+    pub fn skip(&mut self) {
+        self.seq += 1;
+    }
+
     /// Send `msg` as it is (header untouched), e.g. when republishing a recording.
     pub fn send_raw(&mut self, msg: T) -> Result<(), SendError> {
         let channel = T::CHANNEL;

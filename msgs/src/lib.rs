@@ -13,6 +13,9 @@
 
 pub mod ipc;
 pub mod record;
+/// The service manager's notification protocol (readiness, watchdog pings), spoken by every
+/// Sextant process to `sextant run` or to systemd.
+pub mod sd_notify;
 
 pub use record::{Record, RecordKind, SENSOR_ALIVE_TOPIC, SensorAliveEvent};
 
@@ -340,6 +343,14 @@ pub struct NavSolution {
     pub baro_bias_m: f64,
     /// Estimated odometer scale-factor error (dimensionless; 0 = perfect).
     pub odometer_scale: f64,
+    /// 1 when the daemon published this solution later than `fusion.stale_after_ms` (of
+    /// simulated time; never less than 20 ms of wall time) behind its time of validity, relative
+    /// to the fastest delivery it has seen: it was catching up on a backlog (after a stall of
+    /// its own, or a driver's overdue burst). A consumer steering by the solution must not take
+    /// it as current. Its latency is `header.send_mono_ns − imu_send_mono_ns`. Set from the
+    /// wall clock at publication, so an offline replay does not reproduce it.
+    #[serde(default)]
+    pub stale: u32,
 }
 
 /// Sensor slots used in [`Status`] and bit masks.
@@ -571,6 +582,9 @@ pub struct Status {
     /// Sum of the NIS of the fused constraint updates (2 dof each: mean NIS/dof =
     /// nhc_nis_sum / (2·nhc_fused)).
     pub nhc_nis_sum: f64,
+    /// Solutions published with the `stale` flag (see [`NavSolution::stale`]).
+    #[serde(default)]
+    pub solutions_stale: u64,
 }
 
 /// The logical channels of the system.

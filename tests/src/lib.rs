@@ -29,6 +29,32 @@ pub fn bin(name: &str) -> Result<PathBuf> {
     Ok(p)
 }
 
+/// A fresh scratch directory `sextant-<tag>-<pid>` under the system's temporary directory.
+pub fn tempdir(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("sextant-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    let _ = std::fs::create_dir_all(&d);
+    d
+}
+
+/// Start `sextant run` from the repository root on `prefix` into `out`, with `extra`
+/// arguments; its stdout and stderr go to `out/sextant.log`.
+pub fn start_run(out: &Path, prefix: &str, extra: &[&str]) -> Result<std::process::Child> {
+    let log = std::fs::File::create(out.join("sextant.log"))
+        .with_context(|| format!("creating {}/sextant.log", out.display()))?;
+    std::process::Command::new(bin("sextant")?)
+        .current_dir(repo_root())
+        .arg("run")
+        .args(extra)
+        .args(["--prefix", prefix, "--out"])
+        .arg(out)
+        .stdin(std::process::Stdio::null())
+        .stdout(log.try_clone()?)
+        .stderr(log)
+        .spawn()
+        .context("starting sextant run")
+}
+
 /// Repository root (for `config/`).
 pub fn repo_root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))

@@ -40,13 +40,6 @@ struct Outcome {
     exit_ok: bool,
 }
 
-fn tempdir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("sextant-disk-{}-{tag}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
 /// Run the fusion with `--out out` and the six drivers; watch nav and status until the fusion
 /// has exited. With `fsize_limit`, the fusion runs with SIGXFSZ ignored and, once its shared
 /// memory exists, its file-size limit is lowered to that many bytes (`prlimit`), so that the

@@ -14,7 +14,6 @@ use nix::unistd::Pid;
 use sextant_tests::*;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
@@ -23,29 +22,6 @@ static SERIAL: Mutex<()> = Mutex::new(());
 
 /// `run.start_delay_s` of config/sextant.toml: wall time from launch to the first sample.
 const START_DELAY_S: f64 = 2.0;
-
-fn tempdir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("sextant-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-/// Start `sextant run` in the background, its output in OUT/sextant.log.
-fn start_run(out: &Path, prefix: &str, extra: &[&str]) -> Child {
-    let log = std::fs::File::create(out.join("sextant.log")).unwrap();
-    Command::new(bin("sextant").unwrap())
-        .current_dir(repo_root())
-        .arg("run")
-        .args(extra)
-        .args(["--prefix", prefix, "--out"])
-        .arg(out)
-        .stdin(Stdio::null())
-        .stdout(log.try_clone().unwrap())
-        .stderr(log)
-        .spawn()
-        .expect("start sextant run")
-}
 
 fn sigkill(pid: i32) {
     kill(Pid::from_raw(pid), Signal::SIGKILL).expect("SIGKILL");
@@ -110,7 +86,8 @@ fn killed_driver_is_reported_degrades_and_is_used_again_after_restart() {
             "--restart-delay",
             "2",
         ],
-    );
+    )
+    .expect("start sextant run");
     let launched = Instant::now();
     std::thread::sleep(Duration::from_secs_f64(
         START_DELAY_S + kill_at_sim_s / speed,
@@ -269,7 +246,8 @@ fn killed_fusion_is_restarted_with_a_new_recording_and_the_old_one_is_readable()
             "--speed",
             "20",
         ],
-    );
+    )
+    .expect("start sextant run");
     std::thread::sleep(Duration::from_secs_f64(
         START_DELAY_S + kill_after_first_sample_s,
     ));
@@ -339,7 +317,7 @@ fn shared_memory_of_a_crashed_run_is_cleaned_at_the_next_start() {
         "--speed",
         "20",
     ];
-    let mut child = start_run(&out, &prefix, &args);
+    let mut child = start_run(&out, &prefix, &args).expect("start sextant run");
     std::thread::sleep(Duration::from_secs_f64(START_DELAY_S + 2.0));
     // A crash of everything: every child first (so none exits cleanly on the supervisor's
     // death signal), then the supervisor.
@@ -379,7 +357,8 @@ fn shared_memory_of_a_crashed_run_is_cleaned_at_the_next_start() {
             "--speed",
             "20",
         ],
-    );
+    )
+    .expect("start sextant run");
     let st = wait_exit(&mut next, "the next sextant run", Duration::from_secs(40));
     let log = log_text(&out2);
     assert!(st.success(), "{log}");

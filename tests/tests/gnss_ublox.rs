@@ -23,7 +23,6 @@ use nix::unistd::Pid;
 use sextant_tests::*;
 use std::io::Write;
 use std::os::fd::{AsFd, AsRawFd};
-use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -40,13 +39,6 @@ const EPOCHS: u32 = 130;
 /// enough for the pty, the driver and the IPC hop on a loaded 2-core machine (at 20× its 50 ms
 /// were once exceeded under load and fixes arrived too late to fuse).
 const SPEED: f64 = 10.0;
-
-fn tempdir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("sextant-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
 
 fn ubx_epoch(k: u32) -> Vec<u8> {
     let tow = TOW0_MS + 1000 * k;

@@ -17,20 +17,13 @@ use msgs::ipc::Bus;
 use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
 use sextant_tests::*;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Output, Stdio};
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
 /// The e2e tests share the machine's two cores; run them one at a time.
 static SERIAL: Mutex<()> = Mutex::new(());
-
-fn tempdir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("sextant-op-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
 
 /// `sextant run` of the vehicle scenario: `duration` s at `speed`, in `cwd`, with `args`.
 fn sextant_run(cwd: &Path, duration: f64, speed: f64, args: &[&str]) -> Command {

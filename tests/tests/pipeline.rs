@@ -350,10 +350,3 @@ fn ctrl_c_leaves_no_process_no_shared_memory_and_a_readable_recording() {
     assert!(rec.count("nav") > 10);
     assert!(rec.invalid.is_empty());
 }
-
-fn tempdir(tag: &str) -> std::path::PathBuf {
-    let d = std::env::temp_dir().join(format!("sextant-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}

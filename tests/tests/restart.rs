@@ -32,13 +32,6 @@ const KILL_AFTER_S: f64 = 1.5;
 /// Required wall time from the kill to the first solution of the restarted daemon, s.
 const RESUME_WALL_S: f64 = 2.0;
 
-fn tempdir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("sextant-restart-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
 /// The default vehicle scenario, driving from the start (speed-up in 5 s, turns at 10 to
 /// 15 m/s), its sensor grades from the repository.
 fn driving_scenario(dir: &Path) -> PathBuf {

@@ -131,6 +131,7 @@ fn main() -> anyhow::Result<()> {
         recorder_errors: report.recorder.errors,
         segments: report.segments.clone(),
         log_lines_lost: logging::lost_lines(),
+        solutions_stale: report.solutions_stale,
     };
     logging::stdout_line(&exit.line());
     Ok(())

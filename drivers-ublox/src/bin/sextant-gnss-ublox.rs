@@ -89,7 +89,11 @@ fn main() -> anyhow::Result<()> {
     let mut last_log = Instant::now();
     let mut first_fix = true;
     let mut interrupted = false;
+    // Readiness and watchdog pings to `sextant run` (or systemd): the loop wakes at least every
+    // poll interval, so a silent receiver does not look like a hung driver.
+    let mut service = msgs::sd_notify::Service::from_env();
     loop {
+        service.ping();
         if STOP.load(Ordering::SeqCst) {
             interrupted = true;
             break;

@@ -103,6 +103,8 @@ impl Navigator {
             clock_drift_m_s: self.core.ekf.clock_drift_m_s,
             baro_bias_m: self.core.ekf.baro_bias_m,
             odometer_scale: self.core.ekf.odo_scale,
+            // Judged by the daemon at publication (wall clock), not by the navigator.
+            stale: 0,
         }
     }
 }

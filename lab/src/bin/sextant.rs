@@ -307,6 +307,10 @@ struct RunArgs {
     /// configuration without this option), by the process `sextant-foxglove`.
     #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = "127.0.0.1:8765")]
     foxglove: Option<std::net::SocketAddr>,
+    /// Wall time a process may go without a heartbeat before it is killed as hung and
+    /// restarted, s (default: `run.heartbeat_timeout_s`; 0 disables the watch).
+    #[arg(long)]
+    heartbeat_timeout: Option<f64>,
 }
 
 #[derive(Debug, clap::Args)]
@@ -783,6 +787,15 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
         );
     }
     let restart_delay = Duration::from_secs_f64(args.restart_delay);
+    let heartbeat_s = args
+        .heartbeat_timeout
+        .unwrap_or(cfg.system.run.heartbeat_timeout_s);
+    if !(heartbeat_s.is_finite() && (0.0..=3600.0).contains(&heartbeat_s)) {
+        bail!("--heartbeat-timeout must be within [0, 3600] s, got {heartbeat_s}");
+    }
+    // Below 0.2 s a ping cadence of half of it would compete with the processes' own loops.
+    let heartbeat_timeout =
+        (heartbeat_s > 0.0).then(|| Duration::from_secs_f64(heartbeat_s.max(0.2)));
 
     // One bus per prefix: remove what crashed processes left, then refuse when live processes
     // still use the prefix (they would fuse each other's samples).
@@ -875,6 +888,7 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
         restart_delay,
         stop_timeout: Duration::from_secs_f64(rc.stop_timeout_s),
         watchdog: expected + Duration::from_secs(30) + expected / 2,
+        heartbeat_timeout,
         status_prefix: Some(prefix.clone()),
     };
 
@@ -1004,6 +1018,16 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
                 ),
             );
         }
+        m.insert(
+            "hung_processes_killed".into(),
+            serde_json::Value::Object(
+                outcome
+                    .hung_kills
+                    .iter()
+                    .map(|(name, n)| (name.clone(), (*n).into()))
+                    .collect(),
+            ),
+        );
         m.insert("recording_complete".into(), complete.into());
         m.insert(
             "counters_source".into(),
@@ -1020,6 +1044,7 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
             m.insert("recorder_errors".into(), recorder_errors.into());
             m.insert("solutions_computed".into(), sum(|r| r.solutions).into());
             m.insert("log_lines_lost".into(), sum(|r| r.log_lines_lost).into());
+            m.insert("solutions_stale".into(), sum(|r| r.solutions_stale).into());
         }
     }
     let summary_path = out.join("summary.json");

@@ -3,8 +3,12 @@
 //! assignments sent as one datagram to the `AF_UNIX` socket named by the environment variable
 //! `NOTIFY_SOCKET` (a file-system path, or `@name` for the abstract namespace).
 //!
-//! The fusion daemon, run as a `Type=notify` service (`dist/systemd/sextant-fusion.service`),
-//! sends
+//! `sextant run` plays the service manager for its own children (every driver and the fusion
+//! daemon get a socket of their own and a `WATCHDOG_USEC`): a child whose pings stop is hung
+//! and is killed and restarted. Drivers send `READY=1` and `WATCHDOG=1` ([`Service::ping`]).
+//!
+//! The fusion daemon, run as a `Type=notify` service (`dist/systemd/sextant-fusion.service`)
+//! or under `sextant run`, sends
 //! - `READY=1` once its bus endpoints and recording are open, i.e. once it can take sensor
 //!   data: the drivers ordered after it may start. Not "once navigating": navigation needs
 //!   those drivers' data, so waiting for it would deadlock a start-up ordered on readiness;
@@ -165,7 +169,7 @@ impl Service {
         let mode_changed = self.last_mode != Some(mode);
         if !self.ready || mode_changed {
             self.last_mode = Some(mode);
-            let name = msgs::NavMode::from_u32(mode).map_or("unknown mode", |m| m.name());
+            let name = crate::NavMode::from_u32(mode).map_or("unknown mode", |m| m.name());
             let mut state =
                 format!("STATUS={name}, {solutions} solutions, {records_dropped} records dropped");
             if !self.ready {
@@ -173,6 +177,19 @@ impl Service {
                 state.insert_str(0, "READY=1\n");
             }
             self.send(&state);
+        }
+        self.ping();
+    }
+
+    /// For a process without a navigation mode (a driver), called at every wake-up:
+    /// `READY=1` the first time, then `WATCHDOG=1` when half the watchdog timeout has passed.
+    pub fn ping(&mut self) {
+        if self.notifier.is_none() {
+            return;
+        }
+        if !self.ready {
+            self.ready = true;
+            self.send("READY=1");
         }
         if let Some(every) = self.ping_every
             && self.last_ping.elapsed() >= every
