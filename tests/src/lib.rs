@@ -255,3 +255,52 @@ pub fn num(v: &serde_json::Value, ptr: &str) -> Option<f64> {
 pub fn int(v: &serde_json::Value, ptr: &str) -> Option<i64> {
     v.pointer(ptr).and_then(|x| x.as_i64())
 }
+
+/// The default vehicle scenario, driving from the start (speed-up in 5 s, turns at 10 to
+/// 15 m/s) for 90 s, its sensor grades from the repository, written into `dir`.
+pub fn driving_scenario(dir: &Path) -> PathBuf {
+    let root = repo_root();
+    let text = std::fs::read_to_string(root.join("config/scenarios/vehicle.toml")).unwrap();
+    let start = text.find("segments = [").unwrap();
+    let end = start + text[start..].find("\n]\n").unwrap() + 3;
+    let segments = r#"segments = [
+    { type = "speed", to_m_s = 10.0, duration_s = 5.0 },
+    { type = "cruise", duration_s = 10.0 },
+    { type = "turn", angle_deg = 90.0, duration_s = 15.0 },
+    { type = "cruise", duration_s = 10.0 },
+    { type = "turn", angle_deg = -60.0, duration_s = 10.0 },
+    { type = "speed", to_m_s = 15.0, duration_s = 5.0 },
+    { type = "cruise", duration_s = 30.0 },
+]
+"#;
+    let text = format!("{}{segments}{}", &text[..start], &text[end..])
+        .replace("duration_s = 600.0", "duration_s = 90.0")
+        .replace(
+            "seed = 2\n",
+            &format!(
+                "seed = 2\nsensors_dir = {:?}\n",
+                root.join("config/sensors").display().to_string()
+            ),
+        );
+    let path = dir.join("driving.toml");
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+/// Position error (truth − solution) in NED at the solution's latitude/longitude, m, and the
+/// reported NED σ.
+pub fn ned_position_error(
+    nav: &serde_json::Value,
+    truth: &serde_json::Value,
+) -> ([f64; 3], [f64; 3]) {
+    let r_n = f64s(&nav["pos_ecef_m"]);
+    let r_t = f64s(&truth["pos_ecef_m"]);
+    let d = [r_t[0] - r_n[0], r_t[1] - r_n[1], r_t[2] - r_n[2]];
+    let (lat, lon) = (num(nav, "/lat_rad").unwrap(), num(nav, "/lon_rad").unwrap());
+    let (sl, cl, so, co) = (lat.sin(), lat.cos(), lon.sin(), lon.cos());
+    let n = -sl * co * d[0] - sl * so * d[1] + cl * d[2];
+    let e = -so * d[0] + co * d[1];
+    let dn = -cl * co * d[0] - cl * so * d[1] - sl * d[2];
+    let s = f64s(&nav["pos_sigma_ned_m"]);
+    ([n, e, dn], [s[0], s[1], s[2]])
+}

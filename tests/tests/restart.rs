@@ -13,8 +13,8 @@
 use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
 use sextant_tests::*;
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::path::Path;
+use std::process::Child;
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
@@ -31,55 +31,6 @@ const DURATION_S: f64 = 70.0;
 const KILL_AFTER_S: f64 = 1.5;
 /// Required wall time from the kill to the first solution of the restarted daemon, s.
 const RESUME_WALL_S: f64 = 2.0;
-
-/// The default vehicle scenario, driving from the start (speed-up in 5 s, turns at 10 to
-/// 15 m/s), its sensor grades from the repository.
-fn driving_scenario(dir: &Path) -> PathBuf {
-    let root = repo_root();
-    let text = std::fs::read_to_string(root.join("config/scenarios/vehicle.toml")).unwrap();
-    let start = text.find("segments = [").unwrap();
-    let end = start + text[start..].find("\n]\n").unwrap() + 3;
-    let segments = r#"segments = [
-    { type = "speed", to_m_s = 10.0, duration_s = 5.0 },
-    { type = "cruise", duration_s = 10.0 },
-    { type = "turn", angle_deg = 90.0, duration_s = 15.0 },
-    { type = "cruise", duration_s = 10.0 },
-    { type = "turn", angle_deg = -60.0, duration_s = 10.0 },
-    { type = "speed", to_m_s = 15.0, duration_s = 5.0 },
-    { type = "cruise", duration_s = 30.0 },
-]
-"#;
-    let text = format!("{}{segments}{}", &text[..start], &text[end..])
-        .replace("duration_s = 600.0", "duration_s = 90.0")
-        .replace(
-            "seed = 2\n",
-            &format!(
-                "seed = 2\nsensors_dir = {:?}\n",
-                root.join("config/sensors").display().to_string()
-            ),
-        );
-    let path = dir.join("driving.toml");
-    std::fs::write(&path, text).unwrap();
-    path
-}
-
-fn start_run(out: &Path, prefix: &str, scenario: &Path) -> Child {
-    let log = std::fs::File::create(out.join("sextant.log")).unwrap();
-    Command::new(bin("sextant").unwrap())
-        .current_dir(repo_root())
-        .arg("run")
-        .arg("--scenario")
-        .arg(scenario)
-        .args(["--duration", &DURATION_S.to_string()])
-        .args(["--speed", &SPEED.to_string()])
-        .args(["--prefix", prefix, "--out"])
-        .arg(out)
-        .stdin(Stdio::null())
-        .stdout(log.try_clone().unwrap())
-        .stderr(log)
-        .spawn()
-        .expect("start sextant run")
-}
 
 fn wait_for(child: &mut Child, timeout: Duration) -> std::process::ExitStatus {
     let t0 = Instant::now();
@@ -101,21 +52,6 @@ fn log_text(out: &Path) -> String {
     s
 }
 
-/// Position error (truth − solution) in NED at the solution's latitude/longitude, m, and the
-/// reported NED σ.
-fn ned_error(nav: &serde_json::Value, truth: &serde_json::Value) -> ([f64; 3], [f64; 3]) {
-    let r_n = f64s(&nav["pos_ecef_m"]);
-    let r_t = f64s(&truth["pos_ecef_m"]);
-    let d = [r_t[0] - r_n[0], r_t[1] - r_n[1], r_t[2] - r_n[2]];
-    let (lat, lon) = (num(nav, "/lat_rad").unwrap(), num(nav, "/lon_rad").unwrap());
-    let (sl, cl, so, co) = (lat.sin(), lat.cos(), lon.sin(), lon.cos());
-    let n = -sl * co * d[0] - sl * so * d[1] + cl * d[2];
-    let e = -so * d[0] + co * d[1];
-    let dn = -cl * co * d[0] - cl * so * d[1] - sl * d[2];
-    let s = f64s(&nav["pos_sigma_ned_m"]);
-    ([n, e, dn], [s[0], s[1], s[2]])
-}
-
 struct Figures {
     kill_to_solution_s: f64,
     first_imu_to_solution_s: f64,
@@ -128,7 +64,19 @@ fn kill_and_check(tag: &str, delete_checkpoint: bool) -> Figures {
     let out = tempdir(tag);
     let prefix = format!("sextant_restart_{tag}_{}", std::process::id());
     let scenario = driving_scenario(&out);
-    let mut child = start_run(&out, &prefix, &scenario);
+    let mut child = start_run(
+        &out,
+        &prefix,
+        &[
+            "--scenario",
+            &scenario.display().to_string(),
+            "--duration",
+            &DURATION_S.to_string(),
+            "--speed",
+            &SPEED.to_string(),
+        ],
+    )
+    .expect("start sextant run");
     std::thread::sleep(Duration::from_secs_f64(START_DELAY_S + KILL_AFTER_S));
     let checkpoint = out.join("navigator.checkpoint");
     assert!(
@@ -184,7 +132,7 @@ fn kill_and_check(tag: &str, delete_checkpoint: bool) -> Figures {
             break;
         }
         let Some(tr) = truth.get(&t) else { continue };
-        let (e, s) = ned_error(&r.json, tr);
+        let (e, s) = ned_position_error(&r.json, tr);
         let ratio = (0..3).map(|k| e[k].abs() / s[k]).fold(0.0, f64::max);
         max_ratio_first_5s = max_ratio_first_5s.max(ratio);
         if !first_checked {
