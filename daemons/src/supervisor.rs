@@ -938,8 +938,9 @@ mod tests {
     #[test]
     fn silent_children_are_killed_as_hung_and_restarted() {
         // Shell stand-ins never notify: with a 200 ms heartbeat timeout each is killed as hung
-        // within 200–250 ms of its start; the driver is restarted, the fusion daemon too until
-        // it is given up on (2 restarts).
+        // within 200–250 ms of each start and restarted, until one of them is given up on
+        // after its 2 restarts (the run then ends: completed when it is the driver, given up
+        // when it is the fusion daemon; both run the same rhythm, so either may come first).
         let dir = tmp_dir("hung");
         let rec = recording_path(&dir, 0).display().to_string();
         let driver = sh(&dir, "driver", "echo started; exec sleep 30", &[]);
@@ -948,11 +949,16 @@ mod tests {
         p.heartbeat_timeout = Some(Duration::from_millis(200));
         let t0 = Instant::now();
         let o = run(&p, after(10 * SECOND));
-        assert_eq!(o.end, End::FusionDied);
+        assert!(
+            matches!(o.end, End::FusionDied | End::Completed),
+            "{:?}",
+            o.end
+        );
         assert!(t0.elapsed() < 5 * SECOND, "{:?}", t0.elapsed());
         let kills: HashMap<_, _> = o.hung_kills.iter().cloned().collect();
-        assert_eq!(kills["fusion"], 3, "{kills:?}");
+        assert!(kills["fusion"] >= 1, "{kills:?}");
         assert!(kills["driver"] >= 1, "{kills:?}");
+        assert!(kills["fusion"] == 3 || kills["driver"] == 3, "{kills:?}");
         assert!(o.driver_restarts[0].1 >= 1, "{:?}", o.driver_restarts);
         let log = std::fs::read_to_string(dir.join("driver.log")).unwrap();
         assert!(log.matches("started").count() >= 2, "{log}");
