@@ -6,8 +6,6 @@
 //! treated as geopotential (the < 0.1 % difference to geometric altitude below 20 km is ignored
 //! consistently in both directions, so the pair is an exact inverse). Sextant feeds it the
 //! height above the WGS-84 ellipsoid (docs/ARCHITECTURE.md: no geoid).
-//!
-//! OWNER: simulator helper.
 
 /// Sea-level standard pressure, Pa.
 pub const ISA_P0_PA: f64 = 101_325.0;

@@ -25,8 +25,6 @@
 //! interval by Euler (order 1), Heun (order 2) or classical Runge–Kutta (order 4).
 //!
 //! The step allocates nothing (fixed-size nalgebra types only) and renormalises the quaternion.
-//!
-//! OWNER: foundations helper. Signatures are the contract.
 
 use crate::attitude::quat_from_rotation_vector;
 use crate::earth::{Ellipsoid, Geodetic, GravityModel, c_e_n, geodetic_to_ecef, gravity_ecef};
