@@ -137,8 +137,9 @@ fn offline_replay_reproduces_the_live_solution_bit_for_bit() {
     // The engine's inputs include the daemon's alive/dead decisions (one per sensor at least).
     assert!(live.count("fusion/sensor_alive") >= 5);
     for (i, (x, y)) in a.iter().zip(&b).enumerate() {
-        // send_mono_ns is the wall clock of publication: not an engine output.
-        if let Some(d) = bit_diff(x, y, "", &["/header/send_mono_ns"]) {
+        // send_mono_ns (the wall clock of publication) and the stale flag judged from it are
+        // not engine outputs.
+        if let Some(d) = bit_diff(x, y, "", &["/header/send_mono_ns", "/stale"]) {
             panic!("solution {i} differs: {d}");
         }
     }
@@ -176,7 +177,7 @@ fn offline_replay_reproduces_the_live_solution_bit_for_bit() {
     let differing = a
         .iter()
         .zip(&c)
-        .filter(|(x, y)| bit_diff(x, y, "", &["/header/send_mono_ns"]).is_some())
+        .filter(|(x, y)| bit_diff(x, y, "", &["/header/send_mono_ns", "/stale"]).is_some())
         .count();
     assert!(differing > a.len() / 2, "{differing} of {} differ", a.len());
 }
