@@ -132,6 +132,15 @@ pub const CONFIG_METADATA_NAME: &str = "sextant/config";
 /// `NavigatorConfig` the engine was built with (authoritative for replay).
 pub const CONFIG_KEY_FILTER_TOML: &str = "filter_toml";
 
+/// Name of the MCAP metadata record holding the checkpoint a restarted fusion daemon was
+/// started from (absent after a cold start), so that offline replay starts its engine from
+/// the same snapshot and reproduces the warm-started solutions bit for bit.
+pub const WARM_START_METADATA_NAME: &str = "sextant/warm_start";
+
+/// Key (in [`WARM_START_METADATA_NAME`]) of the snapshot, JSON of
+/// `fusion::navigator::NavSnapshot` (shortest round-trip f64, so it parses back bit-exact).
+pub const WARM_START_KEY_SNAPSHOT: &str = "snapshot_json";
+
 /// An error with its sources (`MCAP I/O error: No space left on device (os error 28)`), so that
 /// the operator sees the operating system's reason.
 fn error_chain(e: &dyn std::error::Error) -> String {

@@ -37,6 +37,7 @@ pub mod plots;
 pub mod progress;
 pub mod replay;
 pub mod report;
+pub mod run_losses;
 pub mod scenario;
 pub mod shipped_config;
 pub mod smartloc;

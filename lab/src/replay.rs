@@ -43,9 +43,10 @@ use crate::config;
 use crate::daemon::{engine_status, feed, stamp_solution};
 use crate::recorder::{
     CONFIG_KEY_FILTER_TOML, CONFIG_METADATA_NAME, Record, Recorder, RecorderOptions,
+    WARM_START_KEY_SNAPSHOT, WARM_START_METADATA_NAME,
 };
 use crate::recording::{Recording, RecordingError, TimeBase};
-use fusion::navigator::{Navigator, NavigatorConfig};
+use fusion::navigator::{NavSnapshot, Navigator, NavigatorConfig};
 use msgs::{MAX_SENSORS, NavSolution, Status};
 use serde::Serialize;
 use std::collections::{BTreeMap, VecDeque};
@@ -178,6 +179,24 @@ pub fn embedded_filter_config(rec: &Recording) -> Result<NavigatorConfig, Replay
     config::parse_navigator_config(text, &origin).map_err(|e| ReplayError::Config(e.to_string()))
 }
 
+/// The checkpoint a warm-restarted fusion daemon started from, when the recording holds one
+/// (metadata [`WARM_START_METADATA_NAME`]).
+pub fn embedded_warm_start(rec: &Recording) -> Result<Option<NavSnapshot>, ReplayError> {
+    let Some(json) = rec
+        .metadata()
+        .get(WARM_START_METADATA_NAME)
+        .and_then(|m| m.get(WARM_START_KEY_SNAPSHOT))
+    else {
+        return Ok(None);
+    };
+    serde_json::from_str(json).map(Some).map_err(|e| {
+        ReplayError::Config(format!(
+            "{}: metadata {WARM_START_METADATA_NAME}/{WARM_START_KEY_SNAPSHOT}: {e}",
+            rec.path().display()
+        ))
+    })
+}
+
 /// Compare two solutions bit for bit, except `header.send_mono_ns` and `stale` (facts of the
 /// live publication's wall clock). `Err` names the first differing field. (JSON of f64 is the
 /// shortest round-trip representation, so equal JSON text means equal bits, −0.0 included;
@@ -248,11 +267,20 @@ pub fn replay_offline(opts: &OfflineOptions) -> Result<OfflineSummary, ReplayErr
     meta.insert("replay_of".into(), opts.recording.display().to_string());
     meta.insert("replay_config_source".into(), source.clone());
     let mut engine = Navigator::new(nav_cfg)?;
+    let mut metadata = vec![(CONFIG_METADATA_NAME.to_string(), meta)];
+    // A warm-restarted recording: the engine starts from the same checkpoint as the daemon.
+    if let Some(snapshot) = embedded_warm_start(&rec)? {
+        let outcome = engine.warm_start(snapshot);
+        tracing::info!("replay starts from the recording's checkpoint: {outcome:?}");
+        if let Some(m) = rec.metadata().get(WARM_START_METADATA_NAME) {
+            metadata.push((WARM_START_METADATA_NAME.to_string(), m.clone()));
+        }
+    }
     let out = opts.out_dir.join("recording.mcap");
     let recorder = Recorder::start(
         &out,
         &RecorderOptions {
-            metadata: vec![(CONFIG_METADATA_NAME.to_string(), meta)],
+            metadata,
             // The replayed records keep the source's publish times (its reception clock).
             unix_minus_monotonic_ns: match rec.time_base() {
                 TimeBase::Unix {

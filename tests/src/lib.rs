@@ -83,6 +83,8 @@ pub struct Recording {
     pub channels: BTreeMap<String, (String, String, String)>,
     /// Messages that failed their channel's JSON Schema: (topic, error).
     pub invalid: Vec<(String, String)>,
+    /// For a recording cut by a crash ([`read_cut_recording`]): where reading stopped.
+    pub cut: Option<String>,
 }
 
 impl Recording {
@@ -99,11 +101,28 @@ impl Recording {
 /// Read every message of an MCAP file, decode its JSON and validate it against its channel's
 /// JSON Schema.
 pub fn read_recording(path: &Path) -> Result<Recording> {
+    read(path, false)
+}
+
+/// [`read_recording`] for a recording cut by a crash (no footer, a partial last chunk): every
+/// message up to the first undecodable record, and where reading stopped in `cut`.
+pub fn read_cut_recording(path: &Path) -> Result<Recording> {
+    read(path, true)
+}
+
+fn read(path: &Path, may_be_cut: bool) -> Result<Recording> {
     let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
     let mut rec = Recording::default();
     let mut validators: BTreeMap<u16, jsonschema::Validator> = BTreeMap::new();
     for msg in mcap::MessageStream::new(&bytes)? {
-        let msg = msg.with_context(|| format!("decoding {}", path.display()))?;
+        let msg = match msg {
+            Ok(m) => m,
+            Err(e) if may_be_cut => {
+                rec.cut = Some(e.to_string());
+                break;
+            }
+            Err(e) => return Err(e).with_context(|| format!("decoding {}", path.display())),
+        };
         let ch = &msg.channel;
         let schema = ch
             .schema

@@ -38,10 +38,23 @@ const MAX_LAG_WALL_S: f64 = 0.25;
 const STALE_LIMIT_WALL_S: f64 = 0.020;
 
 fn run(tag: &str, extra: &[&str]) -> (std::path::PathBuf, String, Child) {
+    run_at(tag, SPEED, extra)
+}
+
+fn run_at(tag: &str, speed: f64, extra: &[&str]) -> (std::path::PathBuf, String, Child) {
     let out = tempdir(&format!("stall-{tag}"));
     let prefix = format!("sextant_stall_{tag}_{}", std::process::id());
     let scenario = driving_scenario(&out).display().to_string();
-    let mut args = vec!["--scenario", &scenario, "--duration", "85", "--speed", "20"];
+    let speed = speed.to_string();
+    let duration = DURATION_S.to_string();
+    let mut args = vec![
+        "--scenario",
+        &scenario,
+        "--duration",
+        &duration,
+        "--speed",
+        &speed,
+    ];
     args.extend_from_slice(extra);
     let child = start_run(&out, &prefix, &args).expect("start sextant run");
     (out, prefix, child)
@@ -81,7 +94,7 @@ fn lost_in_sequence(rec: &Recording, topic: &str) -> u64 {
 
 /// Every solution later than the staleness limit (recomputed as the module comment says) is
 /// flagged; returns (flagged, recomputed-late) counts.
-fn check_staleness(rec: &Recording) -> (u64, u64) {
+fn check_staleness(rec: &Recording, speed: f64) -> (u64, u64) {
     let nav: Vec<(i64, u64, i64)> = rec
         .topic("nav")
         .map(|r| {
@@ -96,7 +109,7 @@ fn check_staleness(rec: &Recording) -> (u64, u64) {
     let mut min_offset = f64::INFINITY;
     let (mut flagged, mut late) = (0, 0);
     for &(t, mono, stale) in &nav {
-        let offset = (mono - mono0) as f64 * 1e-9 - (t - t0) as f64 * 1e-9 / SPEED;
+        let offset = (mono - mono0) as f64 * 1e-9 - (t - t0) as f64 * 1e-9 / speed;
         min_offset = min_offset.min(offset);
         let lag = offset - min_offset;
         let drift = 100e-6 * (mono - mono0) as f64 * 1e-9;
@@ -113,13 +126,12 @@ fn check_staleness(rec: &Recording) -> (u64, u64) {
 }
 
 /// Replay offline and require every solution bit for bit.
-fn replays_bit_exactly(recording: &Path, out: &Path) {
-    let replay_out = out.join("replay");
+fn replays_bit_exactly(recording: &Path, replay_out: &Path) {
     let st = std::process::Command::new(bin("sextant").unwrap())
         .args(["replay", "--offline"])
         .arg(recording)
         .arg("--out")
-        .arg(&replay_out)
+        .arg(replay_out)
         .output()
         .unwrap();
     assert!(
@@ -127,8 +139,18 @@ fn replays_bit_exactly(recording: &Path, out: &Path) {
         "{}",
         String::from_utf8_lossy(&st.stderr)
     );
-    let s = summary(&replay_out);
+    let s = summary(replay_out);
     assert_eq!(s["replay"]["bit_exact"], true, "{s}");
+}
+
+/// The end of a run of one daemon life: every late solution flagged and the flags counted in
+/// the summary, navigation at the end within 3σ, the recording replayed bit for bit.
+fn stale_flagged_navigating_and_replayed(s: &serde_json::Value, rec: &Recording, out: &Path) {
+    let (flagged, late) = check_staleness(rec, SPEED);
+    println!("solutions flagged stale: {flagged} (late by the recomputation: {late})");
+    assert_eq!(s["solutions_stale"], flagged, "{s}");
+    navigates_at_the_end(rec);
+    replays_bit_exactly(&out.join("recording.mcap"), &out.join("replay"));
 }
 
 /// The solution after the stall: in an aided mode again and, at the last solution matched with
@@ -190,11 +212,7 @@ fn stopped_imu_driver_drops_overdue_samples_counts_them_and_navigation_resumes()
         "{recorded} recorded + {lost} lost"
     );
 
-    let (flagged, late) = check_staleness(&rec);
-    println!("solutions flagged stale: {flagged} (late by the recomputation: {late})");
-    assert_eq!(s["solutions_stale"], flagged, "{s}");
-    navigates_at_the_end(&rec);
-    replays_bit_exactly(&out.join("recording.mcap"), &out);
+    stale_flagged_navigating_and_replayed(&s, &rec, &out);
     let _ = std::fs::remove_dir_all(&out);
 }
 
@@ -219,11 +237,7 @@ fn stopped_fusion_daemon_publishes_nothing_stale_as_fresh_counts_losses_and_repl
     println!("IMU samples lost in transport while the fusion was stopped: {lost}");
     assert!(lost > 0, "a 30 s backlog exceeds the subscriber's buffer");
     assert_eq!(s["sequence_gaps_per_channel"]["imu"], lost, "{s}");
-    let (flagged, late) = check_staleness(&rec);
-    println!("solutions flagged stale: {flagged} (late by the recomputation: {late})");
-    assert_eq!(s["solutions_stale"], flagged, "{s}");
-    navigates_at_the_end(&rec);
-    replays_bit_exactly(&out.join("recording.mcap"), &out);
+    stale_flagged_navigating_and_replayed(&s, &rec, &out);
     let _ = std::fs::remove_dir_all(&out);
 }
 
@@ -274,5 +288,85 @@ fn hung_driver_is_killed_restarted_and_its_lost_samples_counted() {
         "a hole in the solutions"
     );
     navigates_at_the_end(&rec);
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+#[test]
+fn fusion_stopped_for_ten_seconds_is_killed_resumes_warm_and_every_loss_is_counted() {
+    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    // At 5× the 85 s drive lasts 17 s of wall time; the 10 s stop (50 s simulated) begins
+    // 10 s into the drive. The default 5 s heartbeat timeout kills the stopped daemon; the
+    // supervisor restarts it and it resumes from its checkpoint (written every
+    // `fusion.checkpoint_interval_s`, so at most one interval plus the 5 s old at the kill,
+    // within `warm_start.max_age_s` = 60 s).
+    let speed = 5.0;
+    let (out, prefix, mut child) = run_at("fusion10", speed, &[]);
+    std::thread::sleep(Duration::from_secs_f64(START_DELAY_S + 2.0));
+    let fusion = pid_of(&prefix, "sextant-fusion").expect("fusion running");
+    kill(Pid::from_raw(fusion), Signal::SIGSTOP).unwrap();
+    std::thread::sleep(Duration::from_secs(10));
+    // Killed by then: SIGCONT finds no such process (or a reused pid's owner ignores it
+    // being ours to continue only if it is still the stopped daemon).
+    let _ = kill(Pid::from_raw(fusion), Signal::SIGCONT);
+    let st = wait_exit(&mut child, "sextant run", Duration::from_secs(60));
+    let log = log_text(&out);
+    assert!(st.success(), "sextant run: {st}\n{log}");
+    assert!(log.contains("sextant-fusion sent no heartbeat"), "{log}");
+    assert!(
+        log.contains("warm restart: sensor-error estimates resumed"),
+        "{log}"
+    );
+    let s = summary(&out);
+    assert_eq!(s["hung_processes_killed"]["sextant-fusion"], 1, "{s}");
+    assert_eq!(s["fusion_restarts"], 1, "{s}");
+
+    let first = read_cut_recording(&out.join("recording.mcap")).unwrap();
+    assert!(
+        first.cut.is_some(),
+        "the killed daemon's recording has no end"
+    );
+    let second = read_recording(&out.join("recording.1.mcap")).unwrap();
+    // Every IMU sample the drivers numbered is recorded in one of the two lives or counted
+    // lost: inside a recording (gaps) or between them (sent while no daemon listened).
+    let seq = |rec: &Recording| -> Vec<i64> {
+        rec.topic("imu")
+            .map(|r| int(&r.json, "/header/seq").unwrap())
+            .collect()
+    };
+    let (a, b) = (seq(&first), seq(&second));
+    let between = b[0] - a.last().unwrap() - 1;
+    let lost = b.last().unwrap() - (a.len() + b.len()) as i64;
+    println!(
+        "IMU samples lost: {lost} ({between} while no daemon listened), recorded {} + {}",
+        a.len(),
+        b.len()
+    );
+    // Nothing listened from the stop until the restarted daemon subscribed. The supervisor
+    // kills a child silent for more than the 5 s timeout, counted from its last ping, and
+    // children ping every half timeout: the kill comes 2.5–5 s (plus a check interval) after
+    // the stop, the restart 0.5 s later. So at least 2.5 s of wall time were lost and at most
+    // the whole 10 s stop (the restarted daemon listens before the SIGCONT).
+    let per_wall_s = IMU_HZ * speed;
+    assert!(
+        (2.5 * per_wall_s..=10.0 * per_wall_s).contains(&(lost as f64)),
+        "lost {lost} over a 10 s stop"
+    );
+    let losses = &s["run_losses"];
+    assert_eq!(losses["samples_lost_per_channel"]["imu"], lost, "{s}");
+    assert_eq!(
+        losses["samples_lost_between_recordings"]["imu"], between,
+        "{s}"
+    );
+    // Nothing late published as fresh, in either life; every flag counted.
+    let (f1, _) = check_staleness(&first, speed);
+    let (f2, _) = check_staleness(&second, speed);
+    println!("solutions flagged stale: {f1} before the kill, {f2} after the restart");
+    assert_eq!(losses["solutions_stale"], f1 + f2, "{s}");
+    // Navigation continued after the restart, and ends within 3σ.
+    navigates_at_the_end(&second);
+    // Both recordings replay bit for bit: the first up to where the kill cut it, the second
+    // from the checkpoint it started from (embedded in its metadata).
+    replays_bit_exactly(&out.join("recording.mcap"), &out.join("replay.0"));
+    replays_bit_exactly(&out.join("recording.1.mcap"), &out.join("replay.1"));
     let _ = std::fs::remove_dir_all(&out);
 }

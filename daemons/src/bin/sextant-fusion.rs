@@ -76,9 +76,11 @@ fn main() -> anyhow::Result<()> {
             .unwrap_or(std::path::Path::new(""))
             .join("navigator.checkpoint")
     });
+    let mut started_from = None;
     match checkpoint::read(&checkpoint) {
         Ok(Some(snapshot)) => {
             let t = snapshot.gps_time_ns;
+            started_from = Some(snapshot.clone());
             match navigator.warm_start(snapshot) {
                 fusion::navigator::WarmStartOutcome::Refused(r) => tracing::warn!(
                     "checkpoint {} refused ({r}): aligning from the priors",
@@ -94,7 +96,17 @@ fn main() -> anyhow::Result<()> {
         Ok(None) => tracing::info!("no checkpoint at {}: aligning", checkpoint.display()),
         Err(e) => tracing::warn!("{e}: refused, aligning from the priors"),
     }
-    let metadata = recording_metadata(&cfg, &prefix, args.speed)?;
+    let mut metadata = recording_metadata(&cfg, &prefix, args.speed)?;
+    if let Some(snapshot) = &started_from {
+        // Offline replay starts from the same snapshot (refused or not: the engine decides
+        // again, identically), so a warm-restarted recording replays bit for bit.
+        use sextant_daemons::recorder::{WARM_START_KEY_SNAPSHOT, WARM_START_METADATA_NAME};
+        let json = serde_json::to_string(snapshot).context("serializing the checkpoint")?;
+        metadata.push((
+            WARM_START_METADATA_NAME.to_string(),
+            BTreeMap::from([(WARM_START_KEY_SNAPSHOT.to_string(), json)]),
+        ));
+    }
     let opts = daemon::DaemonOptions {
         prefix,
         out: args.out,

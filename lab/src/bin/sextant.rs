@@ -1029,6 +1029,12 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
             ),
         );
         m.insert("recording_complete".into(), complete.into());
+        if files.len() > 1 {
+            // Several daemon lives (or segments): the losses of the whole run, including what
+            // the drivers sent while no daemon listened (`run_losses`).
+            let losses = sextant_lab::run_losses::of_run(&files);
+            m.insert("run_losses".into(), serde_json::to_value(&losses)?);
+        }
         m.insert(
             "counters_source".into(),
             format!(
