@@ -131,6 +131,16 @@ pub struct RecorderSection {
     pub chunk_size_bytes: u64,
     /// Close the current chunk at least this often, s of wall time (bounds what a crash loses).
     pub flush_interval_s: f64,
+    /// Start a new segment (`recording.part2.mcap`, …) when the current one spans this much
+    /// time of validity, s; 0: one file. An MCAP writer keeps an index entry per chunk until
+    /// the file is finished, so a file's writer memory grows with its length; segments bound
+    /// it for runs of days.
+    #[serde(default = "default_segment_duration_s")]
+    pub segment_duration_s: f64,
+}
+
+fn default_segment_duration_s() -> f64 {
+    3600.0
 }
 
 /// `[foxglove]` (optional): the live view. When present, `sextant run` starts the live
@@ -322,6 +332,16 @@ impl SystemConfig {
             ));
         }
         positive(file, "recorder.flush_interval_s", rec.flush_interval_s)?;
+        if !(rec.segment_duration_s.is_finite() && rec.segment_duration_s >= 0.0) {
+            return Err(invalid(
+                file,
+                "recorder.segment_duration_s",
+                format!(
+                    "must be >= 0 s (0: one file), got {}",
+                    rec.segment_duration_s
+                ),
+            ));
+        }
         Ok(())
     }
 

@@ -493,6 +493,8 @@ pub fn run<E: NavEngine>(
             queue_capacity: rc.queue_capacity,
             chunk_size_bytes: rc.chunk_size_bytes,
             flush_interval: Duration::from_secs_f64(rc.flush_interval_s),
+            segment_duration: (rc.segment_duration_s > 0.0)
+                .then(|| Duration::from_secs_f64(rc.segment_duration_s)),
             metadata: opts.metadata.clone(),
             ..Default::default()
         },
@@ -635,8 +637,7 @@ pub fn run<E: NavEngine>(
             c.superseded
         );
     }
-    let segments = recorder.segments();
-    let recorder = recorder.finish()?;
+    let (recorder, segments) = recorder.finish_with_segments()?;
     Ok(DaemonReport {
         imu_received: report_base.0,
         solutions: report_base.1,

@@ -44,6 +44,14 @@
 //! `recording.part2.mcap`, `recording.part3.mcap`, …; each a complete MCAP with the metadata,
 //! schemas and channels of the first), so that the recording resumes by itself when space
 //! returns. [`Recorder::segments`] lists the files written.
+//!
+//! With [`RecorderOptions::segment_duration`] the recorder also starts the next segment when
+//! the current file spans that much time of validity: an MCAP writer holds one chunk-index
+//! entry per chunk until the file is finished (the summary section needs them), so one file's
+//! writer memory grows with its length (≈ 1 MiB per hour of the default run); segments keep it
+//! bounded over days. Each segment is complete on its own (its `nav/pose` and `tf` take their
+//! NED origin at its first solution); readers of the recording take the segments in order as
+//! one stream ([`crate::recording::segments_of`]).
 
 use crate::foxglove;
 use mcap::{WriteOptions, Writer};
@@ -173,6 +181,9 @@ pub struct RecorderOptions {
     /// `None`: measured when the recorder starts. Set it to reproduce another recording's
     /// publish times (offline replay).
     pub unix_minus_monotonic_ns: Option<i64>,
+    /// Start the next segment when the current file spans this much time of validity (log
+    /// time); `None`: one file (see the module comment).
+    pub segment_duration: Option<Duration>,
 }
 
 impl Default for RecorderOptions {
@@ -183,6 +194,7 @@ impl Default for RecorderOptions {
             flush_interval: Duration::from_secs(1),
             metadata: Vec::new(),
             unix_minus_monotonic_ns: None,
+            segment_duration: None,
         }
     }
 }
@@ -282,6 +294,8 @@ struct Sink {
     /// Messages handed to the writer since the last successful flush: lost if the next flush
     /// fails (they sit in the in-memory chunk).
     unflushed: u64,
+    /// Log time of the first message of this file, Unix ns.
+    first_log_time: Option<u64>,
 }
 
 impl Sink {
@@ -445,6 +459,7 @@ impl Sink {
             buf: Vec::with_capacity(16 * 1024),
             dirty: false,
             unflushed: 0,
+            first_log_time: None,
         })
     }
 
@@ -601,6 +616,42 @@ struct Resume {
 }
 
 impl Resume {
+    /// The current segment spans the configured duration: finish it (a failure to finish is
+    /// a failed write, counted) and open the next one at once.
+    fn rotate(&mut self, sink: Option<Sink>, counters: &Counters) -> Option<Sink> {
+        if !self.enabled {
+            // A device or pipe: no place for further files; it stays one stream.
+            return sink;
+        }
+        let sk = sink?;
+        let (done, unflushed) = (sk.path.clone(), sk.unflushed);
+        if let Err(e) = sk.finish() {
+            count_failure(counters, unflushed, &e);
+        }
+        while segment_path(&self.path, self.next).exists() {
+            self.next += 1;
+        }
+        let p = segment_path(&self.path, self.next);
+        match Sink::create_segment(&p, &self.opts) {
+            Ok(sink) => {
+                self.next += 1;
+                counters.add_segment(&p);
+                tracing::info!(
+                    "recorder: {} complete, recording continues in {}",
+                    done.display(),
+                    p.display()
+                );
+                Some(sink)
+            }
+            Err(e) => {
+                count_failure(counters, 0, &e);
+                self.dropped_at_failure = counters.dropped.load(Ordering::Relaxed);
+                self.last_attempt = Instant::now();
+                None
+            }
+        }
+    }
+
     /// Try the next free segment name, at most once per [`RESUME_RETRY`].
     fn attempt(&mut self, counters: &Counters) -> Option<Sink> {
         if !self.enabled || self.last_attempt.elapsed() < RESUME_RETRY {
@@ -654,10 +705,18 @@ fn deliver(
     counters: &Counters,
     resume: &mut Resume,
 ) {
+    if let (Some(sk), Some(span)) = (sink.as_ref(), resume.opts.segment_duration)
+        && sk
+            .first_log_time
+            .is_some_and(|t0| log_time >= t0.saturating_add(span.as_nanos() as u64))
+    {
+        *sink = resume.rotate(sink.take(), counters);
+    }
     let Some(sk) = sink.as_mut() else {
         counters.dropped.fetch_add(1, Ordering::Relaxed);
         return;
     };
+    sk.first_log_time.get_or_insert(log_time);
     match sk.write(item, log_time) {
         Ok(n) => {
             counters.written.fetch_add(n, Ordering::Relaxed);
@@ -916,6 +975,13 @@ impl Recorder {
         self.stop()
     }
 
+    /// [`Recorder::finish`], with every segment written, in order (the last ones may have been
+    /// opened while the queue drained).
+    pub fn finish_with_segments(mut self) -> Result<(RecorderStats, Vec<PathBuf>), RecorderError> {
+        let stats = self.stop()?;
+        Ok((stats, self.segments()))
+    }
+
     fn stop(&mut self) -> Result<RecorderStats, RecorderError> {
         self.tx = None;
         if let Some(t) = self.thread.take() {
@@ -1047,6 +1113,57 @@ mod tests {
         // The untimed status (header time 0) is logged at the latest time before it.
         let status = msgs.iter().find(|m| m.channel.topic == "status").unwrap();
         assert_eq!(status.log_time, 315_964_800_000_000_000 + 25_000_000);
+    }
+
+    /// With a segment duration, the recording is split at record boundaries into complete MCAP
+    /// files, each spanning less than the duration; the reader takes them as one stream, in
+    /// order, and `open_file` reads one alone.
+    #[test]
+    fn segments_split_the_recording_and_read_back_as_one() {
+        let path = tmp("segments");
+        for n in 2..=5 {
+            let _ = std::fs::remove_file(segment_path(&path, n));
+        }
+        let span = Duration::from_secs(3);
+        let opts = RecorderOptions {
+            segment_duration: Some(span),
+            ..Default::default()
+        };
+        let rec = Recorder::start(&path, &opts).unwrap();
+        let t0 = fusion::time::GpsTime::from_utc(2025, 3, 20, 21, 0, 0.0).ns;
+        // 10 s of IMU at 10 Hz: segments [0, 3), [3, 6), [6, 9), [9, 10) s.
+        for k in 0..100u64 {
+            let mut imu = ImuSample::default();
+            imu.header.time_ns = t0 + k as i64 * 100_000_000;
+            imu.header.seq = k + 1;
+            assert!(rec.record(Record::Imu(imu), 0));
+        }
+        let (stats, segments) = rec.finish_with_segments().unwrap();
+        assert_eq!((stats.written, stats.dropped, stats.errors), (100, 0, 0));
+        assert_eq!(segments.len(), 4, "{segments:?}");
+        assert_eq!(segments, crate::recording::segments_of(&path));
+        let mut per_file = Vec::new();
+        for p in &segments {
+            // Each a complete MCAP (summary and footer), spanning less than the duration.
+            let bytes = std::fs::read(p).unwrap();
+            let stats = mcap::Summary::read(&bytes).unwrap().unwrap().stats.unwrap();
+            assert!(stats.message_end_time - stats.message_start_time < span.as_nanos() as u64);
+            let one: Vec<_> = crate::recording::Recording::open_file(p)
+                .unwrap()
+                .map(|e| e.unwrap().record.unwrap().header().seq)
+                .collect();
+            per_file.push(one.len());
+        }
+        assert_eq!(per_file, [30, 30, 30, 10]);
+        let mut all = crate::recording::Recording::open(&path).unwrap();
+        let seqs: Vec<u64> = (&mut all)
+            .map(|e| e.unwrap().record.unwrap().header().seq)
+            .collect();
+        assert_eq!(seqs, (1..=100).collect::<Vec<_>>());
+        assert!(all.is_complete());
+        for p in segments {
+            let _ = std::fs::remove_file(p);
+        }
     }
 
     /// Records without a time of validity before the first timed one are held back and logged

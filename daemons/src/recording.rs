@@ -17,6 +17,11 @@
 //! time of validity take it from the message's own header (GPS time, the same in every
 //! convention); [`Entry::receive_mono_ns`] gives the reception time on CLOCK_MONOTONIC in
 //! either convention.
+//!
+//! A recording of several segments (`recording.mcap`, `recording.part2.mcap`, …; see
+//! [`crate::recorder`]) reads as one stream: when a file ends complete and the next segment
+//! exists, the iterator goes on in it ([`segments_of`] lists them). A file cut short ends the
+//! stream there, as it always did.
 
 use msgs::{Record, RecordKind};
 use std::collections::{BTreeMap, HashMap, HashSet, VecDeque};
@@ -141,7 +146,9 @@ impl TimeBase {
 /// One message of a recording.
 #[derive(Debug, Clone)]
 pub struct Entry {
-    /// Byte offset of the message record, or of the chunk containing it.
+    /// Byte offset of the message record, or of the chunk containing it, counted over the
+    /// recording's segments (the sizes of the earlier segments plus the offset in this one):
+    /// the reader's progress through [`recording_len`] bytes.
     pub offset: u64,
     /// MCAP log time, ns: the time of validity as Unix time (UTC), or GPS time in recordings
     /// of [`TimeBase::GpsMonotonic`].
@@ -199,6 +206,37 @@ pub struct Recording {
     /// chunk index: a chunk whose opcode was damaged into another valid record type would
     /// otherwise vanish without a word.
     chunks_read: HashSet<u64>,
+    /// The recording's first file (the stem of its segments).
+    first_path: PathBuf,
+    /// Number of the segment read now (1: the first file).
+    segment: usize,
+    /// Total size of the segments before the one read now, bytes.
+    segments_before_len: u64,
+    /// Read this file only ([`Recording::open_file`]).
+    single_file: bool,
+}
+
+/// Size of the recording whose first file is `first`, over all its segments, bytes.
+pub fn recording_len(first: &Path) -> u64 {
+    segments_of(first)
+        .iter()
+        .filter_map(|p| std::fs::metadata(p).ok())
+        .map(|m| m.len())
+        .sum()
+}
+
+/// The segments of the recording whose first file is `first`: `first`, then
+/// `recording.part2.mcap`, `recording.part3.mcap`, … as long as they exist.
+pub fn segments_of(first: &Path) -> Vec<PathBuf> {
+    let mut v = vec![first.to_path_buf()];
+    for n in 2.. {
+        let p = crate::recorder::segment_path(first, n);
+        if !p.is_file() {
+            break;
+        }
+        v.push(p);
+    }
+    v
 }
 
 impl std::fmt::Debug for Recording {
@@ -252,6 +290,10 @@ impl Recording {
             deferred: None,
             complete: false,
             chunks_read: HashSet::new(),
+            first_path: path.to_path_buf(),
+            segment: 1,
+            segments_before_len: 0,
+            single_file: false,
         };
         // Header and metadata precede every chunk: read them now, stop at the first other
         // record. An error here is reported by the iterator, like any other.
@@ -279,9 +321,44 @@ impl Recording {
         self.time_base
     }
 
-    /// The file.
+    /// The file being read (the first segment until the reader moves on to the next).
     pub fn path(&self) -> &Path {
         &self.path
+    }
+
+    /// Like [`Recording::open`], but the iterator ends with this file, never going on into the
+    /// recording's next segment (a reader that takes the segments one by one).
+    pub fn open_file(path: &Path) -> Result<Self, RecordingError> {
+        let mut r = Self::open(path)?;
+        r.single_file = true;
+        Ok(r)
+    }
+
+    /// Continue in the next segment, when the file just finished complete and it exists:
+    /// its channels and schemas replace the finished file's; the first file's metadata and
+    /// time base stay (every segment carries the same).
+    fn next_segment(&mut self) -> Option<Result<(), RecordingError>> {
+        let next = crate::recorder::segment_path(&self.first_path, self.segment + 1);
+        if self.single_file || !next.is_file() {
+            return None;
+        }
+        let r = match Recording::open(&next) {
+            Ok(r) => r,
+            Err(e) => return Some(Err(e)),
+        };
+        self.segment += 1;
+        self.segments_before_len += self.file_len;
+        self.path = r.path;
+        self.reader = r.reader;
+        self.file_len = r.file_len;
+        self.offset = r.offset;
+        self.channels = r.channels;
+        self.schemas = r.schemas;
+        self.pending = r.pending;
+        self.deferred = r.deferred;
+        self.complete = false;
+        self.chunks_read = r.chunks_read;
+        Some(Ok(()))
     }
 
     /// Metadata records read so far (all of them once `open` returned, for Sextant files).
@@ -586,7 +663,7 @@ impl Recording {
                 let record = decode(kind, data)
                     .map_err(|e| format!("message on topic {topic}: bad JSON: {e}"))?;
                 Ok(Some(Entry {
-                    offset: at,
+                    offset: self.segments_before_len + at,
                     log_time_ns,
                     publish_time_ns,
                     receive_mono_ns: self.time_base.receive_mono_ns(log_time_ns, publish_time_ns),
@@ -722,7 +799,14 @@ impl Iterator for Recording {
             }
             match self.step() {
                 Ok(Step::Continue) => {}
-                Ok(Step::End) => self.done = true,
+                Ok(Step::End) => match self.next_segment() {
+                    Some(Ok(())) => {}
+                    Some(Err(e)) => {
+                        self.done = true;
+                        return Some(Err(e));
+                    }
+                    None => self.done = true,
+                },
                 Err(e) => {
                     self.done = true;
                     return Some(Err(e));

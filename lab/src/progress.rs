@@ -50,10 +50,10 @@ pub fn bytes(show: bool, len: u64, what: &str) -> indicatif::ProgressBar {
     )
 }
 
-/// The size of the file at `path` in bytes (0 when it cannot be read: the bar then shows
-/// bytes without a total).
+/// The size of the recording at `path` in bytes, over its segments (0 when it cannot be read:
+/// the bar then shows bytes without a total).
 pub fn file_len(path: &std::path::Path) -> u64 {
-    std::fs::metadata(path).map(|m| m.len()).unwrap_or(0)
+    crate::recording::recording_len(path)
 }
 
 #[cfg(test)]

@@ -247,9 +247,7 @@ pub fn replay_offline(opts: &OfflineOptions) -> Result<OfflineSummary, ReplayErr
         source,
     })?;
     let mut rec = Recording::open(&opts.recording)?;
-    let file_len = std::fs::metadata(&opts.recording)
-        .map(|m| m.len())
-        .unwrap_or(0);
+    let file_len = crate::recording::recording_len(&opts.recording);
     let (nav_cfg, source) = match &opts.config {
         Some(p) => (load_filter_config(p)?, p.display().to_string()),
         None => (embedded_filter_config(&rec)?, "embedded".to_string()),
@@ -613,9 +611,7 @@ pub fn replay_live(opts: &LiveOptions, stop: &AtomicBool) -> Result<LiveSummary,
         )));
     }
     let rec = Recording::open(&opts.recording)?;
-    let file_len = std::fs::metadata(&opts.recording)
-        .map(|m| m.len())
-        .unwrap_or(0);
+    let file_len = crate::recording::recording_len(&opts.recording);
     let bus = Bus::new(&opts.prefix, "sextant-replay")?;
     let mut imu = bus.publisher::<msgs::ImuSample>()?;
     let mut star = bus.publisher::<msgs::StarTrackerSample>()?;

@@ -69,10 +69,10 @@ fn is_input(topic: &str) -> bool {
         .any(|c| c.name() == topic && !matches!(c, Channel::Nav | Channel::Status))
 }
 
-/// Scan one recording (unordered, non-seeking: a recording cut by a crash is read up to its
-/// last readable record).
+/// Scan one file of a recording (unordered, non-seeking: a file cut by a crash is read up to
+/// its last readable record; the recording's further segments are scanned on their own).
 pub fn scan(path: &Path) -> Result<RecordingSpans, RecordingError> {
-    let rec = Recording::open(path)?;
+    let rec = Recording::open_file(path)?;
     let mut s = RecordingSpans {
         recording: path.to_path_buf(),
         ..Default::default()
