@@ -32,6 +32,7 @@ pub mod calibrate;
 pub mod experiments;
 pub mod fonts;
 pub mod import_rinex;
+pub mod import_smartloc;
 pub mod interchange;
 pub mod plots;
 pub mod progress;

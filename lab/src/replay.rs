@@ -34,7 +34,8 @@
 //! **Hybrid runs** ([`LiveClock::FollowBus`], `replay --live REC --only gnss --follow-bus`):
 //! only the chosen channels are republished (e.g. real GNSS recorded by `sextant import rinex`),
 //! scheduled on the clock of a system already running on the prefix — the time of validity and
-//! monotonic send time of the first IMU sample seen on the bus map GPS time to wall time, so
+//! monotonic send time of the first IMU or star-tracker sample seen on the bus map GPS time to
+//! wall time, so
 //! that a real sample stamped t goes out when the simulated drivers send their samples of t.
 //! Samples more than [`FOLLOW_MAX_LATE_S`] older than the bus's time at the start are skipped
 //! (counted), younger late ones are sent at once and the navigator's delayed fusion takes them.
@@ -523,11 +524,11 @@ pub enum LiveClock {
     /// The recording's own: its first sample after `start_delay_s`, the others at their
     /// recorded distance from it divided by the speed-up.
     Recording,
-    /// A running system's: wait (at most `timeout_s` of wall time) for an IMU sample on the
-    /// prefix, then send a sample of time t at the IMU sample's send time + (t − its time) /
-    /// speed (see the module comment).
+    /// A running system's: wait (at most `timeout_s` of wall time) for an IMU or star-tracker
+    /// sample on the prefix, then send a sample of time t at that sample's send time + (t − its
+    /// time) / speed (see the module comment).
     FollowBus {
-        /// Wall time to wait for the first IMU sample, s.
+        /// Wall time to wait for the bus's first sample, s.
         timeout_s: f64,
     },
 }
@@ -560,9 +561,9 @@ pub struct LiveSummary {
 /// Why a live replay could not run.
 #[derive(Debug, thiserror::Error)]
 pub enum FollowError {
-    /// No IMU sample was seen on the prefix in time.
+    /// No IMU or star-tracker sample was seen on the prefix in time.
     #[error(
-        "no IMU sample on {prefix}/imu within {timeout_s} s: start the system (`sextant run --prefix {prefix}`) first"
+        "no IMU or star-tracker sample on {prefix}/imu, {prefix}/star_tracker within {timeout_s} s: start the system (`sextant run --prefix {prefix}`) first"
     )]
     NoBus {
         /// The prefix.
@@ -578,22 +579,36 @@ pub enum FollowError {
     Receive(#[from] msgs::ipc::ReceiveError),
 }
 
-/// Wait for an IMU sample on `bus`: its (time of validity, monotonic send time), ns.
+/// Wait for the first sample of the bus's clocked sensors (IMU or star tracker) on `bus`: its
+/// (time of validity, monotonic send time), ns. The star tracker counts too because the
+/// simulated one sends its sample of the epoch itself (t = 0) one IMU interval before the IMU
+/// sends its first (t = one interval, the increment over it): a real sample stamped t = 0 then
+/// reaches the navigator while the IMU interval it belongs to is still the current one, which
+/// the alignment in motion needs of its GNSS fix. Polled every 0.2 ms (a 1 ms poll is 20 ms
+/// of simulated time at 20×, two IMU intervals at 100 Hz).
 fn follow_bus(
     bus: &msgs::ipc::Bus,
     timeout_s: f64,
     stop: &AtomicBool,
 ) -> Result<Option<(i64, u64)>, FollowError> {
-    let sub = bus.subscriber::<msgs::ImuSample>()?;
+    let imu = bus.subscriber::<msgs::ImuSample>()?;
+    let star = bus.subscriber::<msgs::StarTrackerSample>()?;
     let start = Instant::now();
     while start.elapsed().as_secs_f64() < timeout_s {
         if stop.load(Ordering::SeqCst) {
             return Ok(None);
         }
-        if let Some(m) = sub.receive()? {
-            return Ok(Some((m.header.time_ns, m.header.send_mono_ns)));
+        let first = [
+            imu.receive()?.map(|m| m.header),
+            star.receive()?.map(|m| m.header),
+        ]
+        .into_iter()
+        .flatten()
+        .min_by_key(|h| h.time_ns);
+        if let Some(h) = first {
+            return Ok(Some((h.time_ns, h.send_mono_ns)));
         }
-        std::thread::sleep(Duration::from_millis(1));
+        std::thread::sleep(Duration::from_micros(200));
     }
     Err(FollowError::NoBus {
         prefix: bus.prefix().to_string(),
@@ -620,6 +635,11 @@ pub fn replay_live(opts: &LiveOptions, stop: &AtomicBool) -> Result<LiveSummary,
     let mut baro = bus.publisher::<msgs::BaroSample>()?;
     let mut truth = bus.publisher::<msgs::TruthSample>()?;
     let mut s = LiveSummary::default();
+    // Read (decompress) the first chunk before waiting for the bus, so that the samples due at
+    // its start go out at once: milliseconds of reading are tens of simulated ms at 20×.
+    let mut entries = rec.into_iter().peekable();
+    let _ = entries.peek();
+    let pb = progress_bar(file_len, opts.progress, "live replay");
     // GPS time (ns) → monotonic time (ns) of the followed bus.
     let followed = match opts.clock {
         LiveClock::Recording => {
@@ -635,10 +655,9 @@ pub fn replay_live(opts: &LiveOptions, stop: &AtomicBool) -> Result<LiveSummary,
         },
     };
     s.followed_bus_time_ns = followed.map(|f| f.0);
-    let pb = progress_bar(file_len, opts.progress, "live replay");
     let start = Instant::now();
     let mut t0: Option<u64> = None;
-    for entry in rec {
+    for entry in entries {
         if stop.load(Ordering::SeqCst) {
             s.interrupted = true;
             break;

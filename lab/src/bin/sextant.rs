@@ -173,6 +173,39 @@ enum ImportWhat {
         #[arg(long, default_value = "out/import/recording.mcap")]
         out: PathBuf,
     },
+    /// A smartLoc drive (TU Chemnitz; plain or `.gz`): the input file's GPS pseudoranges and
+    /// odometer as GNSS and odometer samples, on the time base of a scenario whose `reference`
+    /// trajectory starts at the ground-truth file's first point; the first GNSS sample carries
+    /// that point as the start fix. For `replay --live REC --only gnss,odometer --follow-bus`
+    /// into `sextant run --config config/hybrid_berlin.toml` (see docs/DATA.md).
+    #[command(
+        after_help = "Example:\n  sextant import smartloc tests/data/smartloc-berlin/Berlin_Potsdamer_Platz_Input_150-210s.txt.gz \\\n    --reference tests/data/smartloc-berlin/Berlin_Potsdamer_Platz_GT_150-210s.txt.gz --out out/import/berlin.mcap"
+    )]
+    Smartloc {
+        /// Input file (`pseudorange3`, `odom3` lines).
+        input: PathBuf,
+        /// Ground-truth file (`point3` lines): its first point is t = 0 and the start fix.
+        #[arg(long)]
+        reference: PathBuf,
+        /// Scenario whose `start_utc` is the time base (default: the shipped
+        /// scenarios/berlin_reference.toml).
+        #[arg(long)]
+        scenario: Option<PathBuf>,
+        /// UTC of t = 0 (YYYY-MM-DDTHH:MM:SS[.fff]) instead of the scenario's `start_utc`; the
+        /// data carry no date. The bench's scenario must start at the same instant.
+        #[arg(long)]
+        start_utc: Option<String>,
+        /// Filter configuration to embed (default: the built-in one).
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Also write the reference as a points file for a scenario's `reference` trajectory
+        /// (times from its first point; the standstill intervals in its header).
+        #[arg(long)]
+        trajectory_out: Option<PathBuf>,
+        /// The recording to write.
+        #[arg(long, default_value = "out/import/recording.mcap")]
+        out: PathBuf,
+    },
     /// CSV files described by a TOML file (columns, units, frames, time base; see
     /// docs/DATA.md).
     #[command(
@@ -230,7 +263,8 @@ struct ReplayArgs {
     #[arg(long, value_delimiter = ',', value_parser = parse_channel)]
     only: Vec<msgs::Channel>,
     /// Schedule on the clock of the system already running on the prefix (live): wait for its
-    /// first IMU sample and send each sample when the drivers send theirs of the same time.
+    /// first IMU or star-tracker sample and send each sample when the drivers send theirs of
+    /// the same time.
     #[arg(long)]
     follow_bus: bool,
 }
@@ -444,6 +478,34 @@ fn main() -> anyhow::Result<()> {
             };
             let c = kfgins::import(&files, config.as_deref(), &out)?;
             out!("{}", format_counts("imported", &c));
+            Ok(())
+        }
+        Command::Import(ImportArgs {
+            what:
+                ImportWhat::Smartloc {
+                    input,
+                    reference,
+                    scenario,
+                    start_utc,
+                    config,
+                    trajectory_out,
+                    out,
+                },
+        }) => {
+            use sextant_lab::import_smartloc;
+            let opts = import_smartloc::ImportOptions {
+                input,
+                reference,
+                out: out.clone(),
+                scenario: scenario.unwrap_or_else(|| {
+                    sextant_lab::shipped_config::scenario("berlin_reference.toml")
+                }),
+                start_utc,
+                config,
+                trajectory_out,
+            };
+            let s = import_smartloc::import(&opts)?;
+            out!("{}", import_smartloc::format_table(&s, &out));
             Ok(())
         }
         Command::Import(ImportArgs {

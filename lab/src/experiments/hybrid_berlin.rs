@@ -36,16 +36,14 @@
 use super::consistency::filter_config;
 use super::plot::{Chart, Line, color, line_chart};
 use super::{ExperimentError, fmt_f64, measurement, progress_bar, scenario_file};
-use crate::smartloc::{self, Epoch, SmartLoc};
+use crate::smartloc::{self, DriveSamples, SmartLoc, StartFix, wls};
 use drivers_sim::offline::{OfflineSim, run_navigator};
-use drivers_sim::reference_trajectory::{ReferencePoint, ReferenceSettings, ReferenceTrajectory};
-use drivers_sim::scenario::{Scenario, Trajectory};
-use drivers_sim::truth::TruthGenerator;
+use drivers_sim::reference_trajectory::ReferenceTrajectory;
+use drivers_sim::scenario::Scenario;
 use fusion::earth::{self, WGS84};
 use fusion::ekf::chi2_quantile;
-use fusion::gnss_ls::{self, FLAG_PSEUDORANGE, LsSettings, Observations};
 use fusion::navigator::{Navigator, NavigatorConfig};
-use msgs::{Channel, GnssSample, GnssSatellite, Header, MAX_SATELLITES, OdometerSample, Record};
+use msgs::{Channel, GnssSample, GnssSatellite, OdometerSample, Record};
 use nalgebra::{Matrix3, Matrix4, Vector3, Vector4};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -63,14 +61,10 @@ const SLICE_GT_GZ: &[u8] =
 /// File names of the whole drive in a `--data` directory.
 const INPUT_NAME: &str = "Berlin_Potsdamer_Platz_Input.txt.gz";
 const GT_NAME: &str = "Berlin_Potsdamer_Platz_GT.txt.gz";
-/// smartLoc system code of GPS.
-const SYSTEM_GPS: u32 = 1;
 /// χ²₃ 99 % quantile.
 const CHI2_3_99: f64 = 11.344_866_730_144_373;
 /// Probability of the FDE's global test and w-test.
 const FDE_PROBABILITY: f64 = 0.999;
-/// Speed of light, m/s.
-const C_M_S: f64 = 299_792_458.0;
 
 /// The directory `sextant experiment hybrid-berlin --data DIR` names (set once).
 static DATA_DIR: OnceLock<PathBuf> = OnceLock::new();
@@ -244,87 +238,9 @@ fn load(settings: &Settings) -> Result<Drive, ExperimentError> {
     data.reference = smartloc::parse(&gt)
         .map_err(|e| measurement(format!("reference: {e}")))?
         .reference;
-    let t0 = data
-        .reference
-        .first()
-        .ok_or_else(|| measurement("the reference file has no point3 line"))?
-        .t_ms;
-    data.epochs.retain(|e| e.t_ms >= t0);
-    data.epochs.iter_mut().for_each(|e| e.t_ms -= t0);
-    data.odometry.retain(|o| o.t_ms >= t0);
-    data.odometry.iter_mut().for_each(|o| o.t_ms -= t0);
-    data.reference.iter_mut().for_each(|r| r.t_ms -= t0);
+    data.from_reference_start()
+        .ok_or_else(|| measurement("the reference file has no point3 line"))?;
     Ok(Drive { data, source })
-}
-
-/// Standstill intervals: runs of at least two consecutive zero odometer speeds, s.
-fn standstill(data: &SmartLoc) -> Vec<[f64; 2]> {
-    let mut out = Vec::new();
-    let mut start: Option<(i64, i64)> = None;
-    for o in &data.odometry {
-        if o.speed_m_s == 0.0 {
-            start = Some(start.map_or((o.t_ms, o.t_ms), |(a, _)| (a, o.t_ms)));
-        } else if let Some((a, b)) = start.take()
-            && b > a
-        {
-            out.push([a as f64 * 1e-3, b as f64 * 1e-3]);
-        }
-    }
-    if let Some((a, b)) = start
-        && b > a
-    {
-        out.push([a as f64 * 1e-3, b as f64 * 1e-3]);
-    }
-    out
-}
-
-/// The GPS pseudoranges of an epoch as a receiver sample at `time_ns` (no fix yet).
-fn gps_sample(e: &Epoch, time_ns: i64, seq: u64) -> GnssSample {
-    let mut s = GnssSample {
-        header: Header {
-            time_ns,
-            seq,
-            ..Default::default()
-        },
-        ..Default::default()
-    };
-    let mut n = 0;
-    for p in e
-        .pseudoranges
-        .iter()
-        .filter(|p| p.system == SYSTEM_GPS)
-        .take(MAX_SATELLITES)
-    {
-        s.satellites[n] = GnssSatellite {
-            prn: p.id,
-            flags: FLAG_PSEUDORANGE,
-            pseudorange_m: p.pseudorange_m,
-            cn0_dbhz: p.cn0_dbhz,
-            sigma_pseudorange_m: p.variance_m2.sqrt(),
-            sat_pos_ecef_m: sagnac(p.sat_pos_ecef_m, p.pseudorange_m),
-            ..Default::default()
-        };
-        n += 1;
-    }
-    s.n_satellites = n as u32;
-    s
-}
-
-/// The satellite position rotated by the Earth's turn during the signal's flight
-/// (`R_z(ω_e·ρ/c)`), as the navigator's measurement model expects (`msgs::GnssSatellite`).
-/// The smartLoc positions are at transmission in the ECEF frame of transmission: at the
-/// reference position the rotation shrinks the spread of the high satellites' range residuals
-/// from 15.9 m to 5.5 m (median over the shipped slice; test `sagnac_rotation_is_needed`).
-fn sagnac(r: [f64; 3], pseudorange_m: f64) -> [f64; 3] {
-    let th = WGS84.omega_ie_rad_s * pseudorange_m / C_M_S;
-    let (s, c) = th.sin_cos();
-    [c * r[0] + s * r[1], -s * r[0] + c * r[1], r[2]]
-}
-
-/// Weighted least-squares fix of a sample's pseudoranges.
-fn wls(s: &GnssSample) -> Option<gnss_ls::GnssFix> {
-    let obs = Observations::from_sample(s).ok()?;
-    gnss_ls::solve(&obs, &LsSettings::default()).ok()
 }
 
 /// Snapshot fault detection and exclusion: while the weighted residuals fail the χ² test
@@ -365,19 +281,6 @@ fn exclude_faults(s: &mut GnssSample) -> usize {
         s.satellites[n - 1] = GnssSatellite::default();
         s.n_satellites -= 1;
         excluded += 1;
-    }
-}
-
-/// Put a least-squares fix into a sample (position only: no Doppler, so no velocity).
-fn set_fix(s: &mut GnssSample, fix: &gnss_ls::GnssFix) {
-    let p = &fix.position;
-    s.fix_valid = 1;
-    s.pos_ecef_m = p.r_e_m.into();
-    s.pdop = p.dop.pdop;
-    for r in 0..3 {
-        for c in 0..3 {
-            s.pos_cov_ecef_m2[3 * r + c] = p.cov_r_e_m2[(r, c)];
-        }
     }
 }
 
@@ -618,25 +521,8 @@ fn scenario(
     spline: Arc<ReferenceTrajectory>,
     duration_s: f64,
 ) -> Result<Scenario, ExperimentError> {
-    let path = scenario_file(&settings.scenario);
-    let text = std::fs::read_to_string(&path).map_err(|source| ExperimentError::Io {
-        path: path.clone(),
-        source,
-    })?;
-    let mut spec = Scenario::parse(&text, &path).map_err(measurement)?;
-    let Trajectory::Reference(r) = &mut spec.trajectory else {
-        return Err(measurement(format!(
-            "{}: the trajectory is not of kind `reference`",
-            path.display()
-        )));
-    };
-    r.spline = Some(spline);
-    spec.scenario.duration_s = duration_s;
-    let dir = path
-        .parent()
-        .unwrap_or(Path::new("."))
-        .join(spec.scenario.sensors_dir.as_deref().unwrap_or("../sensors"));
-    Scenario::validate(spec, &path, &dir).map_err(measurement)
+    smartloc::drive_scenario(&scenario_file(&settings.scenario), spline, duration_s, None)
+        .map_err(measurement)
 }
 
 /// Measure into `out_dir` (plots) and return the summary.
@@ -647,16 +533,9 @@ pub fn measure(
 ) -> Result<Summary, ExperimentError> {
     let drive = load(settings)?;
     let data = &drive.data;
-    let still = standstill(data);
-    let points: Vec<ReferencePoint> = data
-        .reference
-        .iter()
-        .map(|r| ReferencePoint {
-            t_s: r.t_ms as f64 * 1e-3,
-            r_e_m: Vector3::from(r.r_e_m),
-        })
-        .collect();
-    let spline = ReferenceTrajectory::new(&points, &still, &ReferenceSettings::default())
+    let still = data.standstill_s();
+    let points = data.reference_points();
+    let spline = smartloc::reference_spline(data)
         .map_err(|e| measurement(format!("reference trajectory: {e}")))?;
     let end_s = spline.end_s();
     let duration_s = settings.duration_s.unwrap_or(end_s).min(end_s);
@@ -681,76 +560,40 @@ pub fn measure(
     let spline = Arc::new(spline);
     let scn = scenario(settings, spline.clone(), duration_s)?;
     let epoch = scn.epoch_gps().ns;
-    let t_ns = |t_ms: i64| epoch + t_ms * 1_000_000;
-    let truth0 = *TruthGenerator::new(&scn).current();
-
-    // GNSS samples: all satellites (with their fix for the loose run) and after FDE.
-    let mut all = Vec::new();
-    let mut fde = Vec::new();
-    let (mut n_sats, mut without_fix, mut excluded) = (0usize, 0usize, 0usize);
-    for (seq, e) in data
+    // The start: the reference's first epoch as the fix of the first sample (position and
+    // velocity with the assumed reference accuracy): the alignment in motion's input.
+    let start = StartFix {
+        position_sigma_m: settings.init_position_sigma_m,
+        velocity_sigma_m_s: settings.init_velocity_sigma_m_s,
+        ..StartFix::of_scenario(&scn)
+    };
+    // GNSS samples: all satellites (with their fix for the loose run), as `sextant import
+    // smartloc` writes them, and after FDE; the odometer.
+    let DriveSamples {
+        gnss: all,
+        odometer,
+        gps_pseudoranges: n_sats,
+        epochs_without_fix: without_fix,
+    } = smartloc::drive_samples(data, epoch, duration_s, &start).map_err(measurement)?;
+    let mut excluded = 0usize;
+    let mut fde: Vec<GnssSample> = data
         .epochs
         .iter()
         .filter(|e| e.t_ms as f64 * 1e-3 <= duration_s)
         .enumerate()
-    {
-        let mut s = gps_sample(e, t_ns(e.t_ms), seq as u64);
-        n_sats += s.n_satellites as usize;
-        let mut f = s;
-        excluded += exclude_faults(&mut f);
-        match wls(&s) {
-            Some(fix) => set_fix(&mut s, &fix),
-            None => without_fix += 1,
-        }
-        if let Some(fix) = wls(&f) {
-            set_fix(&mut f, &fix);
-        }
-        all.push(s);
-        fde.push(f);
+        .map(|(seq, e)| {
+            let mut f = smartloc::gps_sample(e, epoch + e.t_ms * 1_000_000, seq as u64);
+            excluded += exclude_faults(&mut f);
+            if let Some(fix) = smartloc::wls(&f) {
+                smartloc::set_fix(&mut f, &fix);
+            }
+            f
+        })
+        .collect();
+    if let Some(first) = fde.first_mut() {
+        start.apply(first);
     }
     let epochs = all.len();
-    // The start: the reference's first epoch as the fix of the first sample (position and
-    // velocity with the assumed reference accuracy): the alignment in motion's input.
-    for s in [&mut all, &mut fde] {
-        let Some(first) = s.first_mut() else {
-            return Err(measurement("no pseudorange epoch in the data"));
-        };
-        if first.header.time_ns != epoch {
-            return Err(measurement(format!(
-                "the first pseudorange epoch is {} s after the reference's first point",
-                (first.header.time_ns - epoch) as f64 * 1e-9
-            )));
-        }
-        first.fix_valid = 1;
-        first.pos_ecef_m = truth0.r_e_m.into();
-        first.vel_ecef_m_s = truth0.v_e_m_s().into();
-        let (sp, sv) = (
-            settings.init_position_sigma_m.powi(2),
-            settings.init_velocity_sigma_m_s.powi(2),
-        );
-        first.pos_cov_ecef_m2 = [sp, 0.0, 0.0, 0.0, sp, 0.0, 0.0, 0.0, sp];
-        first.vel_cov_ecef_m2_s2 = [sv, 0.0, 0.0, 0.0, sv, 0.0, 0.0, 0.0, sv];
-    }
-    // The odometer: each speed over the interval from the previous sample.
-    let odometer: Vec<OdometerSample> = data
-        .odometry
-        .windows(2)
-        .enumerate()
-        .map(|(seq, w)| {
-            let dt_s = (w[1].t_ms - w[0].t_ms) as f64 * 1e-3;
-            OdometerSample {
-                header: Header {
-                    time_ns: t_ns(w[1].t_ms),
-                    seq: seq as u64,
-                    ..Default::default()
-                },
-                dt_s,
-                distance_m: w[1].speed_m_s * dt_s,
-                speed_m_s: w[1].speed_m_s,
-            }
-        })
-        .filter(|o| o.dt_s > 0.0)
-        .collect();
     // The data's own odometer variance (one value throughout the smartLoc files).
     let odo_sigma_m_s = data
         .odometry
@@ -973,6 +816,7 @@ pub fn table(s: &Summary) -> String {
 mod tests {
     use super::*;
     use crate::experiments::test_dir;
+    use crate::smartloc::{SYSTEM_GPS, sagnac};
 
     /// Median over the slice's epochs of the spread (median absolute deviation) of
     /// `ρ − |s − r_ref|` over the GPS satellites above 30° elevation, at the reference
@@ -1010,6 +854,24 @@ mod tests {
         }
         mads.sort_by(f64::total_cmp);
         percentile(&mads, 0.5)
+    }
+
+    /// The live bench's filter (`config/hybrid_berlin_filter.toml`, what `sextant run --config
+    /// config/hybrid_berlin.toml` fuses the played-in real samples with) is the configuration
+    /// of this experiment's "tight, χ² gate" run, so the live and the offline figures compare.
+    #[test]
+    fn the_live_bench_filter_is_the_gated_tight_run() {
+        let settings = Settings::default();
+        let drive = load(&settings).expect("slice");
+        let spline = Arc::new(smartloc::reference_spline(&drive.data).expect("spline"));
+        let end_s = spline.end_s();
+        let scn = scenario(&settings, spline, end_s).expect("scenario");
+        let odo_sigma_m_s = drive.data.odometry[0].speed_variance_m2_s2.sqrt();
+        let offline = config(&CASES[2], &scn, odo_sigma_m_s).expect("config");
+        let path =
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../config/hybrid_berlin_filter.toml");
+        let live = crate::config::load_navigator_config(&path).expect("live filter");
+        assert_eq!(live, offline);
     }
 
     /// The smartLoc satellite positions are in the ECEF frame of transmission: rotated into
