@@ -92,7 +92,7 @@ fn real_gnss_played_into_a_simulated_bench_is_fused() {
     let r = read_recording(&out.join("recording.mcap")).unwrap();
     // Real epochs every 30 s of the run (their times are the receiver's, shifted by its clock
     // bias of under a millisecond): 0, 30, …, 240 s, the first skipped when it precedes the
-    // bus's first IMU sample by more than the replay's allowance, which it does not.
+    // bus's first IMU or star-tracker sample by more than the replay's allowance, which it does not.
     let gnss: Vec<&Record> = r.topic("gnss").collect();
     assert!((8..=9).contains(&gnss.len()), "{} GNSS samples", gnss.len());
     // Every one is a real one: the imported fixes, not a simulator's 1 Hz stream.
