@@ -10,7 +10,7 @@ use crate::foxglove::{NedOrigin, ned_offset};
 use crate::recorder::Record;
 use crate::recording::{Recording, RecordingError};
 use crate::scenario::TimeWindow;
-use crate::stats::{max_abs, percentile, rms};
+use crate::stats::{RmsMax, StreamingPercentiles};
 use msgs::{NavMode, NavSolution, Status, TruthSample};
 use serde::Serialize;
 use std::collections::{BTreeMap, HashMap};
@@ -240,16 +240,16 @@ pub fn analyze_with_progress(
         ..Default::default()
     };
     let mut last_seq: HashMap<String, u64> = HashMap::new();
-    let mut truth: HashMap<i64, TruthSample> = HashMap::new();
     let mut first_truth: Option<TruthSample> = None;
-    let mut navs: Vec<NavSolution> = Vec::new();
-    let mut fixes: Vec<(i64, [f64; 3])> = Vec::new();
     let mut last_status: Option<Status> = None;
     let (mut t_min, mut t_max) = (i64::MAX, i64::MIN);
+    let mut w = Window::default();
+    let mut m = Matched::new(outages);
+    let (mut first_nav_ns, mut last_nav_ns) = (None::<i64>, 0i64);
     let mut n = 0u64;
-    for m in rec {
-        let m = match m {
-            Ok(m) => m,
+    for e in rec {
+        let e = match e {
+            Ok(e) => e,
             Err(e) => {
                 tracing::warn!("{}: reading stopped: {e}", path.display());
                 s.recording_truncated = true;
@@ -258,18 +258,18 @@ pub fn analyze_with_progress(
         };
         n += 1;
         if n.is_multiple_of(4096) {
-            pb.set_position(m.offset);
+            pb.set_position(e.offset);
         }
         *s.messages_per_channel
-            .entry(m.topic.to_string())
+            .entry(e.topic.to_string())
             .or_insert(0) += 1;
-        let Some(record) = m.record else {
+        let Some(record) = e.record else {
             continue;
         };
         let Some(ch) = record.channel() else {
             continue;
         };
-        let topic = ch.name().to_string();
+        let topic = ch.name();
         let h = *record.header();
         if h.time_ns > 0 {
             t_min = t_min.min(h.time_ns);
@@ -277,26 +277,51 @@ pub fn analyze_with_progress(
         }
         let gaps = s
             .sequence_gaps_per_channel
-            .entry(topic.clone())
+            .entry(topic.to_string())
             .or_insert(0);
-        if let Some(prev) = last_seq.insert(topic.clone(), h.seq) {
+        if let Some(prev) = last_seq.insert(topic.to_string(), h.seq) {
             if h.seq > prev + 1 {
                 *gaps += h.seq - prev - 1;
             } else if h.seq <= prev {
                 *s.sequence_restarts_per_channel
-                    .entry(topic.clone())
+                    .entry(topic.to_string())
                     .or_insert(0) += 1;
             }
         }
         match record {
             Record::Truth(t) => {
-                first_truth.get_or_insert(t);
-                truth.insert(t.header.time_ns, t);
+                let origin = *first_truth.get_or_insert(t);
+                let (navs, fixes) = w.truth(t);
+                for nav in &navs {
+                    m.solution(nav, &t, &origin);
+                }
+                for pos in &fixes {
+                    m.fix(pos, &t);
+                }
             }
-            Record::Nav(n) => navs.push(n),
-            Record::Gnss(g) if g.fix_valid == 1 => fixes.push((g.header.time_ns, g.pos_ecef_m)),
+            Record::Nav(nav) => {
+                s.solutions += 1;
+                first_nav_ns.get_or_insert(nav.header.time_ns);
+                last_nav_ns = nav.header.time_ns;
+                if nav.header.send_mono_ns > 0 && nav.imu_send_mono_ns > 0 {
+                    m.latency_us.push(
+                        nav.header.send_mono_ns.saturating_sub(nav.imu_send_mono_ns) as f64 * 1e-3,
+                    );
+                }
+                w.nav(nav, |nav, tr| {
+                    if let Some(origin) = &first_truth {
+                        m.solution(nav, tr, origin)
+                    }
+                });
+            }
+            Record::Gnss(g) if g.fix_valid == 1 => {
+                w.fix(g.header.time_ns, g.pos_ecef_m, |pos, tr| m.fix(pos, tr))
+            }
             Record::Status(st) => last_status = Some(*st),
             _ => {}
+        }
+        if h.time_ns > 0 {
+            w.evict_before(h.time_ns - MATCH_WINDOW_NS);
         }
     }
     pb.finish_and_clear();
@@ -308,106 +333,243 @@ pub fn analyze_with_progress(
                 .unwrap_or_else(|| format!("unknown({})", st.mode)),
         );
     }
-    s.solutions = navs.len() as u64;
     if t_max > t_min {
         s.recorded_time_span_s = (t_max - t_min) as f64 * 1e-9;
     }
-    if let (Some(a), Some(b)) = (navs.first(), navs.last()) {
-        s.duration_s = (b.header.time_ns - a.header.time_ns) as f64 * 1e-9;
+    if let Some(a) = first_nav_ns {
+        s.duration_s = (last_nav_ns - a) as f64 * 1e-9;
     } else if t_max > t_min {
         s.duration_s = (t_max - t_min) as f64 * 1e-9;
     }
-
     let t0_ns = first_truth
         .map(|t| t.header.time_ns)
-        .or_else(|| navs.first().map(|n| n.header.time_ns))
+        .or(first_nav_ns)
         .unwrap_or(0);
-    let mut series = Series {
-        t0_ns,
-        outages_s: outages
-            .iter()
-            .map(|w| {
-                (
-                    (w.start_ns - t0_ns) as f64 * 1e-9,
-                    (w.end_ns - t0_ns) as f64 * 1e-9,
-                )
-            })
-            .collect(),
-        ..Default::default()
-    };
-    let origin = first_truth.as_ref().map(ned_origin);
-    let mut t_ns = Vec::new();
-    let mut latency_us = Vec::new();
-    for n in &navs {
-        if n.header.send_mono_ns > 0 && n.imu_send_mono_ns > 0 {
-            latency_us.push(n.header.send_mono_ns.saturating_sub(n.imu_send_mono_ns) as f64 * 1e-3);
-        }
-        let Some(t) = truth.get(&n.header.time_ns) else {
-            continue;
-        };
-        let e = position_error_ned_m(n, t);
-        let att = attitude_error_rad(t.q_ned_body, n.q_ned_body).to_degrees();
-        if !(e.iter().all(|x| x.is_finite()) && att.is_finite()) {
-            continue;
-        }
-        t_ns.push(n.header.time_ns);
-        let t_s = (n.header.time_ns - t0_ns) as f64 * 1e-9;
-        series.push_matched(t_s, &e, att, n, t, origin.as_ref());
-    }
-    s.solutions_matched_with_truth = t_ns.len() as u64;
-    let (mut fix_h, mut fix_v) = (Vec::new(), Vec::new());
-    for (t, pos) in &fixes {
-        if let Some(tr) = truth.get(t) {
-            let e = ned_offset(tr.pos_ecef_m, tr.lat_rad, tr.lon_rad, *pos);
-            if e.iter().all(|x| x.is_finite()) {
-                fix_h.push(e[0].hypot(e[1]));
-                fix_v.push(e[2]);
-            }
-        }
-    }
-    s.gnss_fix_horizontal_error_rms_m = rms(&fix_h);
-    s.gnss_fix_vertical_error_rms_m = rms(&fix_v);
-    s.horizontal_error_rms_m = rms(&series.horizontal_m);
-    s.horizontal_error_max_m = max_abs(&series.horizontal_m);
-    s.vertical_error_rms_m = rms(&series.vertical_m);
-    s.vertical_error_max_m = max_abs(&series.vertical_m);
-    s.attitude_error_rms_deg = rms(&series.attitude_deg);
-    s.attitude_error_max_deg = max_abs(&series.attitude_deg);
-    s.latency_p50_us = percentile(&latency_us, 50.0);
-    s.latency_p99_us = percentile(&latency_us, 99.0);
-    s.latency_max_us = max_abs(&latency_us);
-
-    let mut all_during = Vec::new();
-    let mut all_after = Vec::new();
-    for w in outages {
-        let after = TimeWindow {
-            start_ns: w.end_ns,
-            end_ns: w.end_ns + (AFTER_OUTAGE_S * 1e9) as i64,
-        };
-        let during: Vec<f64> = t_ns
-            .iter()
-            .zip(&series.horizontal_m)
-            .filter(|(t, _)| w.contains(**t))
-            .map(|(_, e)| *e)
-            .collect();
-        let after_v: Vec<f64> = t_ns
-            .iter()
-            .zip(&series.horizontal_m)
-            .filter(|(t, _)| after.contains(**t))
-            .map(|(_, e)| *e)
-            .collect();
+    s.solutions_matched_with_truth = m.horizontal.count();
+    s.gnss_fix_horizontal_error_rms_m = m.fix_horizontal.rms();
+    s.gnss_fix_vertical_error_rms_m = m.fix_vertical.rms();
+    s.horizontal_error_rms_m = m.horizontal.rms();
+    s.horizontal_error_max_m = m.horizontal.max_abs();
+    s.vertical_error_rms_m = m.vertical.rms();
+    s.vertical_error_max_m = m.vertical.max_abs();
+    s.attitude_error_rms_deg = m.attitude.rms();
+    s.attitude_error_max_deg = m.attitude.max_abs();
+    s.latency_p50_us = m.latency_us.percentile(50.0);
+    s.latency_p99_us = m.latency_us.percentile(99.0);
+    s.latency_max_us = m.latency_us.max();
+    let (mut all_during, mut all_after) = (RmsMax::default(), RmsMax::default());
+    for (w, (during, after)) in outages.iter().zip(&m.outages) {
         s.gnss_outages.push(OutageSummary {
             start_s: (w.start_ns - t0_ns) as f64 * 1e-9,
             end_s: (w.end_ns - t0_ns) as f64 * 1e-9,
-            horizontal_error_max_m: max_abs(&during),
-            after_outage_horizontal_error_rms_m: rms(&after_v),
+            horizontal_error_max_m: during.max_abs(),
+            after_outage_horizontal_error_rms_m: after.rms(),
         });
-        all_during.extend(during);
-        all_after.extend(after_v);
+        all_during.merge(during);
+        all_after.merge(after);
     }
-    s.outage_horizontal_error_max_m = max_abs(&all_during);
-    s.after_outage_horizontal_error_rms_m = rms(&all_after);
+    s.outage_horizontal_error_max_m = all_during.max_abs();
+    s.after_outage_horizontal_error_rms_m = all_after.rms();
+    let mut series = m.series.finish();
+    series.t0_ns = t0_ns;
+    series.outages_s = outages
+        .iter()
+        .map(|w| {
+            (
+                (w.start_ns - t0_ns) as f64 * 1e-9,
+                (w.end_ns - t0_ns) as f64 * 1e-9,
+            )
+        })
+        .collect();
     Ok(Analysis { summary: s, series })
+}
+
+/// How far (time of validity) a solution or fix and the truth sample of its time may lie apart
+/// in the recording and still be matched, ns. The recorder writes records as they arrive; the
+/// truth and the solution of one epoch arrive within milliseconds of wall time, so a minute
+/// of simulated time is far beyond any real separation even at high speed-ups, and keeps the
+/// analysis in bounded memory whatever the recording's length.
+const MATCH_WINDOW_NS: i64 = 60_000_000_000;
+
+/// Most points of the plotted series (the figures use every matched solution).
+const MAX_SERIES_POINTS: usize = 40_000;
+
+/// Solutions, fixes and truth samples waiting for their counterpart of the same time of
+/// validity, over the last [`MATCH_WINDOW_NS`].
+#[derive(Default)]
+struct Window {
+    truth: BTreeMap<i64, TruthSample>,
+    navs: BTreeMap<i64, Vec<NavSolution>>,
+    fixes: BTreeMap<i64, Vec<[f64; 3]>>,
+}
+
+impl Window {
+    /// A truth sample: returns the solutions and fixes of its time that waited for it, and
+    /// waits for later ones.
+    fn truth(&mut self, t: TruthSample) -> (Vec<NavSolution>, Vec<[f64; 3]>) {
+        let k = t.header.time_ns;
+        self.truth.insert(k, t);
+        (
+            self.navs.remove(&k).unwrap_or_default(),
+            self.fixes.remove(&k).unwrap_or_default(),
+        )
+    }
+
+    /// A solution: matched at once when its truth sample is there, else it waits.
+    fn nav(&mut self, n: NavSolution, on_match: impl FnOnce(&NavSolution, &TruthSample)) {
+        match self.truth.get(&n.header.time_ns) {
+            Some(t) => on_match(&n, t),
+            None => self.navs.entry(n.header.time_ns).or_default().push(n),
+        }
+    }
+
+    /// A receiver fix of time `t_ns`: as [`Window::nav`].
+    fn fix(&mut self, t_ns: i64, pos: [f64; 3], on_match: impl FnOnce(&[f64; 3], &TruthSample)) {
+        match self.truth.get(&t_ns) {
+            Some(t) => on_match(&pos, t),
+            None => self.fixes.entry(t_ns).or_default().push(pos),
+        }
+    }
+
+    /// Forget what is older than `t_ns` (it will find no counterpart any more).
+    fn evict_before(&mut self, t_ns: i64) {
+        self.truth = self.truth.split_off(&t_ns);
+        self.navs = self.navs.split_off(&t_ns);
+        self.fixes = self.fixes.split_off(&t_ns);
+    }
+}
+
+/// The figures accumulated over the matched pairs.
+struct Matched<'a> {
+    outage_windows: &'a [TimeWindow],
+    horizontal: RmsMax,
+    vertical: RmsMax,
+    attitude: RmsMax,
+    fix_horizontal: RmsMax,
+    fix_vertical: RmsMax,
+    /// Per outage: horizontal error during it, and in the [`AFTER_OUTAGE_S`] after it.
+    outages: Vec<(RmsMax, RmsMax)>,
+    latency_us: StreamingPercentiles,
+    series: Thinned,
+}
+
+impl<'a> Matched<'a> {
+    fn new(outage_windows: &'a [TimeWindow]) -> Self {
+        Self {
+            outage_windows,
+            horizontal: RmsMax::default(),
+            vertical: RmsMax::default(),
+            attitude: RmsMax::default(),
+            fix_horizontal: RmsMax::default(),
+            fix_vertical: RmsMax::default(),
+            outages: vec![Default::default(); outage_windows.len()],
+            // 1 µs bins up to 100 ms: 1.2 MB, exact beyond.
+            latency_us: StreamingPercentiles::new(1.0, 100_000),
+            series: Thinned::default(),
+        }
+    }
+
+    fn solution(&mut self, n: &NavSolution, t: &TruthSample, origin: &TruthSample) {
+        let e = position_error_ned_m(n, t);
+        let att = attitude_error_rad(t.q_ned_body, n.q_ned_body).to_degrees();
+        if !(e.iter().all(|x| x.is_finite()) && att.is_finite()) {
+            return;
+        }
+        let h = e[0].hypot(e[1]);
+        self.horizontal.push(h);
+        self.vertical.push(-e[2]);
+        self.attitude.push(att);
+        let tv = n.header.time_ns;
+        for (w, (during, after)) in self.outage_windows.iter().zip(&mut self.outages) {
+            if w.contains(tv) {
+                during.push(h);
+            }
+            let after_w = TimeWindow {
+                start_ns: w.end_ns,
+                end_ns: w.end_ns + (AFTER_OUTAGE_S * 1e9) as i64,
+            };
+            if after_w.contains(tv) {
+                after.push(h);
+            }
+        }
+        let t_s = (tv - origin.header.time_ns) as f64 * 1e-9;
+        self.series
+            .push(t_s, &e, att, n, t, Some(&ned_origin(origin)));
+    }
+
+    fn fix(&mut self, pos: &[f64; 3], tr: &TruthSample) {
+        let e = ned_offset(tr.pos_ecef_m, tr.lat_rad, tr.lon_rad, *pos);
+        if e.iter().all(|x| x.is_finite()) {
+            self.fix_horizontal.push(e[0].hypot(e[1]));
+            self.fix_vertical.push(e[2]);
+        }
+    }
+}
+
+/// The plotted series, thinned as it grows: every `stride`-th matched solution is kept, and
+/// when more than twice [`MAX_SERIES_POINTS`] are held every other one is dropped and the
+/// stride doubles.
+#[derive(Default)]
+struct Thinned {
+    series: Series,
+    k: u64,
+    stride: u64,
+}
+
+impl Thinned {
+    fn push(
+        &mut self,
+        t_s: f64,
+        e: &[f64; 3],
+        att_deg: f64,
+        n: &NavSolution,
+        t: &TruthSample,
+        origin: Option<&NedOrigin>,
+    ) {
+        self.stride = self.stride.max(1);
+        self.k += 1;
+        if !(self.k - 1).is_multiple_of(self.stride) {
+            return;
+        }
+        self.series.push_matched(t_s, e, att_deg, n, t, origin);
+        if self.series.t_s.len() > 2 * MAX_SERIES_POINTS {
+            let s = &mut self.series;
+            fn halve<T: Copy>(v: &mut Vec<T>) {
+                let kept: Vec<T> = v.iter().step_by(2).copied().collect();
+                *v = kept;
+            }
+            halve(&mut s.t_s);
+            halve(&mut s.horizontal_m);
+            halve(&mut s.vertical_m);
+            halve(&mut s.attitude_deg);
+            halve(&mut s.truth_ne_m);
+            halve(&mut s.nav_ne_m);
+            self.stride *= 2;
+        }
+    }
+
+    /// The series in time order (pairs are matched as their second half arrives, nearly but
+    /// not exactly in time order).
+    fn finish(self) -> Series {
+        let mut s = self.series;
+        let mut idx: Vec<usize> = (0..s.t_s.len()).collect();
+        idx.sort_by(|&a, &b| s.t_s[a].total_cmp(&s.t_s[b]));
+        let pick = |v: &Vec<f64>| idx.iter().map(|&i| v[i]).collect::<Vec<f64>>();
+        let pick2 = |v: &Vec<(f64, f64)>| {
+            if v.len() == idx.len() {
+                idx.iter().map(|&i| v[i]).collect()
+            } else {
+                v.clone()
+            }
+        };
+        s.horizontal_m = pick(&s.horizontal_m);
+        s.vertical_m = pick(&s.vertical_m);
+        s.attitude_deg = pick(&s.attitude_deg);
+        s.truth_ne_m = pick2(&s.truth_ne_m);
+        s.nav_ne_m = pick2(&s.nav_ne_m);
+        s.t_s = pick(&s.t_s);
+        s
+    }
 }
 
 /// The summary as an aligned text table.

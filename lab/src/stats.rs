@@ -28,9 +28,146 @@ pub fn percentile(v: &[f64], p: f64) -> Option<f64> {
     Some(s[lo] + (s[hi] - s[lo]) * f)
 }
 
+/// RMS and largest absolute value of a stream, in constant memory.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct RmsMax {
+    sum_sq: f64,
+    n: u64,
+    max_abs: Option<f64>,
+}
+
+impl RmsMax {
+    /// Take one value.
+    pub fn push(&mut self, x: f64) {
+        self.sum_sq += x * x;
+        self.n += 1;
+        self.max_abs = Some(self.max_abs.map_or(x.abs(), |m| m.max(x.abs())));
+    }
+    /// Take every value of another stream.
+    pub fn merge(&mut self, o: &RmsMax) {
+        self.sum_sq += o.sum_sq;
+        self.n += o.n;
+        self.max_abs = match (self.max_abs, o.max_abs) {
+            (Some(a), Some(b)) => Some(a.max(b)),
+            (a, b) => a.or(b),
+        };
+    }
+    /// Root mean square; `None` before the first value.
+    pub fn rms(&self) -> Option<f64> {
+        (self.n > 0).then(|| (self.sum_sq / self.n as f64).sqrt())
+    }
+    /// Largest absolute value; `None` before the first value.
+    pub fn max_abs(&self) -> Option<f64> {
+        self.max_abs
+    }
+    /// Values taken.
+    pub fn count(&self) -> u64 {
+        self.n
+    }
+}
+
+/// Percentiles of a stream of non-negative values in constant memory: a histogram of
+/// `resolution`-wide bins up to `resolution × bins`, each bin standing for the mean of the
+/// values that fell into it (so a percentile is within one resolution of the exact one, and
+/// exact when a bin holds one distinct value), and the values beyond kept exactly.
+#[derive(Debug, Clone)]
+pub struct StreamingPercentiles {
+    resolution: f64,
+    counts: Vec<u32>,
+    sums: Vec<f64>,
+    beyond: Vec<f64>,
+    n: u64,
+    max: Option<f64>,
+}
+
+impl StreamingPercentiles {
+    /// Bins of width `resolution` covering `[0, resolution × bins)`.
+    pub fn new(resolution: f64, bins: usize) -> Self {
+        Self {
+            resolution,
+            counts: vec![0; bins],
+            sums: vec![0.0; bins],
+            beyond: Vec::new(),
+            n: 0,
+            max: None,
+        }
+    }
+    /// Take one value (negative values count as 0; NaN is ignored).
+    pub fn push(&mut self, x: f64) {
+        if x.is_nan() {
+            return;
+        }
+        let x = x.max(0.0);
+        self.n += 1;
+        self.max = Some(self.max.map_or(x, |m| m.max(x)));
+        let k = (x / self.resolution) as usize;
+        if k < self.counts.len() {
+            self.counts[k] += 1;
+            self.sums[k] += x;
+        } else {
+            self.beyond.push(x);
+        }
+    }
+    /// The `k`-th smallest value (from 0), as its bin's mean.
+    fn nth(&self, k: u64) -> f64 {
+        let mut left = k;
+        for (c, s) in self.counts.iter().zip(&self.sums) {
+            if left < u64::from(*c) {
+                return s / f64::from(*c);
+            }
+            left -= u64::from(*c);
+        }
+        self.beyond[left as usize]
+    }
+    /// Percentile `p` (0..=100) by linear interpolation between the closest ranks, as
+    /// [`percentile`]; `None` when empty or `p` out of range.
+    pub fn percentile(&mut self, p: f64) -> Option<f64> {
+        if self.n == 0 || !(0.0..=100.0).contains(&p) {
+            return None;
+        }
+        self.beyond.sort_by(|a, b| a.total_cmp(b));
+        let rank = p / 100.0 * (self.n - 1) as f64;
+        let (lo, hi) = (rank.floor() as u64, rank.ceil() as u64);
+        let (a, b) = (self.nth(lo), self.nth(hi));
+        Some(a + (b - a) * (rank - lo as f64))
+    }
+    /// Largest value.
+    pub fn max(&self) -> Option<f64> {
+        self.max
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn streaming_statistics_agree_with_the_slice_ones() {
+        let v: Vec<f64> = (0..10_000)
+            .map(|k| ((k * 7919) % 10_007) as f64 * 0.37)
+            .collect();
+        let mut a = RmsMax::default();
+        let mut q = StreamingPercentiles::new(1.0, 2000);
+        for &x in &v {
+            a.push(x);
+            q.push(x);
+        }
+        assert!((a.rms().unwrap() - rms(&v).unwrap()).abs() < 1e-9 * rms(&v).unwrap());
+        assert_eq!(a.max_abs(), max_abs(&v));
+        assert_eq!(q.max(), max_abs(&v));
+        // Within one bin width of the exact percentile, values above the bins exact.
+        for p in [0.0, 5.0, 50.0, 95.0, 99.0, 100.0] {
+            let exact = percentile(&v, p).unwrap();
+            let got = q.percentile(p).unwrap();
+            assert!((got - exact).abs() <= 1.0, "p{p}: {got} vs {exact}");
+        }
+        let mut same = StreamingPercentiles::new(1.0, 10);
+        for _ in 0..5 {
+            same.push(2.5);
+        }
+        assert_eq!(same.percentile(50.0), Some(2.5));
+        assert_eq!(StreamingPercentiles::new(1.0, 10).percentile(50.0), None);
+    }
 
     #[test]
     fn rms_and_max() {
