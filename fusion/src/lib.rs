@@ -37,6 +37,7 @@ pub mod point_positioning;
 pub mod redundancy;
 pub mod strapdown;
 pub mod time;
+pub mod yaw_gsf;
 
 pub use navigator::{RejectReason, Rejection};
 
