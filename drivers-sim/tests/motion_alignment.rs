@@ -202,6 +202,46 @@ fn a_navigator_started_while_driving_navigates_at_once() {
     );
 }
 
+/// The same start without stars (the star tracker delivers no attitude all run): the heading
+/// comes from the GNSS velocities once the vehicle turns (`yaw_gsf`). The first IMU sample is
+/// at 125 s, on the straight at constant speed where the heading is unobservable: navigation
+/// must not start there, but within one GNSS interval of the σ reaching the threshold during
+/// the 90° turn at 150–165 s, i.e. before its end; consistent from the start on.
+#[test]
+fn a_navigator_started_while_driving_without_stars_aligns_from_gnss_heading() {
+    let mut scn = vehicle_with(DRIVE, DRIVE_S);
+    scn.spec.star_tracker.outages = vec![sextant_drivers_sim::scenario::Window {
+        start_s: 0.0,
+        duration_s: DRIVE_S,
+    }];
+    let mut nav = Navigator::new(default_config()).unwrap();
+    let first = 125.0;
+    let r = run(&scn, &mut nav, first, |_| true, None);
+    let d = nav.diagnostics();
+    println!("starts {:?}, diagnostics {d:?}", r.starts);
+    assert_eq!(r.starts.len(), 1);
+    assert_eq!(d.motion_alignments, 1);
+    assert_eq!(d.gnss_heading_alignments, 1);
+    let (turn0, turn1) = (150.0, 165.0);
+    assert!(
+        r.starts[0] > turn0 && r.starts[0] <= turn1,
+        "navigation started at {:.2} s, not during the first turn",
+        r.starts[0]
+    );
+    let t0 = r.starts[0];
+    let p0 = r.points.iter().find(|p| p.t_s >= t0).expect("a solution");
+    println!(
+        "started {:.2} s after the first IMU sample, attitude σ {:.2?}°",
+        t0 - first,
+        [0, 1, 2].map(|k| p0.att_cov_e_rad2[(k, k)].sqrt().to_degrees())
+    );
+    assert_consistent(
+        &r.points,
+        &[t0, t0 + 1.0, t0 + 5.0, t0 + 20.0, t0 + 40.0, t0 + 70.0],
+        "started from the GNSS heading",
+    );
+}
+
 /// An IMU gap of 3 s in the middle of the drive (beyond the 1 s that is bridged) re-initialises
 /// the navigator; it navigates again within the start bound after the sample that confirms the
 /// gap (20 samples, 0.1 s at 200 Hz), without a standstill, and keeps its sensor-error

@@ -6,18 +6,29 @@
 use super::*;
 
 impl Navigator {
-    /// While aligning, at IMU epoch `t` with the increment `dth` (body, rad) over `dt_s`:
-    /// carry the star attitude, take the aiding due, and start navigating in motion when the
-    /// sensors allow it (`try_align_in_motion`).
-    pub(super) fn consume_during_alignment(&mut self, t: GpsTime, dth: &Vector3<f64>, dt_s: f64) {
+    /// While aligning, at IMU epoch `t` with the increments `dth` (body, rad) and `dv` (body,
+    /// m/s) over `dt_s`: carry the star attitude and the GNSS-velocity yaw estimator, take the
+    /// aiding due, and start navigating in motion when the sensors allow it (from a star
+    /// attitude, `try_align_in_motion`, else from the GNSS heading,
+    /// `try_align_from_gnss_heading`).
+    pub(super) fn consume_during_alignment(
+        &mut self,
+        t: GpsTime,
+        dth: &Vector3<f64>,
+        dv: &Vector3<f64>,
+        dt_s: f64,
+    ) {
         self.check_warm_start_age(t);
         self.carry_star_attitude(dth, dt_s);
+        self.gsf_predict(dth, dv, dt_s);
         while let Some((ts, obs, _)) = self.star_q.pop_due(t) {
             self.alignment_star(ts, &obs, t, dth, dt_s);
         }
         while let Some((ts, obs, _)) = self.gnss_q.pop_due(t) {
             self.alignment_gnss(ts, &obs);
-            if self.try_align_in_motion(ts, &obs, t, dt_s) {
+            if self.try_align_in_motion(ts, &obs, t, dth, dt_s)
+                || self.try_align_from_gnss_heading(ts, &obs, t, dth, dt_s)
+            {
                 return;
             }
         }

@@ -122,6 +122,9 @@ pub struct NavigatorDiagnostics {
     pub replays_impossible: u64,
     /// Alignments in motion (star-tracker attitude, GNSS position and velocity).
     pub motion_alignments: u64,
+    /// Of those, the ones without a star attitude: heading from GNSS velocity
+    /// ([`crate::yaw_gsf`]).
+    pub gnss_heading_alignments: u64,
     /// Starts of navigation that resumed the sensor-error states from a snapshot.
     pub warm_starts: u64,
 }

@@ -31,14 +31,14 @@ impl Navigator {
                 self.time = t;
                 self.align.add(&dth, &dv, s.dt_s);
                 self.health[id].fused += 1;
-                self.consume_during_alignment(t, &dth, s.dt_s);
+                self.consume_during_alignment(t, &dth, &dv, s.dt_s);
                 self.try_finish_alignment(t);
             }
             Phase::Aligning => {
                 self.time = t;
                 self.align.add(&dth, &dv, s.dt_s);
                 self.health[id].fused += 1;
-                self.consume_during_alignment(t, &dth, s.dt_s);
+                self.consume_during_alignment(t, &dth, &dv, s.dt_s);
                 self.try_finish_alignment(t);
             }
             Phase::Navigating => {

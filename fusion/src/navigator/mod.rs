@@ -10,7 +10,9 @@
 //! aiding actually fused within its deadline. While GNSS shows the vehicle moving, the
 //! alignment in motion (`motion_align`) starts navigation at once instead, from one
 //! star-tracker attitude and the GNSS position and velocity, resuming the sensor-error
-//! estimates of a snapshot after a restart or a re-initialisation (`warm_start`).
+//! estimates of a snapshot after a restart or a re-initialisation (`warm_start`); without a
+//! star attitude, from the heading a bank of yaw hypotheses finds in the GNSS velocities
+//! once the vehicle has turned or changed speed (`gsf_align`, [`crate::yaw_gsf`]).
 //!
 //! # GNSS least squares (paper 003 eq. 12–13, [`crate::gnss_ls`])
 //! With ≥ 4 pseudoranges (loose or tight mode) the receiver-style fix is computed from the raw
@@ -86,6 +88,8 @@
 //! - `align`: static coarse alignment.
 //! - `motion_align`: alignment in motion from the star tracker and GNSS, and the start of
 //!   navigation.
+//! - `gsf_align`: alignment in motion without stars, the heading from GNSS velocity
+//!   ([`crate::yaw_gsf`]).
 //! - `warm_start`: the snapshot of the estimate for a warm restart, and the resumption from it.
 //! - `core`: the replayable state as one `Clone` value; a checkpoint is `(time, Core)`.
 //! - `buffer`, `obs`: the delayed-fusion queues and logs, and the observations they hold.
@@ -121,6 +125,7 @@ mod config;
 mod core;
 mod gate;
 mod gnss;
+mod gsf_align;
 mod health;
 mod imu_time;
 mod input;
@@ -139,6 +144,7 @@ use buffer::*;
 pub use config::*;
 use gate::*;
 pub use gate::{RejectReason, Rejection};
+use gsf_align::*;
 use health::*;
 pub use health::{ConstraintHealth, NavigatorDiagnostics, NhcHealth, ZuptHealth};
 pub use imu_time::CONFIRM_SAMPLES;
@@ -268,6 +274,9 @@ pub struct Navigator {
     /// While aligning: the latest star-tracker attitude, carried by the gyros
     /// (`motion_align`).
     star_attitude: Option<StarAttitude>,
+    /// While aligning: the GNSS-velocity yaw estimator, for a start in motion without a star
+    /// attitude (`gsf_align`).
+    gsf: GsfAlignment,
     /// A snapshot to resume the sensor-error states from (`warm_start`).
     warm: Option<NavSnapshot>,
     /// What became of the snapshot given to [`Navigator::warm_start`].
@@ -329,6 +338,7 @@ impl Navigator {
             nhc: NhcHealth::default(),
             init_ls: None,
             star_attitude: None,
+            gsf: GsfAlignment::default(),
             warm: None,
             warm_outcome: None,
             ell,

@@ -23,7 +23,10 @@
 //!
 //! # Position and velocity
 //! From the GNSS fix with its own covariance, moved from the fix epoch `t_g` to the IMU epoch
-//! `t ≥ t_g` (within one IMU interval) by `r += v·(t − t_g)`, `P_rr += (t − t_g)²·P_vv`.
+//! `t ≥ t_g` (within one IMU interval) by `r += v·(t − t_g)`, `P_rr += (t − t_g)²·P_vv`,
+//! and from the antenna to the IMU by the lever arm `l_b` (`[gnss]`): `r −= C_e_b l_b`,
+//! `v −= C_e_b (ω_b × l_b)`. Without a star attitude the same start takes the attitude of the
+//! GNSS-velocity heading estimator (`gsf_align`).
 //! The sensors' errors are independent, so the position, velocity and attitude blocks start
 //! uncorrelated; the sensor biases start from their priors (`sensor_prior`) or,
 //! after a warm restart, from the checkpoint (`warm_start`).
@@ -44,6 +47,11 @@ pub struct MotionAlignment {
     pub enabled: bool,
     /// GNSS speed above which the vehicle counts as moving, m/s.
     pub min_speed_m_s: f64,
+    /// Without a star attitude: start navigation once the heading 1-σ of the GNSS-velocity
+    /// yaw estimator ([`crate::yaw_gsf`]) is below this, deg. Default 2°: 3σ = 6° ≈ 0.1 rad
+    /// keeps the terms the error-state filter's small-angle model drops (`1 − cos ψ ≈ ψ²/2`,
+    /// ≤ 0.5 % of the specific force; `ψ − sin ψ ≈ ψ³/6`, ≤ 0.02 %) below one percent.
+    pub yaw_sigma_deg: f64,
 }
 
 impl Default for MotionAlignment {
@@ -51,6 +59,7 @@ impl Default for MotionAlignment {
         Self {
             enabled: true,
             min_speed_m_s: 1.0,
+            yaw_sigma_deg: 2.0,
         }
     }
 }
@@ -61,6 +70,12 @@ impl MotionAlignment {
             pos(self.min_speed_m_s) && self.min_speed_m_s <= 100.0,
             "motion_alignment.min_speed_m_s",
             "must be in (0, 100] m/s",
+        )?;
+        // Beyond 10° (3σ = 30°) the small-angle model of the filter no longer holds.
+        check(
+            pos(self.yaw_sigma_deg) && self.yaw_sigma_deg <= 10.0,
+            "motion_alignment.yaw_sigma_deg",
+            "must be in (0, 10] deg",
         )
     }
 }
@@ -80,7 +95,7 @@ pub(super) struct StarAttitude {
 
 /// Whether a sample `age` before the IMU epoch belongs to the current IMU interval of `dt_s`
 /// seconds (with half an interval of margin for jitter).
-fn within_interval(age: Duration, dt_s: f64) -> bool {
+pub(super) fn within_interval(age: Duration, dt_s: f64) -> bool {
     age >= Duration::ZERO && age.seconds_f64() <= 1.5 * dt_s
 }
 
@@ -166,6 +181,7 @@ impl Navigator {
         ts: GpsTime,
         obs: &GnssObs,
         t: GpsTime,
+        dth_b_rad: &Vector3<f64>,
         dt_s: f64,
     ) -> bool {
         if !self.config.motion_alignment.enabled || !within_interval(t - ts, dt_s) {
@@ -174,22 +190,61 @@ impl Navigator {
         let (Some(att), Some(fix)) = (self.star_attitude, obs.fix) else {
             return false;
         };
+        if !self.moving(&fix) {
+            return false;
+        }
+        let imu = &self.config.imu;
+        let noise = imu.process_noise();
+        let tau = att.carried_s;
+        let carried = noise.arw_rad_sqrt_s.powi(2) * tau + (imu.gyro_bias_rad_s() * tau).powi(2);
+        let p_psi = att.p_psi + Matrix3::identity() * carried;
+        let kappa = self
+            .active_states(false)
+            .boresight
+            .then_some(att.p_psi_kappa);
+        self.start_in_motion(&fix, ts, t, att.q_e_b, &p_psi, kappa, dth_b_rad, dt_s);
+        true
+    }
+
+    /// Whether a GNSS fix shows a moving vehicle: a valid velocity with
+    /// `|v| ≥ motion_alignment.min_speed_m_s` and `|v|² > 9·tr(P_vv)`.
+    pub(super) fn moving(&self, fix: &GnssFix) -> bool {
         if !fix.vel_valid {
             return false;
         }
         let speed2 = fix.vel.norm_squared();
         let min = self.config.motion_alignment.min_speed_m_s;
-        if speed2 < min * min || speed2 <= 9.0 * fix.vel_cov.trace() {
-            return false;
-        }
+        speed2 >= min * min && speed2 > 9.0 * fix.vel_cov.trace()
+    }
+
+    /// Start navigating in motion at IMU epoch `t` from the GNSS fix of epoch `ts` (position
+    /// and velocity with their covariance) and an attitude `q_e_b` whose ECEF error ψ has the
+    /// covariance `p_psi` (rad²) and, with the boresight estimated, the cross-covariance
+    /// `p_psi_kappa` with it. The fix is the antenna's: the IMU is `C_e_b l_b` from it and
+    /// moves `C_e_b (ω_b × l_b)` slower (ω_b from the increment `dth_b_rad` over `dt_s`).
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn start_in_motion(
+        &mut self,
+        fix: &GnssFix,
+        ts: GpsTime,
+        t: GpsTime,
+        q_e_b: UnitQuaternion<f64>,
+        p_psi: &Matrix3<f64>,
+        p_psi_kappa: Option<Matrix3<f64>>,
+        dth_b_rad: &Vector3<f64>,
+        dt_s: f64,
+    ) {
         let dt_fix = (t - ts).seconds_f64();
-        let r_e = fix.pos + fix.vel * dt_fix;
+        let lever_b = self.config.gnss.lever_arm_b();
+        let w_b = if dt_s > 0.0 {
+            dth_b_rad / dt_s
+        } else {
+            Vector3::zeros()
+        };
+        let r_e = fix.pos + fix.vel * dt_fix - q_e_b * lever_b;
+        let v_e = fix.vel - q_e_b * w_b.cross(&lever_b);
         let p_rr = fix.pos_cov + fix.vel_cov * (dt_fix * dt_fix);
-        let imu = &self.config.imu;
-        let noise = imu.process_noise();
-        let tau = att.carried_s;
-        let carried = noise.arw_rad_sqrt_s.powi(2) * tau + (imu.gyro_bias_rad_s() * tau).powi(2);
-        let c_e_b = att.q_e_b.to_rotation_matrix().into_inner();
+        let c_e_b = q_e_b.to_rotation_matrix().into_inner();
         // Gravity as the body senses it on average (the accelerometer-misalignment prior).
         let geo = earth::ecef_to_geodetic(&self.ell, &r_e);
         let c_e_n = q_e_n(geo.lat_rad, geo.lon_rad)
@@ -202,21 +257,16 @@ impl Navigator {
         p0.fixed_view_mut::<3, 3>(idx::VEL, idx::VEL)
             .copy_from(&fix.vel_cov);
         p0.fixed_view_mut::<3, 3>(idx::ATT, idx::ATT)
-            .copy_from(&(att.p_psi + Matrix3::identity() * carried));
-        if self.active_states(false).boresight {
+            .copy_from(p_psi);
+        if let Some(p_pk) = p_psi_kappa {
             p0.fixed_view_mut::<3, 3>(idx::ATT, idx::KAPPA)
-                .copy_from(&att.p_psi_kappa);
+                .copy_from(&p_pk);
             p0.fixed_view_mut::<3, 3>(idx::KAPPA, idx::ATT)
-                .copy_from(&att.p_psi_kappa.transpose());
+                .copy_from(&p_pk.transpose());
         }
-        self.core.nav = NavState {
-            r_e,
-            v_e: fix.vel,
-            q_e_b: att.q_e_b,
-        };
+        self.core.nav = NavState { r_e, v_e, q_e_b };
         self.start_navigation(p0, t);
         self.diagnostics.motion_alignments += 1;
-        true
     }
 
     /// Prior covariance of the sensor-error states (biases, scale factors, boresight, baro and
@@ -271,6 +321,7 @@ impl Navigator {
         self.phase = Phase::Navigating;
         self.time = t;
         self.star_attitude = None;
+        self.gsf = GsfAlignment::default();
         self.imu_log.clear();
         self.checkpoints.clear();
         self.rewind_to = None;
