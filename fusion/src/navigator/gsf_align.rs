@@ -7,7 +7,8 @@
 //! At the first GNSS epoch with a moving vehicle that follows another GNSS epoch: the roll and
 //! pitch are levelled from the mean specific force `Σ Δv_b / Σ Δt` over the IMU intervals
 //! between the two epochs, with the σ of [`crate::yaw_gsf::leveling_tilt_sigma_rad`] from the
-//! velocity change over them (the horizontal acceleration the accelerometers also sense).
+//! velocity change over them (the horizontal acceleration the accelerometers also sense),
+//! when that σ is at most `MAX_LEVELING_SIGMA_RAD`.
 //! The velocities are the receiver's, rotated to NED at its position (`v_n = C_n_e v_e`,
 //! `P_n = C_n_e P_e C_e_n`, horizontal block). The bank's IMU error model is the filter's
 //! (`[imu]`: ARW, VRW, constant biases).
@@ -26,6 +27,15 @@
 use super::*;
 use crate::yaw_gsf::{YawGsf, YawGsfNoise, YawGsfStart, leveling_tilt_sigma_rad};
 use nalgebra::{Matrix2, Vector2};
+
+/// Largest levelling σ the bank starts with, rad (1°). Under a horizontal acceleration `a` a
+/// hypothesis with the heading error δψ explains the velocities as well as the truth if its
+/// tilt is off by `a sin δψ / g` (a tilt and a heading error both turn the specific force
+/// horizontally): every hypothesis but the two nearest is ≥ 2π/N = 30° off, which a car's 1 m/s²
+/// (a turn at 10 m/s and 6°/s, or a brisk speed change) hides behind 2.9° of tilt. A prior
+/// tilt σ of 1° keeps that ≥ 3σ away; a window accelerating harder (|a_h| > 0.17 m/s²) waits
+/// for the next.
+const MAX_LEVELING_SIGMA_RAD: f64 = DEG;
 
 /// The yaw estimator of the alignment and the levelling window before it starts.
 #[derive(Debug, Clone, Copy, Default)]
@@ -104,15 +114,16 @@ impl Navigator {
                     let gravity = earth::normal_gravity(&self.ell, geo.lat_rad, geo.height_m);
                     let sigma_v = r_ne[(0, 0)].max(r_ne[(1, 1)]).max(0.0).sqrt();
                     let noise = imu.process_noise();
+                    let tilt_sigma_rad = leveling_tilt_sigma_rad(
+                        &(v_ne - v_prev),
+                        (ts - t_prev).seconds_f64(),
+                        sigma_v,
+                        imu.accel_bias_m_s2(),
+                        gravity,
+                    );
                     let start = YawGsfStart {
                         f_b_m_s2: g.sum_dv_b_m_s / g.sum_dt_s,
-                        tilt_sigma_rad: leveling_tilt_sigma_rad(
-                            &(v_ne - v_prev),
-                            (ts - t_prev).seconds_f64(),
-                            sigma_v,
-                            imu.accel_bias_m_s2(),
-                            gravity,
-                        ),
+                        tilt_sigma_rad,
                         v_ne_m_s: v_ne,
                         p_vv_m2_s2: r_ne,
                         lat_rad: geo.lat_rad,
@@ -125,8 +136,11 @@ impl Navigator {
                         gyro_bias_rad_s: imu.gyro_bias_rad_s(),
                         accel_bias_m_s2: imu.accel_bias_m_s2(),
                     };
-                    // A refusal (a window sensing no gravity) waits for the next window.
-                    g.bank = YawGsf::new(&start, noise).ok();
+                    // A refusal (a window sensing no gravity) waits for the next window;
+                    // so does a window too accelerated to level in (`MAX_LEVELING_SIGMA_RAD`).
+                    if tilt_sigma_rad <= MAX_LEVELING_SIGMA_RAD {
+                        g.bank = YawGsf::new(&start, noise).ok();
+                    }
                 }
                 g.last_v = Some((ts, v_ne));
                 g.sum_dv_b_m_s = Vector3::zeros();

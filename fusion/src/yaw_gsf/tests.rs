@@ -154,12 +154,12 @@ fn manoeuvres() -> Vec<Segment> {
 
 #[test]
 fn converges_to_the_true_heading_from_every_offset_of_the_hypotheses() {
-    // The true initial heading steps through 12 values 30° apart, so the truth falls at every
-    // offset from the 60° grid of hypotheses (0°, ±30° and between).
+    // The true initial heading steps through 12 values 37° apart, so the truth falls at 12
+    // different offsets (0° to 28°) from the 30° grid of hypotheses.
     let mut nees_first = 0.0;
     let cases = 12;
     for j in 0..cases {
-        let psi0 = wrap((30.0 * j as f64 + 11.0) * DEG);
+        let psi0 = wrap((37.0 * j as f64 + 11.0) * DEG);
         let run = drive(&manoeuvres(), psi0, 6.0, 80.0, 100 + j as u64);
         let first = run
             .epochs
