@@ -140,7 +140,7 @@ pub struct RecorderSection {
 }
 
 fn default_segment_duration_s() -> f64 {
-    3600.0
+    1800.0
 }
 
 /// `[foxglove]` (optional): the live view. When present, `sextant run` starts the live

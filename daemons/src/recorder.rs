@@ -600,6 +600,19 @@ fn count_failure(counters: &Counters, lost: u64, e: &RecorderError) {
     );
 }
 
+/// Give the memory the finished segment's writer freed (its chunk index: thousands of small
+/// allocations) back to the system. glibc keeps freed memory in its arenas, and the next
+/// segment's allocations interleave with the holes, so without this the resident set rose by
+/// a step at most rotations (≈ 3.5 MiB over a simulated day, measured).
+fn release_freed_memory() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    // SAFETY: malloc_trim only returns free heap pages to the kernel; it touches no memory
+    // that is in use and is safe to call from any thread at any time.
+    unsafe {
+        libc::malloc_trim(0);
+    }
+}
+
 /// Where the writer thread opens its next segment after a failure.
 struct Resume {
     /// The recording's first segment.
@@ -628,6 +641,7 @@ impl Resume {
         if let Err(e) = sk.finish() {
             count_failure(counters, unflushed, &e);
         }
+        release_freed_memory();
         while segment_path(&self.path, self.next).exists() {
             self.next += 1;
         }

@@ -22,10 +22,10 @@ use std::time::Duration;
 fn system_config(dir: &Path, segment_duration_s: f64) -> PathBuf {
     let root = repo_root();
     let text = std::fs::read_to_string(root.join("config/sextant.toml")).unwrap();
-    assert!(text.contains("segment_duration_s = 3600.0"));
+    assert!(text.contains("segment_duration_s = 1800.0"));
     let text = text
         .replace(
-            "segment_duration_s = 3600.0",
+            "segment_duration_s = 1800.0",
             &format!("segment_duration_s = {segment_duration_s:.1}"),
         )
         .replace(
