@@ -100,6 +100,9 @@ pub fn engine_status<E: NavEngine>(engine: &E) -> Status {
     st.gnss_ls_last_nis = d.gnss_ls_last_nis;
     st.gnss_ls_pdop = d.gnss_ls_pdop;
     st.reinitializations = d.reinitializations;
+    st.motion_alignments = d.motion_alignments;
+    st.gnss_heading_alignments = d.gnss_heading_alignments;
+    st.warm_starts = d.warm_starts;
     let (zupt, nhc) = engine.constraint_health();
     st.zupt_fused = zupt.fused;
     st.zupt_rejected_gate = zupt.rejected_gate;

@@ -196,6 +196,12 @@ pub struct StatusPlot {
     pub imu_channels_excluded: u32,
     /// Filter re-initialisations so far.
     pub reinitializations: u64,
+    /// Starts of navigation in motion so far.
+    pub motion_alignments: u64,
+    /// Starts that resumed the sensor-error estimates from a checkpoint so far.
+    pub warm_starts: u64,
+    /// Solutions published stale so far.
+    pub solutions_stale: u64,
 }
 
 /// The plottable view of a status stamped `unix_ns` (its log time).
@@ -220,6 +226,9 @@ pub fn status_plot(st: &Status, unix_ns: u64) -> StatusPlot {
         recorder_errors: st.recorder_errors,
         imu_channels_excluded: st.imu_channels_excluded_mask.count_ones(),
         reinitializations: st.reinitializations,
+        motion_alignments: st.motion_alignments,
+        warm_starts: st.warm_starts,
+        solutions_stale: st.solutions_stale,
     }
 }
 

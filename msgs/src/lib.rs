@@ -585,6 +585,16 @@ pub struct Status {
     /// Solutions published with the `stale` flag (see [`NavSolution::stale`]).
     #[serde(default)]
     pub solutions_stale: u64,
+    /// Starts of navigation in motion (star-tracker attitude or GNSS heading, with a GNSS
+    /// position and velocity), at the first start or after a gap or restart.
+    #[serde(default)]
+    pub motion_alignments: u64,
+    /// Of those, the ones without a star attitude: heading from GNSS velocity.
+    #[serde(default)]
+    pub gnss_heading_alignments: u64,
+    /// Starts of navigation that resumed the sensor-error estimates from a checkpoint.
+    #[serde(default)]
+    pub warm_starts: u64,
 }
 
 /// The logical channels of the system.

@@ -160,6 +160,21 @@ fn kill_and_check(tag: &str, delete_checkpoint: bool, stars: bool) -> Figures {
     }
 
     let rec = read_recording(&out.join("recording.1.mcap")).expect("recording.1.mcap");
+    // The restarted daemon's status says how it started: warm from the checkpoint, or aligned
+    // in motion (with the heading from GNSS velocity when there are no stars).
+    let status = &rec.topic("status").last().expect("status").json;
+    let counter = |name: &str| int(status, &format!("/{name}")).unwrap();
+    assert_eq!(
+        counter("warm_starts"),
+        i64::from(!delete_checkpoint),
+        "{status}"
+    );
+    assert_eq!(counter("motion_alignments"), 1, "{status}");
+    assert_eq!(
+        counter("gnss_heading_alignments"),
+        i64::from(!stars),
+        "{status}"
+    );
     assert!(rec.invalid.is_empty(), "{:?}", &rec.invalid[..1]);
     let first_nav = rec
         .topic("nav")
