@@ -966,20 +966,30 @@ mod tests {
         let shipped =
             std::fs::read_to_string(root.join("config/scenarios/berlin_reference.toml")).unwrap();
         let sensors = root.join("config/sensors");
+        // The shipped scenario without its own points file, standstills and duration (the
+        // test gives its own).
+        let base: String = shipped
+            .lines()
+            .filter(|l| {
+                !(l.starts_with("file = ")
+                    || l.starts_with("still_s = ")
+                    || l.starts_with("duration_s = "))
+            })
+            .map(|l| format!("{l}\n"))
+            .collect();
         let with = |extra: &str, duration: &str| {
-            shipped
-                .replace(
-                    "kind = \"reference\"",
-                    &format!("kind = \"reference\"\n{extra}"),
-                )
-                .replace("duration_s = 60.0", duration)
-                .replace(
-                    "seed = 1",
-                    &format!(
-                        "seed = 1\nsensors_dir = {:?}",
-                        sensors.display().to_string()
-                    ),
-                )
+            base.replace(
+                "kind = \"reference\"",
+                &format!("kind = \"reference\"\n{extra}"),
+            )
+            .replace("seed = 1", &format!("{duration}\nseed = 1"))
+            .replace(
+                "seed = 1",
+                &format!(
+                    "seed = 1\nsensors_dir = {:?}",
+                    sensors.display().to_string()
+                ),
+            )
         };
         let path = dir.join("s.toml");
         let ok = with(
