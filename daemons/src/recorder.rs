@@ -642,14 +642,8 @@ impl Resume {
             count_failure(counters, unflushed, &e);
         }
         release_freed_memory();
-        while segment_path(&self.path, self.next).exists() {
-            self.next += 1;
-        }
-        let p = segment_path(&self.path, self.next);
-        match Sink::create_segment(&p, &self.opts) {
-            Ok(sink) => {
-                self.next += 1;
-                counters.add_segment(&p);
+        match self.open_next(counters) {
+            Ok((sink, p)) => {
                 tracing::info!(
                     "recorder: {} complete, recording continues in {}",
                     done.display(),
@@ -666,20 +660,26 @@ impl Resume {
         }
     }
 
+    /// Create the next free segment and list it.
+    fn open_next(&mut self, counters: &Counters) -> Result<(Sink, PathBuf), RecorderError> {
+        while segment_path(&self.path, self.next).exists() {
+            self.next += 1;
+        }
+        let p = segment_path(&self.path, self.next);
+        let sink = Sink::create_segment(&p, &self.opts)?;
+        self.next += 1;
+        counters.add_segment(&p);
+        Ok((sink, p))
+    }
+
     /// Try the next free segment name, at most once per [`RESUME_RETRY`].
     fn attempt(&mut self, counters: &Counters) -> Option<Sink> {
         if !self.enabled || self.last_attempt.elapsed() < RESUME_RETRY {
             return None;
         }
         self.last_attempt = Instant::now();
-        while segment_path(&self.path, self.next).exists() {
-            self.next += 1;
-        }
-        let p = segment_path(&self.path, self.next);
-        match Sink::create_segment(&p, &self.opts) {
-            Ok(sink) => {
-                self.next += 1;
-                counters.add_segment(&p);
+        match self.open_next(counters) {
+            Ok((sink, p)) => {
                 let lost = counters.dropped.load(Ordering::Relaxed) - self.dropped_at_failure;
                 tracing::warn!(
                     "recorder: recording resumed in {} ({lost} records dropped while it could not write)",

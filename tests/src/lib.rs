@@ -74,6 +74,32 @@ pub struct Record {
     pub json: serde_json::Value,
 }
 
+/// The `summary.json` an offline command or `sextant run` wrote to `dir`.
+pub fn summary_json(dir: &Path) -> serde_json::Value {
+    let path = dir.join("summary.json");
+    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+/// Run `sextant --quiet ARGS --out OUT` (an offline command), require success and return
+/// the summary it wrote.
+pub fn sextant_offline(args: &[&str], out: &Path) -> serde_json::Value {
+    let o = std::process::Command::new(bin("sextant").unwrap())
+        .arg("--quiet")
+        .args(args)
+        .arg("--out")
+        .arg(out)
+        .output()
+        .unwrap();
+    assert!(
+        o.status.success(),
+        "sextant {args:?}: {}\n{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    summary_json(out)
+}
+
 /// What a recording holds, read with the `mcap` crate's reader.
 #[derive(Debug, Default)]
 pub struct Recording {

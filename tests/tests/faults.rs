@@ -53,11 +53,6 @@ fn horizontal_sigma(nav: &serde_json::Value) -> f64 {
     s[0].hypot(s[1])
 }
 
-fn summary(out: &Path) -> serde_json::Value {
-    let text = std::fs::read_to_string(out.join("summary.json")).unwrap();
-    serde_json::from_str(&text).unwrap()
-}
-
 fn log_text(out: &Path) -> String {
     std::fs::read_to_string(out.join("sextant.log")).unwrap_or_default()
 }
@@ -97,7 +92,7 @@ fn killed_driver_is_reported_degrades_and_is_used_again_after_restart() {
     let st = wait_exit(&mut child, "sextant run", Duration::from_secs(60));
     assert!(st.success(), "sextant run: {st}\n{}", log_text(&out));
     assert!(launched.elapsed() < Duration::from_secs(40));
-    let s = summary(&out);
+    let s = summary_json(&out);
     assert_eq!(s["driver_restarts"]["sextant-sim-gnss"], 1, "{s}");
     assert_eq!(s["fusion_restarts"], 0, "{s}");
 
@@ -255,7 +250,7 @@ fn killed_fusion_is_restarted_with_a_new_recording_and_the_old_one_is_readable()
     sigkill(fusion_pid);
     let st = wait_exit(&mut child, "sextant run", Duration::from_secs(60));
     assert!(st.success(), "sextant run: {st}\n{}", log_text(&out));
-    let s = summary(&out);
+    let s = summary_json(&out);
     assert_eq!(s["fusion_restarts"], 1, "{s}");
     let recs: Vec<String> = s["recordings"]
         .as_array()

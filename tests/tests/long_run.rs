@@ -49,26 +49,6 @@ fn system_config(dir: &Path, segment_duration_s: f64) -> PathBuf {
     path
 }
 
-fn summary(path: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
-}
-
-fn sextant(args: &[&str], out: &Path) -> serde_json::Value {
-    let o = Command::new(bin("sextant").unwrap())
-        .arg("--quiet")
-        .args(args)
-        .arg("--out")
-        .arg(out)
-        .output()
-        .unwrap();
-    assert!(
-        o.status.success(),
-        "sextant {args:?}: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    summary(&out.join("summary.json"))
-}
-
 #[test]
 fn a_recording_in_segments_reads_reports_and_replays_as_one() {
     let dir = tempdir("segments");
@@ -132,15 +112,15 @@ fn a_recording_in_segments_reads_reports_and_replays_as_one() {
     assert!(imu_seq.windows(2).all(|w| w[1] == w[0] + 1), "IMU sequence");
     assert!(nav_total > 0);
 
-    let s = summary(&dir.join("summary.json"));
+    let s = summary_json(&dir);
     assert_eq!(s["solutions"], nav_total, "{s}");
     assert_eq!(s["recording_files"].as_array().unwrap().len(), 4, "{s}");
     assert_eq!(s["recording_complete"], true, "{s}");
 
     let first = files[0].display().to_string();
-    let rep = sextant(&["report", &first], &dir.join("report"));
+    let rep = sextant_offline(&["report", &first], &dir.join("report"));
     assert_eq!(rep["solutions"], nav_total, "{rep}");
-    let rp = sextant(&["replay", "--offline", &first], &dir.join("replay"));
+    let rp = sextant_offline(&["replay", "--offline", &first], &dir.join("replay"));
     assert_eq!(rp["replay"]["solutions_compared"], nav_total, "{rp}");
     assert_eq!(rp["replay"]["bit_exact"], true, "{rp}");
     let _ = std::fs::remove_dir_all(&dir);
@@ -188,7 +168,7 @@ fn fusion_memory_stays_flat_over_a_simulated_day() {
     }
     let st = wait_exit(&mut child, "sextant run", Duration::from_secs(600));
     assert!(st.success(), "sextant run: {st}");
-    let s = summary(&dir.join("summary.json"));
+    let s = summary_json(&dir);
     assert_eq!(s["records_dropped"], 0, "{s}");
     let after_first_hour = samples
         .iter()

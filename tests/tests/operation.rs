@@ -82,11 +82,6 @@ fn wait_for_pid(prefix: &str, program: &str) -> i32 {
     }
 }
 
-fn summary(dir: &Path) -> serde_json::Value {
-    let t = std::fs::read_to_string(dir.join("summary.json")).unwrap();
-    serde_json::from_str(&t).unwrap()
-}
-
 #[test]
 fn one_bus_per_prefix_and_an_earlier_run_is_never_overwritten() {
     let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
@@ -159,7 +154,7 @@ fn one_bus_per_prefix_and_an_earlier_run_is_never_overwritten() {
     // A is unaffected: it completes, navigates, and its recording is complete.
     let st = wait_exit(&mut a, "sextant run", Duration::from_secs(60));
     assert!(st.success(), "run A: {st}");
-    let s = summary(&a_out);
+    let s = summary_json(&a_out);
     assert_eq!(s["recording_complete"], true, "{s}");
     assert_eq!(s["records_dropped"], 0, "{s}");
     assert!(s["solutions"].as_u64().unwrap() > 1000, "{s}");

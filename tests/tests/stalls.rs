@@ -74,10 +74,6 @@ fn log_text(out: &Path) -> String {
     s
 }
 
-fn summary(out: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap()
-}
-
 /// Sequence numbers of a channel's messages: strictly increasing; returns the samples lost
 /// (the holes in the numbering, the first sample being number 1).
 fn lost_in_sequence(rec: &Recording, topic: &str) -> u64 {
@@ -127,19 +123,10 @@ fn check_staleness(rec: &Recording, speed: f64) -> (u64, u64) {
 
 /// Replay offline and require every solution bit for bit.
 fn replays_bit_exactly(recording: &Path, replay_out: &Path) {
-    let st = std::process::Command::new(bin("sextant").unwrap())
-        .args(["replay", "--offline"])
-        .arg(recording)
-        .arg("--out")
-        .arg(replay_out)
-        .output()
-        .unwrap();
-    assert!(
-        st.status.success(),
-        "{}",
-        String::from_utf8_lossy(&st.stderr)
+    let s = sextant_offline(
+        &["replay", "--offline", &recording.display().to_string()],
+        replay_out,
     );
-    let s = summary(replay_out);
     assert_eq!(s["replay"]["bit_exact"], true, "{s}");
 }
 
@@ -190,7 +177,7 @@ fn stopped_imu_driver_drops_overdue_samples_counts_them_and_navigation_resumes()
     let st = wait_exit(&mut child, "sextant run", Duration::from_secs(60));
     let log = log_text(&out);
     assert!(st.success(), "sextant run: {st}\n{log}");
-    let s = summary(&out);
+    let s = summary_json(&out);
     assert_eq!(s["hung_processes_killed"]["sextant-sim-imu"], 0, "{s}");
     assert_eq!(s["driver_restarts"]["sextant-sim-imu"], 0, "{s}");
     assert!(log.contains("overdue samples dropped"), "{log}");
@@ -228,7 +215,7 @@ fn stopped_fusion_daemon_publishes_nothing_stale_as_fresh_counts_losses_and_repl
     let st = wait_exit(&mut child, "sextant run", Duration::from_secs(60));
     let log = log_text(&out);
     assert!(st.success(), "sextant run: {st}\n{log}");
-    let s = summary(&out);
+    let s = summary_json(&out);
     assert_eq!(s["fusion_restarts"], 0, "{s}");
     assert_eq!(s["hung_processes_killed"]["sextant-fusion"], 0, "{s}");
 
@@ -256,7 +243,7 @@ fn hung_driver_is_killed_restarted_and_its_lost_samples_counted() {
         log.contains("sextant-sim-odometer sent no heartbeat"),
         "{log}"
     );
-    let s = summary(&out);
+    let s = summary_json(&out);
     assert_eq!(s["hung_processes_killed"]["sextant-sim-odometer"], 1, "{s}");
     assert_eq!(s["driver_restarts"]["sextant-sim-odometer"], 1, "{s}");
     for other in ["sextant-sim-imu", "sextant-sim-gnss", "sextant-fusion"] {
@@ -316,7 +303,7 @@ fn fusion_stopped_for_ten_seconds_is_killed_resumes_warm_and_every_loss_is_count
         log.contains("warm restart: sensor-error estimates resumed"),
         "{log}"
     );
-    let s = summary(&out);
+    let s = summary_json(&out);
     assert_eq!(s["hung_processes_killed"]["sextant-fusion"], 1, "{s}");
     assert_eq!(s["fusion_restarts"], 1, "{s}");
 
