@@ -1,9 +1,11 @@
 //! The fusion daemon's checkpoint file: the navigator's [`NavSnapshot`] written atomically and
 //! checksummed, read back by a restarted daemon (warm restart, `fusion::navigator` module
-//! `warm_start`).
+//! `warm_start`); and in the same format the calibration memory ([`SavedCalibration`]), saved
+//! at the end of a run and read at the next start (`fusion::navigator` module
+//! `calibration_memory`).
 //!
 //! # Format
-//! `SXNAVCK1` (8 bytes), payload length (u32 little-endian), payload (the snapshot as JSON,
+//! `SXNAVCK1` (8 bytes; `SXNAVCL1` for a calibration memory), payload length (u32 little-endian), payload (the snapshot as JSON,
 //! floats round-trip exactly), CRC-32 (IEEE) of the payload (u32 little-endian). Anything else
 //! — a short file, another magic, a length that does not match, a checksum that does not —
 //! is refused with a [`CheckpointError`] naming the file.
@@ -23,23 +25,57 @@ use std::sync::{Arc, Condvar, Mutex};
 /// File magic and format version.
 pub const MAGIC: &[u8; 8] = b"SXNAVCK1";
 
+/// File magic and format version of a calibration memory ([`SavedCalibration`]).
+pub const CALIBRATION_MAGIC: &[u8; 8] = b"SXNAVCL1";
+
 /// Largest payload accepted, bytes (a snapshot is ≈ 25 kB).
 const MAX_PAYLOAD: usize = 1 << 20;
 
-/// Errors reading or writing a checkpoint.
+/// Which kind of file an error is about.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FileKind {
+    /// The warm-restart checkpoint ([`MAGIC`]).
+    Checkpoint,
+    /// The calibration memory ([`CALIBRATION_MAGIC`]).
+    Calibration,
+}
+
+impl FileKind {
+    fn magic(self) -> &'static [u8; 8] {
+        match self {
+            Self::Checkpoint => MAGIC,
+            Self::Calibration => CALIBRATION_MAGIC,
+        }
+    }
+}
+
+impl std::fmt::Display for FileKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Checkpoint => "checkpoint",
+            Self::Calibration => "calibration",
+        })
+    }
+}
+
+/// Errors reading or writing a checkpoint or a calibration memory.
 #[derive(Debug, thiserror::Error)]
 pub enum CheckpointError {
     /// The file could not be read or written.
-    #[error("checkpoint {path}: {source}")]
+    #[error("{kind} {path}: {source}")]
     Io {
+        /// Checkpoint or calibration.
+        kind: FileKind,
         /// The file.
         path: PathBuf,
         /// The error.
         source: std::io::Error,
     },
-    /// The file is not a checkpoint of this format, or is damaged.
-    #[error("checkpoint {path} is corrupt: {what}")]
+    /// The file is not a file of this format, or is damaged.
+    #[error("{kind} {path} is corrupt: {what}")]
     Corrupt {
+        /// Checkpoint or calibration.
+        kind: FileKind,
         /// The file.
         path: PathBuf,
         /// What is wrong.
@@ -47,12 +83,28 @@ pub enum CheckpointError {
     },
 }
 
+/// A calibration memory as saved at the end of a run: the navigator's final estimate (only its
+/// sensor errors are used, `fusion::navigator` module `calibration_memory`) and the wall-clock
+/// time it was saved, which the next start measures the time off from.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SavedCalibration {
+    /// When it was saved, Unix ns (the system clock).
+    pub saved_unix_ns: i64,
+    /// The estimate the run ended with.
+    pub snapshot: NavSnapshot,
+}
+
 /// The bytes of a checkpoint file for `snapshot`.
 pub fn encode(snapshot: &NavSnapshot) -> Vec<u8> {
+    encode_as(FileKind::Checkpoint, snapshot)
+}
+
+fn encode_as<T: serde::Serialize>(kind: FileKind, value: &T) -> Vec<u8> {
     // Serializing plain numbers, arrays and a Vec cannot fail.
-    let payload = serde_json::to_vec(snapshot).unwrap_or_default();
+    let payload = serde_json::to_vec(value).unwrap_or_default();
     let mut out = Vec::with_capacity(payload.len() + 16);
-    out.extend_from_slice(MAGIC);
+    out.extend_from_slice(kind.magic());
     out.extend_from_slice(&(payload.len() as u32).to_le_bytes());
     out.extend_from_slice(&payload);
     out.extend_from_slice(&crc32fast::hash(&payload).to_le_bytes());
@@ -61,7 +113,16 @@ pub fn encode(snapshot: &NavSnapshot) -> Vec<u8> {
 
 /// The snapshot in the bytes of a checkpoint file (`path` names it in the error).
 pub fn decode(bytes: &[u8], path: &Path) -> Result<NavSnapshot, CheckpointError> {
+    decode_as(FileKind::Checkpoint, bytes, path)
+}
+
+fn decode_as<T: serde::de::DeserializeOwned>(
+    kind: FileKind,
+    bytes: &[u8],
+    path: &Path,
+) -> Result<T, CheckpointError> {
     let corrupt = |what: String| CheckpointError::Corrupt {
+        kind,
         path: path.to_path_buf(),
         what,
     };
@@ -71,8 +132,8 @@ pub fn decode(bytes: &[u8], path: &Path) -> Result<NavSnapshot, CheckpointError>
             bytes.len()
         )));
     }
-    if &bytes[..8] != MAGIC {
-        return Err(corrupt("not a Sextant navigator checkpoint (magic)".into()));
+    if &bytes[..8] != kind.magic() {
+        return Err(corrupt(format!("not a Sextant navigator {kind} (magic)")));
     }
     let len = u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize;
     if len > MAX_PAYLOAD || bytes.len() != 12 + len + 4 {
@@ -93,21 +154,48 @@ pub fn decode(bytes: &[u8], path: &Path) -> Result<NavSnapshot, CheckpointError>
     serde_json::from_slice(payload).map_err(|e| corrupt(format!("payload: {e}")))
 }
 
-/// Read the checkpoint at `path`; Ok(None) when there is none.
-pub fn read(path: &Path) -> Result<Option<NavSnapshot>, CheckpointError> {
+fn read_as<T: serde::de::DeserializeOwned>(
+    kind: FileKind,
+    path: &Path,
+) -> Result<Option<T>, CheckpointError> {
     match std::fs::read(path) {
-        Ok(bytes) => decode(&bytes, path).map(Some),
+        Ok(bytes) => decode_as(kind, &bytes, path).map(Some),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
         Err(source) => Err(CheckpointError::Io {
+            kind,
             path: path.to_path_buf(),
             source,
         }),
     }
 }
 
+/// Read the checkpoint at `path`; Ok(None) when there is none.
+pub fn read(path: &Path) -> Result<Option<NavSnapshot>, CheckpointError> {
+    read_as(FileKind::Checkpoint, path)
+}
+
+/// Read the calibration memory at `path`; Ok(None) when there is none.
+pub fn read_calibration(path: &Path) -> Result<Option<SavedCalibration>, CheckpointError> {
+    read_as(FileKind::Calibration, path)
+}
+
 /// Write `snapshot` to `path` atomically (module docs).
 pub fn write(path: &Path, snapshot: &NavSnapshot) -> Result<(), CheckpointError> {
+    write_atomic(FileKind::Checkpoint, path, &encode(snapshot))
+}
+
+/// Write the calibration memory `saved` to `path` atomically (module docs).
+pub fn write_calibration(path: &Path, saved: &SavedCalibration) -> Result<(), CheckpointError> {
+    write_atomic(
+        FileKind::Calibration,
+        path,
+        &encode_as(FileKind::Calibration, saved),
+    )
+}
+
+fn write_atomic(kind: FileKind, path: &Path, bytes: &[u8]) -> Result<(), CheckpointError> {
     let io = |source| CheckpointError::Io {
+        kind,
         path: path.to_path_buf(),
         source,
     };
@@ -115,7 +203,7 @@ pub fn write(path: &Path, snapshot: &NavSnapshot) -> Result<(), CheckpointError>
     tmp_name.push(".tmp");
     let tmp = path.with_file_name(tmp_name);
     let mut f = std::fs::File::create(&tmp).map_err(io)?;
-    f.write_all(&encode(snapshot)).map_err(io)?;
+    f.write_all(bytes).map_err(io)?;
     f.sync_all().map_err(io)?;
     drop(f);
     std::fs::rename(&tmp, path).map_err(io)?;
@@ -289,6 +377,23 @@ mod tests {
         let st = w.finish();
         assert_eq!(st.failed, 0);
         assert_eq!(read(&path).unwrap(), Some(later));
+    }
+
+    /// A calibration memory round-trips through its file; a checkpoint is not taken for one.
+    #[test]
+    fn calibration_round_trip_and_kind_check() {
+        let dir = tempdir("cal");
+        let path = dir.join("sextant.calibration");
+        assert!(read_calibration(&path).unwrap().is_none());
+        let saved = SavedCalibration {
+            saved_unix_ns: 1_764_000_000_123_456_789,
+            snapshot: snapshot(),
+        };
+        write_calibration(&path, &saved).unwrap();
+        assert_eq!(read_calibration(&path).unwrap(), Some(saved));
+        write(&path, &snapshot()).unwrap();
+        let e = read_calibration(&path).unwrap_err().to_string();
+        assert!(e.contains("calibration") && e.contains("magic"), "{e}");
     }
 
     /// Every damaged file is refused with an error naming it, never a panic.

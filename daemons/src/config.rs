@@ -107,6 +107,11 @@ pub struct FusionSection {
     /// delivery seen, is flagged stale (`NavSolution.stale`).
     #[serde(default = "default_stale_after_ms")]
     pub stale_after_ms: f64,
+    /// Calibration memory file (`fusion::navigator` module `calibration_memory`): read at the
+    /// start, the sensor errors of the previous run as the prior; written at the end with the
+    /// estimate the run ended with. None: no calibration memory.
+    #[serde(default)]
+    pub calibration_file: Option<PathBuf>,
 }
 
 fn default_stale_after_ms() -> f64 {

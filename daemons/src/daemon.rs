@@ -103,6 +103,7 @@ pub fn engine_status<E: NavEngine>(engine: &E) -> Status {
     st.motion_alignments = d.motion_alignments;
     st.gnss_heading_alignments = d.gnss_heading_alignments;
     st.warm_starts = d.warm_starts;
+    st.imu_held_at_time_jump = d.imu_held_at_time_jump;
     let (zupt, nhc) = engine.constraint_health();
     st.zupt_fused = zupt.fused;
     st.zupt_rejected_gate = zupt.rejected_gate;
@@ -236,6 +237,9 @@ pub struct DaemonReport {
     pub segments: Vec<PathBuf>,
     /// Solutions flagged stale (published late behind their time of validity).
     pub solutions_stale: u64,
+    /// The engine's estimate at the end (None when it was not navigating): the calibration
+    /// memory the next run starts from.
+    pub final_snapshot: Option<NavSnapshot>,
 }
 
 struct State<'a, E: NavEngine> {
@@ -626,6 +630,7 @@ pub fn run<E: NavEngine>(
     st.publish_status();
     st.log_warm_start();
     let report_base = (st.imu_received, st.solutions, st.published, st.stale);
+    let final_snapshot = st.engine.snapshot();
     let State {
         recorder,
         checkpoint,
@@ -648,6 +653,7 @@ pub fn run<E: NavEngine>(
         recorder,
         segments,
         solutions_stale: report_base.3,
+        final_snapshot,
     })
 }
 

@@ -149,6 +149,18 @@ pub const WARM_START_METADATA_NAME: &str = "sextant/warm_start";
 /// `fusion::navigator::NavSnapshot` (shortest round-trip f64, so it parses back bit-exact).
 pub const WARM_START_KEY_SNAPSHOT: &str = "snapshot_json";
 
+/// Name of the MCAP metadata record holding the calibration memory a fusion daemon started
+/// from (absent without one), so that offline replay loads the same prior.
+pub const CALIBRATION_METADATA_NAME: &str = "sextant/calibration";
+
+/// Key (in [`CALIBRATION_METADATA_NAME`]) of the remembered estimate, JSON of
+/// `fusion::navigator::NavSnapshot`.
+pub const CALIBRATION_KEY_SNAPSHOT: &str = "snapshot_json";
+
+/// Key (in [`CALIBRATION_METADATA_NAME`]) of the wall-clock time from the save to the start,
+/// s (shortest round-trip decimal).
+pub const CALIBRATION_KEY_ELAPSED_S: &str = "elapsed_s";
+
 /// An error with its sources (`MCAP I/O error: No space left on device (os error 28)`), so that
 /// the operator sees the operating system's reason.
 fn error_chain(e: &dyn std::error::Error) -> String {

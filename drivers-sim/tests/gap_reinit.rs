@@ -207,6 +207,7 @@ fn hour_gap_reinitialises_and_realigns() {
     assert_eq!(d.reinitializations, 1);
     // 19 held samples, right after the gap (5 ms apart).
     assert_eq!(r.imu_rejected.len(), 19, "{:?}", r.imu_rejected);
+    assert_eq!(d.imu_held_at_time_jump, 19);
     assert!(
         r.imu_rejected
             .iter()
@@ -313,6 +314,9 @@ fn single_wild_time_stamp_is_rejected_and_navigation_goes_on() {
     assert_eq!(r.imu_rejected.len(), 2, "{:?}", r.imu_rejected);
     assert_eq!(nav.diagnostics().reinitializations, 0);
     assert_eq!(nav.health()[SensorId::Imu as usize].rejected_invalid, 2);
+    // The wild stamp ahead was held as a candidate time base; the one behind is a plain
+    // backward step.
+    assert_eq!(nav.diagnostics().imu_held_at_time_jump, 1);
     assert_eq!(r.nav_starts.len(), 1, "navigates on, no new alignment");
     assert_eq!(r.aiding_rejected, 0);
     let (hc, ac, _) = rms(&rc.points, 120.0, 195.0);
@@ -408,6 +412,8 @@ fn clock_reset_backward_reinitialises() {
     assert_eq!(nav.diagnostics().reinitializations, 1);
     assert_eq!(r.imu_rejected.len(), 19, "{:?}", r.imu_rejected);
     assert!(r.imu_rejected.iter().all(|t| *t > 150.0 && *t < 150.1));
+    // Held, but as backward steps (`TimeNotIncreasing`), not after a forward jump.
+    assert_eq!(nav.diagnostics().imu_held_at_time_jump, 0);
     assert_eq!(nav.mode(), NavMode::Aligning as u32);
     assert!(!nav.is_navigating());
     let h = nav.health()[SensorId::Imu as usize];

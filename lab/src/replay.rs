@@ -43,6 +43,7 @@
 use crate::config;
 use crate::daemon::{engine_status, feed, stamp_solution};
 use crate::recorder::{
+    CALIBRATION_KEY_ELAPSED_S, CALIBRATION_KEY_SNAPSHOT, CALIBRATION_METADATA_NAME,
     CONFIG_KEY_FILTER_TOML, CONFIG_METADATA_NAME, Record, Recorder, RecorderOptions,
     WARM_START_KEY_SNAPSHOT, WARM_START_METADATA_NAME,
 };
@@ -198,6 +199,31 @@ pub fn embedded_warm_start(rec: &Recording) -> Result<Option<NavSnapshot>, Repla
     })
 }
 
+/// The calibration memory a recording's fusion daemon started from (the remembered estimate
+/// and the time off, s), from its metadata; None when it had none.
+pub fn embedded_calibration(rec: &Recording) -> Result<Option<(NavSnapshot, f64)>, ReplayError> {
+    let Some(m) = rec.metadata().get(CALIBRATION_METADATA_NAME) else {
+        return Ok(None);
+    };
+    let bad = |key: &str, e: String| {
+        ReplayError::Config(format!(
+            "{}: metadata {CALIBRATION_METADATA_NAME}/{key}: {e}",
+            rec.path().display()
+        ))
+    };
+    let json = m
+        .get(CALIBRATION_KEY_SNAPSHOT)
+        .ok_or_else(|| bad(CALIBRATION_KEY_SNAPSHOT, "missing".into()))?;
+    let snapshot =
+        serde_json::from_str(json).map_err(|e| bad(CALIBRATION_KEY_SNAPSHOT, e.to_string()))?;
+    let elapsed_s = m
+        .get(CALIBRATION_KEY_ELAPSED_S)
+        .ok_or_else(|| bad(CALIBRATION_KEY_ELAPSED_S, "missing".into()))?
+        .parse::<f64>()
+        .map_err(|e| bad(CALIBRATION_KEY_ELAPSED_S, e.to_string()))?;
+    Ok(Some((snapshot, elapsed_s)))
+}
+
 /// Compare two solutions bit for bit, except `header.send_mono_ns` and `stale` (facts of the
 /// live publication's wall clock). `Err` names the first differing field. (JSON of f64 is the
 /// shortest round-trip representation, so equal JSON text means equal bits, −0.0 included;
@@ -267,6 +293,19 @@ pub fn replay_offline(opts: &OfflineOptions) -> Result<OfflineSummary, ReplayErr
     meta.insert("replay_config_source".into(), source.clone());
     let mut engine = Navigator::new(nav_cfg)?;
     let mut metadata = vec![(CONFIG_METADATA_NAME.to_string(), meta)];
+    // A recording started from a calibration memory: the engine loads the same prior.
+    if let Some((snapshot, elapsed_s)) = embedded_calibration(&rec)? {
+        match engine.load_calibration(&snapshot, elapsed_s) {
+            Ok(l) => tracing::info!(
+                "replay starts from the recording's calibration memory ({} states used)",
+                l.used()
+            ),
+            Err(e) => tracing::warn!("the recording's calibration memory is refused: {e}"),
+        }
+        if let Some(m) = rec.metadata().get(CALIBRATION_METADATA_NAME) {
+            metadata.push((CALIBRATION_METADATA_NAME.to_string(), m.clone()));
+        }
+    }
     // A warm-restarted recording: the engine starts from the same checkpoint as the daemon.
     if let Some(snapshot) = embedded_warm_start(&rec)? {
         let outcome = engine.warm_start(snapshot);

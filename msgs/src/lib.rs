@@ -595,6 +595,11 @@ pub struct Status {
     /// Starts of navigation that resumed the sensor-error estimates from a checkpoint.
     #[serde(default)]
     pub warm_starts: u64,
+    /// IMU samples held and rejected as candidates of a new time base after a forward jump of
+    /// their time of validity (also in the IMU's `rejected_invalid`): `CONFIRM_SAMPLES − 1`
+    /// per confirmed discontinuity, fewer for a candidate run that was cut short.
+    #[serde(default)]
+    pub imu_held_at_time_jump: u64,
 }
 
 /// The logical channels of the system.

@@ -100,6 +100,15 @@ pub fn sextant_offline(args: &[&str], out: &Path) -> serde_json::Value {
     summary_json(out)
 }
 
+/// `sextant replay --offline RECORDING` into `replay_out`; requires every solution bit for bit.
+pub fn replays_bit_exactly(recording: &Path, replay_out: &Path) {
+    let s = sextant_offline(
+        &["replay", "--offline", &recording.display().to_string()],
+        replay_out,
+    );
+    assert_eq!(s["replay"]["bit_exact"], true, "{s}");
+}
+
 /// What a recording holds, read with the `mcap` crate's reader.
 #[derive(Debug, Default)]
 pub struct Recording {

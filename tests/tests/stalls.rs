@@ -121,15 +121,6 @@ fn check_staleness(rec: &Recording, speed: f64) -> (u64, u64) {
     (flagged, late)
 }
 
-/// Replay offline and require every solution bit for bit.
-fn replays_bit_exactly(recording: &Path, replay_out: &Path) {
-    let s = sextant_offline(
-        &["replay", "--offline", &recording.display().to_string()],
-        replay_out,
-    );
-    assert_eq!(s["replay"]["bit_exact"], true, "{s}");
-}
-
 /// The end of a run of one daemon life: every late solution flagged and the flags counted in
 /// the summary, navigation at the end within 3σ, the recording replayed bit for bit.
 fn stale_flagged_navigating_and_replayed(s: &serde_json::Value, rec: &Recording, out: &Path) {

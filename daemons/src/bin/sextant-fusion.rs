@@ -4,7 +4,9 @@
 //! recording. It writes the navigator's checkpoint next to the recording
 //! (`navigator.checkpoint`, or `--checkpoint FILE`) and, when one is there at start, resumes
 //! from it if it is fresh (warm restart); a corrupt or stale one is refused with a message and
-//! the navigator aligns.
+//! the navigator aligns. With a calibration memory (`--calibration FILE` or `[fusion]
+//! calibration_file`) it starts from the sensor errors the previous run ended with and saves
+//! its own at the end.
 
 use anyhow::Context;
 use clap::Parser;
@@ -32,6 +34,10 @@ struct Args {
     /// of `--out`).
     #[arg(long)]
     checkpoint: Option<PathBuf>,
+    /// Calibration memory: read at the start (the previous run's sensor errors as the prior),
+    /// written at the end (default: `[fusion] calibration_file`; none when neither is given).
+    #[arg(long)]
+    calibration: Option<PathBuf>,
 }
 
 fn main() -> anyhow::Result<()> {
@@ -96,7 +102,30 @@ fn main() -> anyhow::Result<()> {
         Ok(None) => tracing::info!("no checkpoint at {}: aligning", checkpoint.display()),
         Err(e) => tracing::warn!("{e}: refused, aligning from the priors"),
     }
+    let calibration = args
+        .calibration
+        .clone()
+        .or_else(|| cfg.system.fusion.calibration_file.clone());
+    let mut calibration_used = None;
+    if let Some(path) = &calibration {
+        calibration_used = load_calibration(&mut navigator, path);
+    }
     let mut metadata = recording_metadata(&cfg, &prefix, args.speed)?;
+    if let Some((saved, elapsed_s)) = &calibration_used {
+        // Offline replay loads the same memory with the same time off, so the recording
+        // replays bit for bit.
+        use sextant_daemons::recorder::{
+            CALIBRATION_KEY_ELAPSED_S, CALIBRATION_KEY_SNAPSHOT, CALIBRATION_METADATA_NAME,
+        };
+        let json = serde_json::to_string(saved).context("serializing the calibration")?;
+        metadata.push((
+            CALIBRATION_METADATA_NAME.to_string(),
+            BTreeMap::from([
+                (CALIBRATION_KEY_SNAPSHOT.to_string(), json),
+                (CALIBRATION_KEY_ELAPSED_S.to_string(), elapsed_s.to_string()),
+            ]),
+        ));
+    }
     if let Some(snapshot) = &started_from {
         // Offline replay starts from the same snapshot (refused or not: the engine decides
         // again, identically), so a warm-restarted recording replays bit for bit.
@@ -133,6 +162,9 @@ fn main() -> anyhow::Result<()> {
             report.recorder.dropped
         );
     }
+    if let Some(path) = &calibration {
+        save_calibration(path, report.final_snapshot.as_ref());
+    }
     let exit = exit_report::ExitReport {
         recording: opts.out.clone(),
         imu_received: report.imu_received,
@@ -147,6 +179,74 @@ fn main() -> anyhow::Result<()> {
     };
     logging::stdout_line(&exit.line());
     Ok(())
+}
+
+/// Load the calibration memory at `path` into the navigator; the snapshot and the time off
+/// (s) when it is used. Any problem is logged and the navigator starts from the data sheet.
+fn load_calibration(
+    navigator: &mut fusion::navigator::Navigator,
+    path: &std::path::Path,
+) -> Option<(fusion::navigator::NavSnapshot, f64)> {
+    let saved = match checkpoint::read_calibration(path) {
+        Ok(Some(s)) => s,
+        Ok(None) => {
+            tracing::info!(
+                "no calibration memory at {} yet: starting from the data sheet",
+                path.display()
+            );
+            return None;
+        }
+        Err(e) => {
+            tracing::warn!("{e}: starting from the data sheet");
+            return None;
+        }
+    };
+    let now_ns = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos() as i64);
+    // A system clock set back since the save: the time off is unknown beyond "none".
+    let elapsed_s = ((now_ns - saved.saved_unix_ns) as f64 * 1e-9).max(0.0);
+    match navigator.load_calibration(&saved.snapshot, elapsed_s) {
+        Ok(loaded) => {
+            tracing::info!(
+                "calibration memory {} saved {:.1} h ago: {} of {} sensor-error states start from it (tighter than the data sheet)",
+                path.display(),
+                elapsed_s / 3600.0,
+                loaded.used(),
+                fusion::navigator::REMEMBERED.len()
+            );
+            Some((saved.snapshot, elapsed_s))
+        }
+        Err(e) => {
+            tracing::warn!(
+                "calibration memory {} refused ({e}): starting from the data sheet",
+                path.display()
+            );
+            None
+        }
+    }
+}
+
+/// Save the estimate the run ended with as the calibration memory at `path`; without one (the
+/// navigator was not navigating at the end) the file is left as it was.
+fn save_calibration(path: &std::path::Path, last: Option<&fusion::navigator::NavSnapshot>) {
+    let Some(snapshot) = last else {
+        tracing::warn!(
+            "not navigating at the end: calibration memory {} left as it was",
+            path.display()
+        );
+        return;
+    };
+    let saved = checkpoint::SavedCalibration {
+        saved_unix_ns: std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_nanos() as i64),
+        snapshot: snapshot.clone(),
+    };
+    match checkpoint::write_calibration(path, &saved) {
+        Ok(()) => tracing::info!("calibration memory saved to {}", path.display()),
+        Err(e) => tracing::error!("{e}: the calibration memory was not saved"),
+    }
 }
 
 /// The configuration embedded in the recording (MCAP metadata `sextant/config`): the filter

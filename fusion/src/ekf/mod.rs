@@ -273,6 +273,19 @@ impl ErrorStateEkf {
         (dth, dv)
     }
 
+    /// Set the estimates of the hardware errors (gyro and accelerometer biases and scale
+    /// factors, odometer scale, boresight, gyro non-orthogonality) to the values of `x`
+    /// (error-state layout); the baro bias and the clock are left as they are.
+    pub fn apply_sensor_estimates(&mut self, x: &StateVector) {
+        self.gyro_bias_rad_s = x.fixed_rows::<3>(idx::BG).into_owned();
+        self.accel_bias_m_s2 = x.fixed_rows::<3>(idx::BA).into_owned();
+        self.odo_scale = x[idx::ODO];
+        self.gyro_scale = x.fixed_rows::<3>(idx::SG).into_owned();
+        self.accel_scale = x.fixed_rows::<3>(idx::SA).into_owned();
+        self.kappa_rad = x.fixed_rows::<3>(idx::KAPPA).into_owned();
+        self.gyro_misalignment_rad = x.fixed_rows::<3>(idx::SGM).into_owned();
+    }
+
     /// Apply an accepted correction `dx` to the navigation state and the error estimates
     /// (closed loop); the error state is zero afterwards. The covariance reset Jacobian
     /// `I − ½[ψ×]` is ≈ I for the small ψ of a running filter and is not applied.

@@ -62,8 +62,14 @@ impl Navigator {
             return; // keep averaging until a position is known
         };
         let geo = earth::ecef_to_geodetic(&self.ell, &r_e);
-        let f_b = self.align.mean_specific_force_m_s2();
-        let w_b = self.align.mean_rate_rad_s();
+        // The mean increments corrected with the prior's sensor-error estimates (zero unless a
+        // calibration memory is tighter than the data sheet): biases and scale factors; the
+        // non-orthogonality acts on the Earth rate only, 10⁻⁴ of it for 20″.
+        let (mut p0, x0) = self.sensor_prior(&self.align.mean_specific_force_m_s2());
+        let f_b = (self.align.mean_specific_force_m_s2() - x0.fixed_rows::<3>(idx::BA))
+            .component_div(&x0.fixed_rows::<3>(idx::SA).add_scalar(1.0));
+        let w_b = (self.align.mean_rate_rad_s() - x0.fixed_rows::<3>(idx::BG))
+            .component_div(&x0.fixed_rows::<3>(idx::SG).add_scalar(1.0));
         let a = match alignment::coarse_align(&f_b, &w_b, geo.lat_rad, self.ell.omega_ie_rad_s) {
             Ok(a) => a,
             Err(_) => {
@@ -74,9 +80,21 @@ impl Navigator {
         };
         let imu = &self.config.imu;
         let noise = self.filter_noise();
+        // The bias σ the levelling and gyrocompassing see: the prior's (largest axis).
+        let axis_sigma = |i0: usize| {
+            (0..3)
+                .map(|k| p0[(i0 + k, i0 + k)])
+                .fold(0.0, f64::max)
+                .sqrt()
+        };
+        let (gyro_bias_rad_s, accel_bias_m_s2) = if self.calibration.is_some() {
+            (axis_sigma(idx::BG), axis_sigma(idx::BA))
+        } else {
+            (imu.gyro_bias_rad_s(), imu.accel_bias_m_s2())
+        };
         let spec = alignment::AlignmentErrorSpec {
-            gyro_bias_rad_s: imu.gyro_bias_rad_s(),
-            accel_bias_m_s2: imu.accel_bias_m_s2(),
+            gyro_bias_rad_s,
+            accel_bias_m_s2,
             arw_rad_sqrt_s: noise.arw_rad_sqrt_s,
             vrw_m_s_sqrt_s: noise.vrw_m_s_sqrt_s,
         };
@@ -103,7 +121,6 @@ impl Navigator {
             v_e: Vector3::zeros(),
             q_e_b,
         };
-        let mut p0 = self.sensor_prior(&f_b);
         p0.fixed_view_mut::<3, 3>(idx::POS, idx::POS)
             .copy_from(&pos_cov);
         let sv = self.config.initial.velocity_sigma_m_s.powi(2);
@@ -135,12 +152,23 @@ impl Navigator {
         );
         p0.fixed_view_mut::<9, 9>(idx::ATT, idx::ATT)
             .copy_from(&joint);
+        // The joint block replaced the biases' prior block; a calibration memory's
+        // correlations of the biases with the other remembered states are dropped with it
+        // (their variances stay), so that the whole stays positive semi-definite.
+        if self.calibration.is_some() {
+            for i in idx::BG..idx::BA + 3 {
+                for j in (idx::BA + 3)..ekf::NX {
+                    p0[(i, j)] = 0.0;
+                    p0[(j, i)] = 0.0;
+                }
+            }
+        }
         // A snapshot's sensor errors are not taken over here: the coarse attitude above was
         // derived with zero biases and is correlated with them (the joint block).
         if self.warm.take().is_some() {
             self.warm_outcome = Some(WarmStartOutcome::Refused(WarmStartRefusal::StandingStart));
         }
-        self.start_navigation(p0, t);
+        self.start_navigation(p0, &x0, t);
     }
 
     /// During alignment: keep the latest least-squares fix of the raw pseudoranges (the

@@ -390,6 +390,8 @@ pub struct NavigatorConfig {
     pub motion_alignment: MotionAlignment,
     /// Resumption from a snapshot after a restart.
     pub warm_start: WarmStartConfig,
+    /// A previous run's sensor errors as the prior of the next start.
+    pub calibration_memory: super::CalibrationMemoryConfig,
 }
 
 impl Default for NavigatorConfig {
@@ -417,6 +419,7 @@ impl Default for NavigatorConfig {
             redundancy: crate::redundancy::RedundancyConfig::default(),
             motion_alignment: MotionAlignment::default(),
             warm_start: WarmStartConfig::default(),
+            calibration_memory: super::CalibrationMemoryConfig::default(),
         }
     }
 }
@@ -442,6 +445,7 @@ impl NavigatorConfig {
     pub fn validate(&self) -> Result<(), ConfigError> {
         self.motion_alignment.validate()?;
         self.warm_start.validate()?;
+        self.calibration_memory.validate()?;
         check(
             nonneg(self.alignment_s) && self.alignment_s <= 3600.0,
             "alignment_s",

@@ -115,6 +115,11 @@ pub struct NavigatorDiagnostics {
     pub gnss_ls_pdop: f64,
     /// Times the navigator started over (re-alignment).
     pub reinitializations: u64,
+    /// IMU samples held (and rejected) as candidates of a new time base after a forward jump
+    /// of their time of validity beyond the bridged gap; also counted in the IMU's
+    /// `rejected_invalid`. A confirmed discontinuity holds `CONFIRM_SAMPLES − 1` of them; a
+    /// candidate run cut short (another jump, a return to the old time base) holds fewer.
+    pub imu_held_at_time_jump: u64,
     /// Late samples that could not be replayed at their epoch because the IMU log no longer
     /// reached back to the checkpoint before them (an IMU faster than
     /// [`NavigatorConfig::max_imu_rate_hz`]): one per rewind; the samples are dropped and

@@ -86,6 +86,7 @@ impl Navigator {
         let reason = if step <= Duration::ZERO {
             RejectReason::TimeNotIncreasing { previous: prev }
         } else {
+            self.diagnostics.imu_held_at_time_jump += 1;
             RejectReason::ImuTimeJumpHeld
         };
         Err(Rejection::new(SensorId::Imu, t, reason))
@@ -119,6 +120,7 @@ impl Navigator {
         // new alignment is one in motion and the gap is within `warm_start.max_age_s`.
         fresh.warm = self.snapshot();
         fresh.warm_outcome = self.warm_outcome;
+        fresh.calibration = self.calibration;
         *self = fresh;
     }
 

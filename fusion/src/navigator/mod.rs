@@ -91,6 +91,7 @@
 //! - `gsf_align`: alignment in motion without stars, the heading from GNSS velocity
 //!   ([`crate::yaw_gsf`]).
 //! - `warm_start`: the snapshot of the estimate for a warm restart, and the resumption from it.
+//! - `calibration_memory`: a previous run's sensor errors as the prior of the next start.
 //! - `core`: the replayable state as one `Clone` value; a checkpoint is `(time, Core)`.
 //! - `buffer`, `obs`: the delayed-fusion queues and logs, and the observations they hold.
 //! - `replay`: the navigating IMU step, checkpoints and the replay of late samples.
@@ -120,6 +121,7 @@ use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 mod align;
 mod baro;
 mod buffer;
+mod calibration_memory;
 mod channels;
 mod config;
 mod core;
@@ -141,6 +143,10 @@ mod zupt;
 
 use self::core::*;
 use buffer::*;
+use calibration_memory::CalibrationPrior;
+pub use calibration_memory::{
+    CalibrationLoaded, CalibrationMemoryConfig, CalibrationRefusal, REMEMBERED,
+};
 pub use config::*;
 use gate::*;
 pub use gate::{RejectReason, Rejection};
@@ -281,6 +287,9 @@ pub struct Navigator {
     warm: Option<NavSnapshot>,
     /// What became of the snapshot given to [`Navigator::warm_start`].
     warm_outcome: Option<WarmStartOutcome>,
+    /// The sensor errors of a previous run, the prior of every start
+    /// (`calibration_memory`).
+    calibration: Option<CalibrationPrior>,
 }
 
 /// Slot of a sensor in the health array.
@@ -341,6 +350,7 @@ impl Navigator {
             gsf: GsfAlignment::default(),
             warm: None,
             warm_outcome: None,
+            calibration: None,
             ell,
             config,
         })

@@ -157,7 +157,8 @@ impl Navigator {
     }
 
     /// The boresight estimate and its covariance the star attitude is derived with: the
-    /// checkpoint's after a warm restart, else zero with the configured prior σ; zero
+    /// checkpoint's after a warm restart, else the calibration memory's where it is tighter
+    /// than the prior, else zero with the configured prior σ; zero
     /// covariance when the boresight is not estimated.
     fn boresight_prior(&self) -> (Vector3<f64>, Matrix3<f64>) {
         if !self.active_states(false).boresight {
@@ -169,6 +170,9 @@ impl Navigator {
                 Vector3::from(w.kappa_rad),
                 p.fixed_view::<3, 3>(idx::KAPPA, idx::KAPPA).into_owned(),
             );
+        }
+        if let Some(remembered) = self.remembered_boresight() {
+            return remembered;
         }
         let sk = self.config.aiding.boresight_sigma_deg * DEG;
         (Vector3::zeros(), Matrix3::identity() * sk * sk)
@@ -251,7 +255,7 @@ impl Navigator {
             .to_rotation_matrix()
             .into_inner();
         let f_b = c_e_b.transpose() * c_e_n * Vector3::new(0.0, 0.0, -G0);
-        let mut p0 = self.sensor_prior(&f_b);
+        let (mut p0, x0) = self.sensor_prior(&f_b);
         p0.fixed_view_mut::<3, 3>(idx::POS, idx::POS)
             .copy_from(&p_rr);
         p0.fixed_view_mut::<3, 3>(idx::VEL, idx::VEL)
@@ -265,35 +269,8 @@ impl Navigator {
                 .copy_from(&p_pk.transpose());
         }
         self.core.nav = NavState { r_e, v_e, q_e_b };
-        self.start_navigation(p0, t);
+        self.start_navigation(p0, &x0, t);
         self.diagnostics.motion_alignments += 1;
-    }
-
-    /// Prior covariance of the sensor-error states (biases, scale factors, boresight, baro and
-    /// odometer), zero elsewhere, for a body sensing the specific force `f_b` (m/s²): the
-    /// accelerometer misalignment (σ_m per off-diagonal, not a state) turns it into the error
-    /// `M f_b`, whose axis-k part `Σ_{j≠k} M_kj f_j` has variance `σ_m² (|f|² − f_k²)`, a bias
-    /// while `f_b` is gravity.
-    pub(super) fn sensor_prior(&self, f_b: &Vector3<f64>) -> Covariance {
-        let imu = &self.config.imu;
-        let mut p0 = Covariance::zeros();
-        let sbg = imu.gyro_bias_rad_s().powi(2);
-        let sba = imu.accel_bias_m_s2().powi(2);
-        let s_mis = imu.misalignment_arcsec / 3600.0 * DEG;
-        let sg = imu.gyro_scale_ppm * 1e-6;
-        let sa = imu.accel_scale_ppm * 1e-6;
-        let sk = self.config.aiding.boresight_sigma_deg * DEG;
-        for k in 0..3 {
-            p0[(idx::BG + k, idx::BG + k)] = sbg;
-            p0[(idx::BA + k, idx::BA + k)] =
-                sba + s_mis * s_mis * (f_b.norm_squared() - f_b[k] * f_b[k]);
-            p0[(idx::SG + k, idx::SG + k)] = sg * sg;
-            p0[(idx::SA + k, idx::SA + k)] = sa * sa;
-            p0[(idx::KAPPA + k, idx::KAPPA + k)] = sk * sk;
-        }
-        p0[(idx::BARO, idx::BARO)] = self.config.aiding.baro_bias_sigma_m.powi(2);
-        p0[(idx::ODO, idx::ODO)] = self.config.aiding.odometer_scale_sigma.powi(2);
-        p0
     }
 
     /// The process noise of the filter: the IMU's plus the aiding states' random walks.
@@ -305,13 +282,15 @@ impl Navigator {
         noise
     }
 
-    /// Start navigating at IMU epoch `t` from the inertial state already in `core.nav` and the
-    /// initial covariance `p0`: a fresh filter (or, after a warm restart, the checkpoint's
+    /// Start navigating at IMU epoch `t` from the inertial state already in `core.nav`, the
+    /// initial covariance `p0` and the sensor-error estimates `x0`: a fresh filter (or, after a warm restart, the checkpoint's
     /// sensor estimates with their covariance, `apply_warm_start`), fresh
     /// mechanization history, delayed-fusion log and checkpoints; aiding queued up to `t`
     /// belongs to the alignment period.
-    pub(super) fn start_navigation(&mut self, p0: Covariance, t: GpsTime) {
+    pub(super) fn start_navigation(&mut self, p0: Covariance, x0: &StateVector, t: GpsTime) {
         self.core.ekf = ErrorStateEkf::new(p0, self.filter_noise(), self.active_states(false));
+        // The sensor-error estimates of the prior (the calibration memory's, else zero).
+        self.core.ekf.apply_sensor_estimates(x0);
         self.core.clock_initialized = false;
         self.apply_warm_start(t);
         if !self.core.clock_initialized {

@@ -345,6 +345,11 @@ struct RunArgs {
     /// restarted, s (default: `run.heartbeat_timeout_s`; 0 disables the watch).
     #[arg(long)]
     heartbeat_timeout: Option<f64>,
+    /// Calibration memory file: the fusion daemon starts from the sensor errors (biases,
+    /// scale factors, boresight, odometer scale) saved in it by the previous run, and saves
+    /// its own there at the end (default: `[fusion] calibration_file`; none when neither).
+    #[arg(long, value_name = "FILE")]
+    calibration: Option<PathBuf>,
 }
 
 #[derive(Debug, clap::Args)]
@@ -916,10 +921,14 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
             log: out.join("logs").join(format!("{n}.log")),
         })
         .collect();
+    let mut fusion_args = supervisor::fusion_args(&cfg.path, &prefix, &recording, speed);
+    if let Some(c) = &args.calibration {
+        fusion_args.extend(["--calibration".to_string(), c.display().to_string()]);
+    }
     let fusion = ChildSpec {
         name: "sextant-fusion".into(),
         program: bin_dir.join("sextant-fusion"),
-        args: supervisor::fusion_args(&cfg.path, &prefix, &recording, speed),
+        args: fusion_args,
         log: out.join("logs").join("sextant-fusion.log"),
     };
     let fusion_log = fusion.log.clone();
