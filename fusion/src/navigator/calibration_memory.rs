@@ -260,7 +260,7 @@ impl Navigator {
                 *r = (p[(i, i)] / prior[i]).sqrt();
             }
         }
-        self.calibration = Some(memory);
+        self.calibration = Some(Box::new(memory));
         Ok(CalibrationLoaded { sigma_ratio })
     }
 

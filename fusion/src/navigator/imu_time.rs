@@ -120,7 +120,7 @@ impl Navigator {
         // new alignment is one in motion and the gap is within `warm_start.max_age_s`.
         fresh.warm = self.snapshot();
         fresh.warm_outcome = self.warm_outcome;
-        fresh.calibration = self.calibration;
+        fresh.calibration = self.calibration.take();
         *self = fresh;
     }
 

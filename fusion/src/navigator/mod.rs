@@ -288,8 +288,9 @@ pub struct Navigator {
     /// What became of the snapshot given to [`Navigator::warm_start`].
     warm_outcome: Option<WarmStartOutcome>,
     /// The sensor errors of a previous run, the prior of every start
-    /// (`calibration_memory`).
-    calibration: Option<CalibrationPrior>,
+    /// (`calibration_memory`). Boxed: 8 kB that the navigator, itself held on the stack by
+    /// its callers, should not carry inline.
+    calibration: Option<Box<CalibrationPrior>>,
 }
 
 /// Slot of a sensor in the health array.
