@@ -1,7 +1,7 @@
 //! Analysis of a recording: messages per channel, drops (recorder drops, sequence-number gaps),
 //! error of the solution against the truth (matched by identical time of validity), errors during
-//! and after GNSS outages, and IMU-to-solution latency. Used by `sextant run` and, later,
-//! `sextant report`.
+//! and after GNSS outages, and IMU-to-solution latency. Used by `sextant run` and `replay`;
+//! `sextant report` reuses its matching window and thinned series.
 //!
 //! Read through [`crate::recording`]; a recording cut short by a crash is read up to its last
 //! complete chunk (`Summary::recording_truncated` tells).
@@ -184,32 +184,6 @@ pub(crate) fn ned_origin(t: &TruthSample) -> NedOrigin {
     }
 }
 
-impl Series {
-    /// Append one solution matched with the truth sample of its time of validity: `t_s` s
-    /// since `t0_ns`, its NED position error `e_ned_m` (solution − truth, m) and attitude error
-    /// angle (deg), and both positions as north/east from `origin` (when there is one).
-    pub(crate) fn push_matched(
-        &mut self,
-        t_s: f64,
-        e_ned_m: &[f64; 3],
-        attitude_deg: f64,
-        nav: &NavSolution,
-        truth: &TruthSample,
-        origin: Option<&NedOrigin>,
-    ) {
-        self.t_s.push(t_s);
-        self.horizontal_m.push(e_ned_m[0].hypot(e_ned_m[1]));
-        self.vertical_m.push(-e_ned_m[2]);
-        self.attitude_deg.push(attitude_deg);
-        if let Some(o) = origin {
-            let tn = ned_offset(o.r_e, o.lat_rad, o.lon_rad, truth.pos_ecef_m);
-            let nn = ned_offset(o.r_e, o.lat_rad, o.lon_rad, nav.pos_ecef_m);
-            self.truth_ne_m.push((tn[0], tn[1]));
-            self.nav_ne_m.push((nn[0], nn[1]));
-        }
-    }
-}
-
 /// Analyse the recording at `path` with the GNSS outage windows of its scenario.
 pub fn analyze_recording(path: &Path, outages: &[TimeWindow]) -> Result<Summary, AnalysisError> {
     analyze(path, outages).map(|a| a.summary)
@@ -370,8 +344,7 @@ pub fn analyze_with_progress(
     }
     s.outage_horizontal_error_max_m = all_during.max_abs();
     s.after_outage_horizontal_error_rms_m = all_after.rms();
-    let mut series = m.series.finish();
-    series.t0_ns = t0_ns;
+    let mut series = m.series.into_series(0.0, t0_ns);
     series.outages_s = outages
         .iter()
         .map(|w| {
@@ -389,15 +362,17 @@ pub fn analyze_with_progress(
 /// truth and the solution of one epoch arrive within milliseconds of wall time, so a minute
 /// of simulated time is far beyond any real separation even at high speed-ups, and keeps the
 /// analysis in bounded memory whatever the recording's length.
-const MATCH_WINDOW_NS: i64 = 60_000_000_000;
+pub(crate) const MATCH_WINDOW_NS: i64 = 60_000_000_000;
 
 /// Most points of the plotted series (the figures use every matched solution).
 const MAX_SERIES_POINTS: usize = 40_000;
 
 /// Solutions, fixes and truth samples waiting for their counterpart of the same time of
-/// validity, over the last [`MATCH_WINDOW_NS`].
+/// validity, over the last [`MATCH_WINDOW_NS`]: the matching of two time-ordered streams that
+/// the recording interleaves in arrival order (a bounded reorder window; a solution whose truth
+/// sample lies further away in the file, or that has none, is never matched).
 #[derive(Default)]
-struct Window {
+pub(crate) struct Window {
     truth: BTreeMap<i64, TruthSample>,
     navs: BTreeMap<i64, Vec<NavSolution>>,
     fixes: BTreeMap<i64, Vec<[f64; 3]>>,
@@ -406,7 +381,7 @@ struct Window {
 impl Window {
     /// A truth sample: returns the solutions and fixes of its time that waited for it, and
     /// waits for later ones.
-    fn truth(&mut self, t: TruthSample) -> (Vec<NavSolution>, Vec<[f64; 3]>) {
+    pub(crate) fn truth(&mut self, t: TruthSample) -> (Vec<NavSolution>, Vec<[f64; 3]>) {
         let k = t.header.time_ns;
         self.truth.insert(k, t);
         (
@@ -416,7 +391,11 @@ impl Window {
     }
 
     /// A solution: matched at once when its truth sample is there, else it waits.
-    fn nav(&mut self, n: NavSolution, on_match: impl FnOnce(&NavSolution, &TruthSample)) {
+    pub(crate) fn nav(
+        &mut self,
+        n: NavSolution,
+        on_match: impl FnOnce(&NavSolution, &TruthSample),
+    ) {
         match self.truth.get(&n.header.time_ns) {
             Some(t) => on_match(&n, t),
             None => self.navs.entry(n.header.time_ns).or_default().push(n),
@@ -432,7 +411,7 @@ impl Window {
     }
 
     /// Forget what is older than `t_ns` (it will find no counterpart any more).
-    fn evict_before(&mut self, t_ns: i64) {
+    pub(crate) fn evict_before(&mut self, t_ns: i64) {
         self.truth = self.truth.split_off(&t_ns);
         self.navs = self.navs.split_off(&t_ns);
         self.fixes = self.fixes.split_off(&t_ns);
@@ -440,7 +419,7 @@ impl Window {
 }
 
 /// The figures accumulated over the matched pairs.
-struct Matched<'a> {
+pub(crate) struct Matched<'a> {
     outage_windows: &'a [TimeWindow],
     horizontal: RmsMax,
     vertical: RmsMax,
@@ -450,11 +429,17 @@ struct Matched<'a> {
     /// Per outage: horizontal error during it, and in the [`AFTER_OUTAGE_S`] after it.
     outages: Vec<(RmsMax, RmsMax)>,
     latency_us: StreamingPercentiles,
-    series: Thinned,
+    /// The plotted series (thinned).
+    pub(crate) series: Thinned<SeriesPoint>,
 }
 
 impl<'a> Matched<'a> {
     fn new(outage_windows: &'a [TimeWindow]) -> Self {
+        Self::with_series_points(outage_windows, MAX_SERIES_POINTS)
+    }
+
+    /// With a plotted series of between `max_points` and twice as many points.
+    pub(crate) fn with_series_points(outage_windows: &'a [TimeWindow], max_points: usize) -> Self {
         Self {
             outage_windows,
             horizontal: RmsMax::default(),
@@ -465,11 +450,13 @@ impl<'a> Matched<'a> {
             outages: vec![Default::default(); outage_windows.len()],
             // 1 µs bins up to 100 ms: 1.2 MB, exact beyond.
             latency_us: StreamingPercentiles::new(1.0, 100_000),
-            series: Thinned::default(),
+            series: Thinned::new(max_points),
         }
     }
 
-    fn solution(&mut self, n: &NavSolution, t: &TruthSample, origin: &TruthSample) {
+    /// A solution matched with the truth sample of its time; `origin` is the first truth
+    /// sample (time and north/east origin of the series).
+    pub(crate) fn solution(&mut self, n: &NavSolution, t: &TruthSample, origin: &TruthSample) {
         let e = position_error_ned_m(n, t);
         let att = attitude_error_rad(t.q_ned_body, n.q_ned_body).to_degrees();
         if !(e.iter().all(|x| x.is_finite()) && att.is_finite()) {
@@ -494,7 +481,7 @@ impl<'a> Matched<'a> {
         }
         let t_s = (tv - origin.header.time_ns) as f64 * 1e-9;
         self.series
-            .push(t_s, &e, att, n, t, Some(&ned_origin(origin)));
+            .push_with(|| SeriesPoint::new(t_s, &e, att, n, t, Some(&ned_origin(origin))));
     }
 
     fn fix(&mut self, pos: &[f64; 3], tr: &TruthSample) {
@@ -506,68 +493,115 @@ impl<'a> Matched<'a> {
     }
 }
 
-/// The plotted series, thinned as it grows: every `stride`-th matched solution is kept, and
-/// when more than twice [`MAX_SERIES_POINTS`] are held every other one is dropped and the
-/// stride doubles.
-#[derive(Default)]
-struct Thinned {
-    series: Series,
-    k: u64,
+/// A series thinned as it grows, in bounded memory: every `stride`-th point pushed is kept,
+/// and when more than twice `max_points` are held every other one is dropped and the stride
+/// doubles. So it holds all points while fewer than `2 × max_points + 1` were pushed, and
+/// otherwise between `max_points` and `2 × max_points`, evenly spaced in push order (the first
+/// point always kept, the last one not necessarily).
+#[derive(Debug, Clone)]
+pub(crate) struct Thinned<T> {
+    points: Vec<T>,
+    pushed: u64,
     stride: u64,
+    max_points: usize,
 }
 
-impl Thinned {
-    fn push(
-        &mut self,
-        t_s: f64,
-        e: &[f64; 3],
-        att_deg: f64,
-        n: &NavSolution,
-        t: &TruthSample,
-        origin: Option<&NedOrigin>,
-    ) {
-        self.stride = self.stride.max(1);
-        self.k += 1;
-        if !(self.k - 1).is_multiple_of(self.stride) {
+impl<T> Thinned<T> {
+    /// Empty, keeping at most `2 × max_points` points.
+    pub(crate) fn new(max_points: usize) -> Self {
+        Self {
+            points: Vec::new(),
+            pushed: 0,
+            stride: 1,
+            max_points: max_points.max(1),
+        }
+    }
+
+    /// Take the next point; `point` is called only when it is kept.
+    pub(crate) fn push_with(&mut self, point: impl FnOnce() -> T) {
+        self.pushed += 1;
+        if !(self.pushed - 1).is_multiple_of(self.stride) {
             return;
         }
-        self.series.push_matched(t_s, e, att_deg, n, t, origin);
-        if self.series.t_s.len() > 2 * MAX_SERIES_POINTS {
-            let s = &mut self.series;
-            fn halve<T: Copy>(v: &mut Vec<T>) {
-                let kept: Vec<T> = v.iter().step_by(2).copied().collect();
-                *v = kept;
-            }
-            halve(&mut s.t_s);
-            halve(&mut s.horizontal_m);
-            halve(&mut s.vertical_m);
-            halve(&mut s.attitude_deg);
-            halve(&mut s.truth_ne_m);
-            halve(&mut s.nav_ne_m);
+        self.points.push(point());
+        if self.points.len() > 2 * self.max_points {
+            let mut k = 0usize;
+            self.points.retain(|_| {
+                k += 1;
+                k % 2 == 1
+            });
             self.stride *= 2;
         }
     }
 
+    /// The points kept, in push order.
+    pub(crate) fn points(&self) -> &[T] {
+        &self.points
+    }
+
+    /// The points kept, in push order.
+    pub(crate) fn into_points(self) -> Vec<T> {
+        self.points
+    }
+}
+
+/// One matched solution of the plotted [`Series`].
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct SeriesPoint {
+    t_s: f64,
+    horizontal_m: f64,
+    vertical_m: f64,
+    attitude_deg: f64,
+    /// Truth and solution north/east from the origin, m.
+    ne_m: Option<[(f64, f64); 2]>,
+}
+
+impl SeriesPoint {
+    /// One solution matched with the truth sample of its time of validity: `t_s` s since the
+    /// series' origin, its NED position error `e_ned_m` (solution − truth, m) and attitude
+    /// error angle (deg), and both positions as north/east from `origin` (when there is one).
+    fn new(
+        t_s: f64,
+        e_ned_m: &[f64; 3],
+        attitude_deg: f64,
+        nav: &NavSolution,
+        truth: &TruthSample,
+        origin: Option<&NedOrigin>,
+    ) -> Self {
+        Self {
+            t_s,
+            horizontal_m: e_ned_m[0].hypot(e_ned_m[1]),
+            vertical_m: -e_ned_m[2],
+            attitude_deg,
+            ne_m: origin.map(|o| {
+                let tn = ned_offset(o.r_e, o.lat_rad, o.lon_rad, truth.pos_ecef_m);
+                let nn = ned_offset(o.r_e, o.lat_rad, o.lon_rad, nav.pos_ecef_m);
+                [(tn[0], tn[1]), (nn[0], nn[1])]
+            }),
+        }
+    }
+}
+
+impl Thinned<SeriesPoint> {
     /// The series in time order (pairs are matched as their second half arrives, nearly but
-    /// not exactly in time order).
-    fn finish(self) -> Series {
-        let mut s = self.series;
-        let mut idx: Vec<usize> = (0..s.t_s.len()).collect();
-        idx.sort_by(|&a, &b| s.t_s[a].total_cmp(&s.t_s[b]));
-        let pick = |v: &Vec<f64>| idx.iter().map(|&i| v[i]).collect::<Vec<f64>>();
-        let pick2 = |v: &Vec<(f64, f64)>| {
-            if v.len() == idx.len() {
-                idx.iter().map(|&i| v[i]).collect()
-            } else {
-                v.clone()
-            }
+    /// not exactly in time order), times shifted by `shift_s`, origin `t0_ns`.
+    pub(crate) fn into_series(self, shift_s: f64, t0_ns: i64) -> Series {
+        let mut points = self.into_points();
+        points.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
+        let mut s = Series {
+            t0_ns,
+            ..Default::default()
         };
-        s.horizontal_m = pick(&s.horizontal_m);
-        s.vertical_m = pick(&s.vertical_m);
-        s.attitude_deg = pick(&s.attitude_deg);
-        s.truth_ne_m = pick2(&s.truth_ne_m);
-        s.nav_ne_m = pick2(&s.nav_ne_m);
-        s.t_s = pick(&s.t_s);
+        for p in points {
+            s.t_s.push(p.t_s + shift_s);
+            s.horizontal_m.push(p.horizontal_m);
+            s.vertical_m.push(p.vertical_m);
+            s.attitude_deg.push(p.attitude_deg);
+            if let Some([truth, nav]) = p.ne_m {
+                s.truth_ne_m.push(truth);
+                s.nav_ne_m.push(nav);
+            }
+        }
         s
     }
 }

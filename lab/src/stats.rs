@@ -66,13 +66,24 @@ impl RmsMax {
     }
 }
 
-/// Percentiles of a stream of non-negative values in constant memory: a histogram of
-/// `resolution`-wide bins up to `resolution × bins`, each bin standing for the mean of the
-/// values that fell into it (so a percentile is within one resolution of the exact one, and
-/// exact when a bin holds one distinct value), and the values beyond kept exactly.
+/// Percentiles of a stream of non-negative values in constant memory: a histogram, each bin
+/// standing for the mean of the values that fell into it, and the values beyond its last bin
+/// kept exactly. The k-th smallest value lies in the bin its rank falls into, and so does that
+/// bin's mean: a percentile is off by at most one bin width from the exact one (interpolated
+/// between the closest ranks as [`percentile`]), and exact when the bins it is read from each
+/// hold one distinct value. Two layouts:
+///
+/// - [`StreamingPercentiles::new`]: `resolution`-wide bins up to `resolution × bins` (an
+///   absolute bound);
+/// - [`StreamingPercentiles::relative`]: bins `(1 + r)` times wider than the previous one from
+///   `min` up to `max` (a relative bound, `r` of the value, for values of any magnitude in
+///   ≈ ln(max/min)/r bins; below `min`, within `min`).
+///
+/// Memory is 12 bytes per bin plus 8 per value beyond the last bin: bounded when the range
+/// covers the values.
 #[derive(Debug, Clone)]
 pub struct StreamingPercentiles {
-    resolution: f64,
+    bins: Bins,
     counts: Vec<u32>,
     sums: Vec<f64>,
     beyond: Vec<f64>,
@@ -80,18 +91,41 @@ pub struct StreamingPercentiles {
     max: Option<f64>,
 }
 
+/// Where a value falls in a [`StreamingPercentiles`]' histogram.
+#[derive(Debug, Clone, Copy)]
+enum Bins {
+    /// Bin k is `[k·resolution, (k+1)·resolution)`.
+    Linear { resolution: f64 },
+    /// Bin 0 is `[0, min)`, bin k ≥ 1 is `[min·(1+r)^(k−1), min·(1+r)^k)`; `ln_step` = ln(1+r).
+    Geometric { min: f64, ln_step: f64 },
+}
+
 impl StreamingPercentiles {
     /// Bins of width `resolution` covering `[0, resolution × bins)`.
     pub fn new(resolution: f64, bins: usize) -> Self {
+        Self::with_bins(Bins::Linear { resolution }, bins)
+    }
+
+    /// Bins of relative width `relative_resolution` covering `[min, max)`, and one bin for
+    /// `[0, min)`: a percentile ≥ `min` is within `relative_resolution` of its value, one below
+    /// `min` within `min`.
+    pub fn relative(relative_resolution: f64, min: f64, max: f64) -> Self {
+        let ln_step = relative_resolution.ln_1p();
+        let bins = 1 + ((max / min).ln() / ln_step).ceil().max(0.0) as usize;
+        Self::with_bins(Bins::Geometric { min, ln_step }, bins)
+    }
+
+    fn with_bins(bins: Bins, n_bins: usize) -> Self {
         Self {
-            resolution,
-            counts: vec![0; bins],
-            sums: vec![0.0; bins],
+            bins,
+            counts: vec![0; n_bins],
+            sums: vec![0.0; n_bins],
             beyond: Vec::new(),
             n: 0,
             max: None,
         }
     }
+
     /// Take one value (negative values count as 0; NaN is ignored).
     pub fn push(&mut self, x: f64) {
         if x.is_nan() {
@@ -100,7 +134,11 @@ impl StreamingPercentiles {
         let x = x.max(0.0);
         self.n += 1;
         self.max = Some(self.max.map_or(x, |m| m.max(x)));
-        let k = (x / self.resolution) as usize;
+        let k = match self.bins {
+            Bins::Linear { resolution } => (x / resolution) as usize,
+            Bins::Geometric { min, .. } if x < min => 0,
+            Bins::Geometric { min, ln_step } => 1 + ((x / min).ln() / ln_step) as usize,
+        };
         if k < self.counts.len() {
             self.counts[k] += 1;
             self.sums[k] += x;
@@ -167,6 +205,40 @@ mod tests {
         }
         assert_eq!(same.percentile(50.0), Some(2.5));
         assert_eq!(StreamingPercentiles::new(1.0, 10).percentile(50.0), None);
+    }
+
+    #[test]
+    fn relative_bins_bound_the_error_by_a_fraction_of_the_value() {
+        // Values over nine decades: every percentile within 1e-3 of its value.
+        let v: Vec<f64> = (0..20_000)
+            .map(|k| 1e-4 * 10f64.powf(((k * 7919) % 20_011) as f64 / 20_011.0 * 9.0))
+            .collect();
+        let mut q = StreamingPercentiles::relative(1e-3, 1e-6, 1e6);
+        for &x in &v {
+            q.push(x);
+        }
+        for p in [0.0, 1.0, 50.0, 95.0, 99.9, 100.0] {
+            let exact = percentile(&v, p).unwrap();
+            let got = q.percentile(p).unwrap();
+            assert!(
+                (got - exact).abs() <= 1e-3 * exact,
+                "p{p}: {got} vs {exact}"
+            );
+        }
+        // Below `min`: within `min`; beyond `max`: exact; one distinct value per bin: exact.
+        let mut small = StreamingPercentiles::relative(1e-3, 1e-6, 1.0);
+        for x in [1e-9, 3e-7, 5.0, 7.0] {
+            small.push(x);
+        }
+        assert!(small.percentile(0.0).unwrap() < 1e-6);
+        assert_eq!(small.percentile(100.0), Some(7.0));
+        let mut same = StreamingPercentiles::relative(1e-3, 1e-6, 1e6);
+        for _ in 0..7 {
+            same.push(0.25);
+        }
+        assert_eq!(same.percentile(50.0), Some(0.25));
+        // About ln(1e12)/1e-3 bins: a third of a megabyte.
+        assert!(StreamingPercentiles::relative(1e-3, 1e-6, 1e6).counts.len() < 28_000);
     }
 
     #[test]
