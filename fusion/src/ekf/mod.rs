@@ -51,12 +51,15 @@
 //! - [`update`](mod@update): the Joseph-form update as a pure function returning a
 //!   [`Residual`] record, and covariance augmentation;
 //! - [`measurements`]: the measurement models (innovation, Jacobian `H`, noise `R`);
-//! - [`chi2`]: chi-square distribution and the gate thresholds.
+//! - [`chi2`]: chi-square distribution and the gate thresholds;
+//! - [`correlated`]: the variance inflation that fuses a time-correlated (Gauss–Markov)
+//!   measurement error as white noise without over-confidence (GNSS).
 //!
 //! Every item of the submodules is re-exported here, so `crate::ekf::update`,
 //! `crate::ekf::star_attitude`, … name the same items as before the split.
 
 pub mod chi2;
+pub mod correlated;
 pub mod dynamics;
 pub mod measurements;
 pub mod update;

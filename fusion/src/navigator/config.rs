@@ -160,6 +160,11 @@ pub struct GnssInstallation {
     /// surveyed on the vehicle. Used by the loose and tight measurement models and to move
     /// the first fix from the antenna to the IMU at alignment.
     pub lever_arm_b_m: [f64; 3],
+    /// Correlation time of the receiver's position / pseudorange error, s: the error is
+    /// modelled as first-order Gauss–Markov with the receiver's reported variance and fused
+    /// with the consistent inflation of [`crate::ekf::correlated`]. 0: white (no inflation).
+    /// Doppler velocity and range rates are fused white.
+    pub error_correlation_time_s: f64,
 }
 
 impl GnssInstallation {
@@ -614,6 +619,11 @@ impl NavigatorConfig {
                 "must be a finite number within ±50 m",
             )?;
         }
+        check(
+            nonneg(self.gnss.error_correlation_time_s),
+            "gnss.error_correlation_time_s",
+            "must be a finite number >= 0",
+        )?;
         check(
             self.gnss_mode == GnssMode::Loose || self.states.clock,
             "states.clock",

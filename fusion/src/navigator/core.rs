@@ -28,6 +28,9 @@ pub(super) struct Core {
     pub(super) last_odo: Option<(GpsTime, f64)>,
     /// Whether the receiver clock states have been started (tight coupling).
     pub(super) clock_initialized: bool,
+    /// Time of validity of the last GNSS epoch whose position or pseudoranges were fused
+    /// (the lag of the time-correlated error model, [`crate::ekf::correlated`]).
+    pub(super) last_gnss_ranging: Option<GpsTime>,
     /// Bias-corrected inertial angular rate of the last IMU step, body axes, rad/s (the
     /// velocity lever-arm term of the GNSS antenna).
     pub(super) w_ib_b_rad_s: Vector3<f64>,
@@ -54,6 +57,7 @@ impl Core {
             last_baro_fused: None,
             last_odo: None,
             clock_initialized: false,
+            last_gnss_ranging: None,
             w_ib_b_rad_s: Vector3::zeros(),
         }
     }

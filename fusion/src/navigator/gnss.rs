@@ -64,11 +64,22 @@ impl Navigator {
         let mut fused = false;
         let mut nis = f64::NEG_INFINITY;
         if self.config.updates.gnss_position {
-            let m =
+            let rho = self.gnss_error_correlation(ts);
+            let mut m =
                 ekf::gnss_position(&self.core.nav, &self.gnss_antenna(), &fix.pos, &fix.pos_cov);
+            if rho > 0.0 {
+                self.core
+                    .ekf
+                    .propagate_covariance(&self.ell, &self.core.nav.r_e);
+                let hph = m.h * self.core.ekf.p * m.h.transpose();
+                m.r = ekf::correlated::inflate_covariance3(&hph, &m.r, rho);
+            }
             let v = self.run_update(Counter::Sensor(id), &m, tally);
             fused |= v.accepted();
             nis = nis.max(v.nis);
+            if v.accepted() {
+                self.core.last_gnss_ranging = Some(ts);
+            }
         }
         if self.config.updates.gnss_velocity && fix.vel_valid {
             let m =
@@ -101,11 +112,13 @@ impl Navigator {
         };
         // A measurement consumed by the clock initialisation was used: the epoch counts.
         let mut fused = skip_pr.is_some();
+        let mut ranged = skip_pr.is_some();
+        let rho = self.gnss_error_correlation(ts);
         let mut nis = f64::NEG_INFINITY;
         for (i, sat) in obs.sats.iter().take(obs.n_sats).enumerate() {
             if sat.has_pr && skip_pr != Some(i) {
                 let b = self.core.ekf.clock_bias_m - self.core.ekf.clock_drift_m_s * back_s;
-                let m = ekf::gnss_pseudorange(
+                let mut m = ekf::gnss_pseudorange(
                     &self.core.nav,
                     &self.gnss_antenna(),
                     &sat.pos,
@@ -113,8 +126,16 @@ impl Navigator {
                     b,
                     sat.sigma_pr_m,
                 );
+                if rho > 0.0 {
+                    self.core
+                        .ekf
+                        .propagate_covariance(&self.ell, &self.core.nav.r_e);
+                    let hph = (m.h * self.core.ekf.p * m.h.transpose())[(0, 0)];
+                    m.r[(0, 0)] *= ekf::correlated::scalar_inflation(hph, m.r[(0, 0)], rho);
+                }
                 let v = self.run_update(Counter::Sensor(id), &m, tally);
                 fused |= v.accepted();
+                ranged |= v.accepted();
                 nis = nis.max(v.nis);
             }
             if sat.has_rr && self.config.updates.gnss_velocity && skip_rr != Some(i) {
@@ -135,8 +156,26 @@ impl Navigator {
         if tally == Tally::Count && nis > f64::NEG_INFINITY {
             self.health[id].last_nis = nis;
         }
+        if ranged {
+            self.core.last_gnss_ranging = Some(ts);
+        }
         if fused {
             self.mark_fused(id, ts, tally);
+        }
+    }
+
+    /// Lag-one correlation `ρ = exp(−Δt/τ)` of the receiver's position / pseudorange error
+    /// between the epoch `ts` and the last GNSS epoch whose position or pseudoranges were
+    /// fused (`τ` = `gnss.error_correlation_time_s`; 0 when it is 0 or nothing was fused
+    /// since navigation started). Every satellite of an epoch gets the epoch's lag: a
+    /// satellite that has just risen is inflated as if it had been tracked (conservative).
+    pub(super) fn gnss_error_correlation(&self, ts: GpsTime) -> f64 {
+        match self.core.last_gnss_ranging {
+            Some(prev) if ts > prev => ekf::correlated::lag_correlation(
+                (ts - prev).seconds_f64(),
+                self.config.gnss.error_correlation_time_s,
+            ),
+            _ => 0.0,
         }
     }
 

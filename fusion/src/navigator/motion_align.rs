@@ -292,6 +292,7 @@ impl Navigator {
         // The sensor-error estimates of the prior (the calibration memory's, else zero).
         self.core.ekf.apply_sensor_estimates(x0);
         self.core.clock_initialized = false;
+        self.core.last_gnss_ranging = None;
         self.apply_warm_start(t);
         if !self.core.clock_initialized {
             self.initialize_from_ls(t);

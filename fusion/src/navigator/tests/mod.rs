@@ -173,6 +173,10 @@ fn filter_toml_is_the_default_and_validates() {
             .to_string()
             .contains("gate_probability")
     );
+    c = NavigatorConfig::default();
+    c.gnss.error_correlation_time_s = -60.0;
+    let e = c.validate().unwrap_err().to_string();
+    assert!(e.contains("gnss.error_correlation_time_s"), "{e}");
 }
 
 #[test]
