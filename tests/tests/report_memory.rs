@@ -26,17 +26,18 @@ use std::time::Duration;
 /// Allowed growth of the peak resident set from the 2 min to the 8 min recording, KiB.
 const GROWTH_BOUND_KIB: u64 = 12 * 1024;
 
-/// WGS-84 ECEF of geodetic (lat, lon, h).
+/// WGS-84 ECEF of geodetic (lat, lon, h): where the synthetic solutions are.
 fn ecef(lat: f64, lon: f64, h: f64) -> [f64; 3] {
-    let a = 6378137.0;
-    let f = 1.0 / 298.257223563;
-    let e2 = f * (2.0 - f);
-    let n = a / (1.0 - e2 * lat.sin().powi(2)).sqrt();
-    [
-        (n + h) * lat.cos() * lon.cos(),
-        (n + h) * lat.cos() * lon.sin(),
-        (n * (1.0 - e2) + h) * lat.sin(),
-    ]
+    use fusion::earth::{Geodetic, WGS84, geodetic_to_ecef};
+    let r = geodetic_to_ecef(
+        &WGS84,
+        &Geodetic {
+            lat_rad: lat,
+            lon_rad: lon,
+            height_m: h,
+        },
+    );
+    [r.x, r.y, r.z]
 }
 
 /// A recording of `seconds` of 200 Hz IMU and solutions, 50 Hz truth written 0.3 s late,
