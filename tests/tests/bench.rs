@@ -52,6 +52,28 @@ fn quick_bench_reports_every_figure() {
             (n - want).abs() < 0.1 * want,
             "{key}: {n} solutions, expected about {want}"
         );
+        // The floor: a bare iceoryx2 round trip at the same rate, as many samples, in the same
+        // run; Sextant's figures against it are finite.
+        let (f50, f99, f999) = (
+            f(&s, &p("floor/latency_p50_us")),
+            f(&s, &p("floor/latency_p99_us")),
+            f(&s, &p("floor/latency_p99_9_us")),
+        );
+        assert!(
+            0.0 < f50 && f50 <= f99 && f99 <= f999,
+            "{key} floor: {f50} {f99} {f999}"
+        );
+        assert!(f50 < 1e6 / hz, "{key}: floor p50 {f50} us");
+        let replies = f(&s, &p("floor/solutions"));
+        assert!(
+            replies >= 0.9 * f(&s, &p("floor/sent")) && replies > 0.9 * want_replies(hz),
+            "{key}: {replies} floor replies"
+        );
+        let excess = f(&s, &p("vs_floor/p50_excess_us"));
+        let ratio = f(&s, &p("vs_floor/p99_ratio"));
+        assert!(excess.is_finite(), "{key}: p50 excess {excess}");
+        assert!(ratio.is_finite() && ratio > 0.0, "{key}: p99 ratio {ratio}");
+        assert!(f(&s, &p("floor/echo_peak_rss_mib")) > 0.0);
         for proc_name in ["sextant-fusion", "sextant-sim-imu", "sextant-sim-gnss"] {
             let cpu = f(&s, &p(&format!("processes/{proc_name}/cpu_percent")));
             let rss = f(&s, &p(&format!("processes/{proc_name}/peak_rss_mib")));
@@ -84,4 +106,33 @@ fn quick_bench_reports_every_figure() {
     }
     let png = std::fs::metadata(out.join("latency_histogram.png")).expect("histogram");
     assert!(png.len() > 1000);
+    assert!(stdout.contains("over the floor"), "{stdout}");
+    // Cost curves: every point timed, positive and finite, and the simulated constellation has
+    // enough satellites for a fix.
+    for curve in [
+        "imu_rate",
+        "active_states",
+        "tight_satellites",
+        "imu_channels",
+    ] {
+        let pts = s["cost_curves"][curve]
+            .as_array()
+            .unwrap_or_else(|| panic!("cost curve {curve}"));
+        assert!(pts.len() >= 2, "{curve}: {pts:?}");
+        for pt in pts {
+            let ns = f(pt, "/ns_per_imu_sample");
+            assert!(ns.is_finite() && ns > 0.0, "{curve}: {pt}");
+            assert!(f(pt, "/imu_samples") > 100.0, "{curve}: {pt}");
+            assert_eq!(f(pt, "/rejected_inputs"), 0.0, "{curve}: {pt}");
+        }
+    }
+    assert!(f(&s, "/cost_curves/satellites_simulated_max") >= 4.0);
+    assert!(f(&s, "/cost_curves/triad_ns_per_imu_sample") > 0.0);
+    let png = std::fs::metadata(out.join("cost_curves.png")).expect("cost curves");
+    assert!(png.len() > 1000);
+}
+
+/// Samples of a quick floor run: 3 s (the live run's 4 s less its alignment) at `hz`.
+fn want_replies(hz: f64) -> f64 {
+    hz * 3.0
 }

@@ -42,6 +42,14 @@ enum Command {
     /// recorder throughput, CPU and memory; prints a table, writes summary.json and a histogram.
     #[command(after_help = "Example:\n  sextant bench --out out/bench")]
     Bench(BenchArgs),
+    /// The echo end of the bench's floor measurement (started by `sextant bench`): answers
+    /// every IMU sample on PREFIX/imu with a solution on PREFIX/nav until SIGINT/SIGTERM.
+    #[command(hide = true)]
+    BenchEcho {
+        /// Service-name prefix of the floor run.
+        #[arg(long)]
+        prefix: String,
+    },
     /// Replay a recording: offline through the fusion (bit-exact check, or other settings with
     /// --config), or live onto the iceoryx2 services (bench).
     #[command(
@@ -409,6 +417,12 @@ fn main() -> anyhow::Result<()> {
         }
         Command::Experiment(args) => experiment(args),
         Command::Bench(args) => bench(args),
+        Command::BenchEcho { prefix } => {
+            let stop = sextant_lab::signals::install()?;
+            let replies = sextant_lab::bench::floor::echo(&prefix, stop)?;
+            tracing::info!("bench echo on {prefix}: {replies} replies");
+            Ok(())
+        }
         Command::Replay(args) => replay(args),
         Command::Calibrate(CalibrateArgs {
             what:

@@ -102,6 +102,49 @@ type DynErr = Box<dyn std::error::Error>;
 
 /// Draw `chart` into the PNG file `path` (1000 × 600 px).
 pub fn line_chart(path: &Path, chart: &Chart) -> Result<(), ExperimentError> {
+    let panel = Panel {
+        chart: chart.clone(),
+        y_from_zero: false,
+    };
+    panel_chart(path, std::slice::from_ref(&panel), 1, (1000, 600))
+}
+
+/// One panel of [`panel_chart`].
+pub struct Panel<'a> {
+    /// The chart.
+    pub chart: Chart<'a>,
+    /// Start a linear y axis at zero (so that a flat curve looks flat).
+    pub y_from_zero: bool,
+}
+
+/// Draw `panels`, `columns` per row, into the PNG file `path` of `size` pixels.
+pub fn panel_chart(
+    path: &Path,
+    panels: &[Panel],
+    columns: usize,
+    size: (u32, u32),
+) -> Result<(), ExperimentError> {
+    let plot_err = |e: &dyn std::fmt::Display| ExperimentError::Plot {
+        path: path.to_path_buf(),
+        detail: e.to_string(),
+    };
+    crate::fonts::register();
+    let root = BitMapBackend::new(path, size).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| plot_err(&e))?;
+    let columns = columns.max(1);
+    let rows = panels.len().div_ceil(columns).max(1);
+    let areas = root.split_evenly((rows, columns));
+    for (area, panel) in areas.iter().zip(panels) {
+        render(area, &panel.chart, panel.y_from_zero).map_err(|e| plot_err(&e))?;
+    }
+    root.present().map_err(|e| plot_err(&e))?;
+    Ok(())
+}
+
+type Area<'a> = DrawingArea<BitMapBackend<'a>, plotters::coord::Shift>;
+
+/// One chart on `area`: axis ranges from the usable points, linear or logarithmic axes.
+fn render(area: &Area, chart: &Chart, y_from_zero: bool) -> Result<(), DynErr> {
     let usable = |v: f64, log: bool| v.is_finite() && (!log || v > 0.0);
     let (x0, x1) = range(
         chart
@@ -119,16 +162,17 @@ pub fn line_chart(path: &Path, chart: &Chart) -> Result<(), ExperimentError> {
             .filter(|&y| usable(y, chart.log_y)),
         chart.log_y,
     );
-    let result = match (chart.log_x, chart.log_y) {
-        (false, false) => draw(path, chart, x0..x1, y0..y1),
-        (true, false) => draw(path, chart, (x0..x1).log_scale(), y0..y1),
-        (false, true) => draw(path, chart, x0..x1, (y0..y1).log_scale()),
-        (true, true) => draw(path, chart, (x0..x1).log_scale(), (y0..y1).log_scale()),
+    let y0 = if y_from_zero && !chart.log_y {
+        y0.min(0.0)
+    } else {
+        y0
     };
-    result.map_err(|e| ExperimentError::Plot {
-        path: path.to_path_buf(),
-        detail: e.to_string(),
-    })
+    match (chart.log_x, chart.log_y) {
+        (false, false) => draw(area, chart, x0..x1, y0..y1),
+        (true, false) => draw(area, chart, (x0..x1).log_scale(), y0..y1),
+        (false, true) => draw(area, chart, x0..x1, (y0..y1).log_scale()),
+        (true, true) => draw(area, chart, (x0..x1).log_scale(), (y0..y1).log_scale()),
+    }
 }
 
 /// Axis range of the values with a margin (5 % linear, a factor 1.3 logarithmic).
@@ -179,17 +223,14 @@ fn tick_label(v: f64, log: bool) -> String {
     }
 }
 
-fn draw<XR, YR>(path: &Path, chart: &Chart, xr: XR, yr: YR) -> Result<(), DynErr>
+fn draw<XR, YR>(area: &Area, chart: &Chart, xr: XR, yr: YR) -> Result<(), DynErr>
 where
     XR: AsRangedCoord<Value = f64>,
     YR: AsRangedCoord<Value = f64>,
     XR::CoordDescType: ValueFormatter<f64>,
     YR::CoordDescType: ValueFormatter<f64>,
 {
-    crate::fonts::register();
-    let root = BitMapBackend::new(path, (1000, 600)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let mut ctx = ChartBuilder::on(&root)
+    let mut ctx = ChartBuilder::on(area)
         .caption(chart.title, ("sans-serif", 22))
         .margin(12)
         .x_label_area_size(45)
@@ -246,7 +287,6 @@ where
         .background_style(WHITE.mix(0.85))
         .border_style(BLACK)
         .draw()?;
-    root.present()?;
     Ok(())
 }
 

@@ -16,8 +16,20 @@
 //! 4. **Recording throughput**: the [`Recorder`] saturated with a realistic record mix
 //!    (records/s, MB/s of MCAP written), then paced at 10× the default live load (the default
 //!    `sextant run` at speed 10) to check that nothing is dropped.
+//! 5. **The floor** ([`floor`]), measured in the same run just before each live run, at the same
+//!    IMU rate and for as many samples as the live run has solutions: a bare iceoryx2
+//!    IMU → reply round trip between two processes with Sextant's own services and wake-up
+//!    mechanism and message sizes. Sextant's latency is reported against it (p50 excess in µs,
+//!    p99 ratio): on a loaded machine both move together, so the comparison survives the load
+//!    that the absolute figures do not.
+//! 6. **Cost curves** ([`cost`]): the offline fusion cost per IMU sample against the IMU rate,
+//!    the active filter states, the satellites of tight coupling and the redundant IMU channels.
 //!
-//! Writes `summary.json`, a latency histogram PNG, and returns the summary for the table.
+//! Writes `summary.json`, a latency histogram PNG (Sextant and the floor), the cost curves'
+//! PNG, and returns the summary for the table.
+
+pub mod cost;
+pub mod floor;
 
 use crate::experiments::plot::{Chart, Line, color, line_chart};
 use crate::recorder::{Recorder, RecorderOptions};
@@ -533,43 +545,69 @@ fn recorder_throughput(out: &Path, saturated: usize, paced_s: f64) -> anyhow::Re
     }))
 }
 
-fn histogram_png(path: &Path, runs: &[(f64, &[f64])]) -> anyhow::Result<()> {
-    // Bins of 5 µs up to the largest p99.9 of the runs (the tail beyond is in the table).
+/// Sextant's latency against the floor's: the median's excess in µs (what the fusion daemon
+/// adds per solution) and the tail's ratio (p99, p99.9).
+fn vs_floor(sextant: &[f64], floor: &[f64]) -> Value {
+    let p = |l: &[f64], q: f64| percentile(l, q);
+    json!({
+        "p50_excess_us": p(sextant, 50.0) - p(floor, 50.0),
+        "p99_ratio": p(sextant, 99.0) / p(floor, 99.0),
+        "p99_9_ratio": p(sextant, 99.9) / p(floor, 99.9),
+        "p50_ratio": p(sextant, 50.0) / p(floor, 50.0),
+    })
+}
+
+/// Latency histograms of the live runs (solid) and of the floor at the same rates (dashed).
+fn histogram_png(
+    path: &Path,
+    runs: &[(f64, &[f64])],
+    floors: &[(f64, &[f64])],
+) -> anyhow::Result<()> {
+    // Bins up to the largest p99.9 of the runs (the tail beyond is in the table).
     let top = runs
         .iter()
+        .chain(floors)
         .map(|(_, l)| percentile(l, 99.9))
         .fold(0.0f64, f64::max)
         .max(50.0);
     let width = (top / 60.0).max(1.0);
     let nbins = (top / width).ceil() as usize + 1;
-    let lines: Vec<Line> = runs
-        .iter()
-        .enumerate()
-        .map(|(i, (hz, lat))| {
-            let mut counts = vec![0u64; nbins];
-            for &x in *lat {
-                let b = ((x / width) as usize).min(nbins - 1);
-                counts[b] += 1;
-            }
-            let mut points = Vec::new();
-            for (b, &c) in counts.iter().enumerate() {
-                let y = c as f64 / lat.len() as f64;
-                points.push((b as f64 * width, y));
-                points.push(((b + 1) as f64 * width, y));
-            }
-            Line {
-                label: format!("IMU {hz:.0} Hz ({} solutions)", lat.len()),
-                points,
-                color: color(i),
-                dashed: false,
-                markers: false,
-            }
-        })
-        .collect();
+    let histogram = |lat: &[f64]| {
+        let mut counts = vec![0u64; nbins];
+        for &x in lat {
+            let b = ((x / width) as usize).min(nbins - 1);
+            counts[b] += 1;
+        }
+        let mut points = Vec::new();
+        for (b, &c) in counts.iter().enumerate() {
+            let y = c as f64 / lat.len().max(1) as f64;
+            points.push((b as f64 * width, y));
+            points.push(((b + 1) as f64 * width, y));
+        }
+        points
+    };
+    let mut lines: Vec<Line> = Vec::new();
+    for (i, (hz, lat)) in runs.iter().enumerate() {
+        lines.push(Line::solid(
+            format!("Sextant, IMU {hz:.0} Hz ({} solutions)", lat.len()),
+            histogram(lat),
+            color(i),
+        ));
+    }
+    for (i, (hz, lat)) in floors.iter().enumerate() {
+        lines.push(Line::dashed(
+            format!(
+                "floor (bare iceoryx2 round trip), {hz:.0} Hz ({} replies)",
+                lat.len()
+            ),
+            histogram(lat),
+            color(i),
+        ));
+    }
     line_chart(
         path,
         &Chart {
-            title: "IMU send -> solution send latency",
+            title: "IMU send -> solution send latency: Sextant and the bare iceoryx2 floor",
             x_label: &format!("latency, us (bins of {width:.1} us; last bin holds the tail)"),
             y_label: "fraction of solutions",
             log_x: false,
@@ -624,10 +662,17 @@ pub fn run(opts: &BenchOptions) -> anyhow::Result<Value> {
 
     let mut runs: Vec<(f64, Vec<f64>)> = Vec::new();
     let mut live = serde_json::Map::new();
+    let mut floors: Vec<(f64, Vec<f64>)> = Vec::new();
+    let logs = opts.out.join("logs");
+    std::fs::create_dir_all(&logs)?;
+    let measured_s = sizes.live_s - BENCH_ALIGNMENT_S;
     for hz in [200.0, 1000.0] {
+        eprintln!("bench: floor, IMU {hz} Hz, {measured_s} s");
+        let floor_prefix = format!("{}_floor_{}hz", opts.prefix, hz as u64);
+        let fl = floor::run(&opts.bin_dir, &floor_prefix, hz, measured_s, &logs)?;
         eprintln!("bench: live run, IMU {hz} Hz, {} s", sizes.live_s);
         let (lat, procs) = live_run(opts, &cfg_dir, hz, sizes.live_s)?;
-        let mut fig = latency_figures(&lat, hz, sizes.live_s - BENCH_ALIGNMENT_S);
+        let mut fig = latency_figures(&lat, hz, measured_s);
         fig["processes"] = procs;
         if let Some(split) = fig["processes"]
             .as_object_mut()
@@ -635,16 +680,32 @@ pub fn run(opts: &BenchOptions) -> anyhow::Result<Value> {
         {
             fig["latency_split"] = split;
         }
+        let mut ff = latency_figures(&fl.latencies_us, hz, measured_s);
+        ff["sent"] = json!(fl.sent);
+        ff["echo_cpu_percent"] = json!(fl.echo_cpu_percent);
+        ff["echo_peak_rss_mib"] = json!(fl.echo_peak_rss_mib);
+        fig["vs_floor"] = vs_floor(&lat, &fl.latencies_us);
+        fig["floor"] = ff;
         live.insert(format!("imu_{}hz", hz as u64), fig);
         runs.push((hz, lat));
+        floors.push((hz, fl.latencies_us));
     }
     eprintln!("bench: offline fusion, {} s simulated", sizes.offline_s);
     let offline = offline_throughput(&cfg_dir, sizes.offline_s)?;
     eprintln!("bench: recorder");
     let recorder = recorder_throughput(&opts.out, sizes.record_saturated, sizes.record_paced_s)?;
+    eprintln!("bench: cost curves");
+    // The configuration as the live runs read it (with the short alignment).
+    let bench_cfg = crate::config::load(&cfg_dir.join("sextant.toml"))?;
+    let curves = cost::run(&cfg_dir, &bench_cfg.navigator, opts.quick)?;
+    let curves_png = opts.out.join("cost_curves.png");
+    if let Err(e) = cost::png(&curves_png, &curves) {
+        tracing::warn!("cost curves: {e}");
+    }
     let hist: Vec<(f64, &[f64])> = runs.iter().map(|(h, l)| (*h, l.as_slice())).collect();
+    let hist_floor: Vec<(f64, &[f64])> = floors.iter().map(|(h, l)| (*h, l.as_slice())).collect();
     let png = opts.out.join("latency_histogram.png");
-    if let Err(e) = histogram_png(&png, &hist) {
+    if let Err(e) = histogram_png(&png, &hist, &hist_floor) {
         tracing::warn!("histogram: {e}");
     }
     let l1k = &live["imu_1000hz"];
@@ -665,8 +726,10 @@ pub fn run(opts: &BenchOptions) -> anyhow::Result<Value> {
         "live": Value::Object(live),
         "offline": offline,
         "recorder": recorder,
+        "cost_curves": curves,
         "targets": targets,
         "histogram_png": png.display().to_string(),
+        "cost_curves_png": curves_png.display().to_string(),
     });
     std::fs::write(
         opts.out.join("summary.json"),
@@ -684,19 +747,43 @@ pub fn table(s: &Value) -> String {
         s["machine"]["nproc"],
         s["machine"]["cpu_model"].as_str().unwrap_or("?")
     );
-    t += "IMU rate | solutions | p50 us | p99 us | p99.9 us | max us | fusion CPU % | fusion RSS MiB\n";
+    t += "IMU rate | run     | solutions | p50 us | p99 us | p99.9 us | max us | CPU % (fusion/echo) | RSS MiB (fusion/echo)\n";
     for key in ["imu_200hz", "imu_1000hz"] {
         let r = &s["live"][key];
         t += &format!(
-            "{:>6} Hz | {:>9} | {:>6} | {:>6} | {:>8} | {:>6} | {:>12} | {:>14}\n",
-            r["imu_rate_hz"],
-            r["solutions"],
+            "{:>6} Hz | Sextant | {:>9} | {:>6} | {:>6} | {:>8} | {:>6} | {:>19} | {:>21}\n",
+            r["imu_rate_hz"].to_string(),
+            r["solutions"].to_string(),
             f(&r["latency_p50_us"]),
             f(&r["latency_p99_us"]),
             f(&r["latency_p99_9_us"]),
             f(&r["latency_max_us"]),
             f(&r["processes"]["sextant-fusion"]["cpu_percent"]),
             f(&r["processes"]["sextant-fusion"]["peak_rss_mib"]),
+        );
+        let fl = &r["floor"];
+        t += &format!(
+            "{:>6} Hz | floor   | {:>9} | {:>6} | {:>6} | {:>8} | {:>6} | {:>19} | {:>21}\n",
+            r["imu_rate_hz"].to_string(),
+            fl["solutions"].to_string(),
+            f(&fl["latency_p50_us"]),
+            f(&fl["latency_p99_us"]),
+            f(&fl["latency_p99_9_us"]),
+            f(&fl["latency_max_us"]),
+            f(&fl["echo_cpu_percent"]),
+            f(&fl["echo_peak_rss_mib"]),
+        );
+    }
+    t += "Sextant against the floor (bare iceoryx2 round trip between two processes, same run):\n";
+    for key in ["imu_200hz", "imu_1000hz"] {
+        let r = &s["live"][key];
+        let v = &r["vs_floor"];
+        t += &format!(
+            "  {} Hz: p50 +{} us over the floor, p99 x{:.2}, p99.9 x{:.2}\n",
+            r["imu_rate_hz"],
+            f(&v["p50_excess_us"]),
+            v["p99_ratio"].as_f64().unwrap_or(f64::NAN),
+            v["p99_9_ratio"].as_f64().unwrap_or(f64::NAN),
         );
     }
     let o = &s["offline"];
@@ -714,6 +801,7 @@ pub fn table(s: &Value) -> String {
         f(&r["paced_10x_records_per_s"]),
         r["paced_10x_dropped"]
     );
+    t += &cost::table(&s["cost_curves"]);
     t += "targets:\n";
     if let Some(m) = s["targets"].as_object() {
         for (k, v) in m {
