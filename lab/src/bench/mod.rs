@@ -17,7 +17,7 @@
 //!    (records/s, MB/s of MCAP written), then paced at 10× the default live load (the default
 //!    `sextant run` at speed 10) to check that nothing is dropped.
 //! 5. **The floor** ([`floor`]), measured in the same run just before each live run, at the same
-//!    IMU rate and for as many samples as the live run has solutions: a bare iceoryx2
+//!    IMU rate and for as many samples as the live run has solutions (1 s in quick mode): a bare iceoryx2
 //!    IMU → reply round trip between two processes with Sextant's own services and wake-up
 //!    mechanism and message sizes. Sextant's latency is reported against it (p50 excess in µs,
 //!    p99 ratio): on a loaded machine both move together, so the comparison survives the load
@@ -67,6 +67,9 @@ pub struct BenchOptions {
 /// of the paced recorder run.
 struct Sizes {
     live_s: f64,
+    /// Seconds of each floor run: as long as the live run's measured part, but 1 s in quick
+    /// mode (tests), where the comparison is a smoke check.
+    floor_s: f64,
     offline_s: f64,
     record_paced_s: f64,
     record_saturated: usize,
@@ -77,6 +80,7 @@ impl Sizes {
         if quick {
             Sizes {
                 live_s: 4.0,
+                floor_s: 1.0,
                 offline_s: 60.0,
                 record_paced_s: 1.0,
                 record_saturated: 50_000,
@@ -84,6 +88,7 @@ impl Sizes {
         } else {
             Sizes {
                 live_s: 30.0,
+                floor_s: 30.0 - BENCH_ALIGNMENT_S,
                 offline_s: 600.0,
                 record_paced_s: 5.0,
                 record_saturated: 500_000,
@@ -667,9 +672,9 @@ pub fn run(opts: &BenchOptions) -> anyhow::Result<Value> {
     std::fs::create_dir_all(&logs)?;
     let measured_s = sizes.live_s - BENCH_ALIGNMENT_S;
     for hz in [200.0, 1000.0] {
-        eprintln!("bench: floor, IMU {hz} Hz, {measured_s} s");
+        eprintln!("bench: floor, IMU {hz} Hz, {} s", sizes.floor_s);
         let floor_prefix = format!("{}_floor_{}hz", opts.prefix, hz as u64);
-        let fl = floor::run(&opts.bin_dir, &floor_prefix, hz, measured_s, &logs)?;
+        let fl = floor::run(&opts.bin_dir, &floor_prefix, hz, sizes.floor_s, &logs)?;
         eprintln!("bench: live run, IMU {hz} Hz, {} s", sizes.live_s);
         let (lat, procs) = live_run(opts, &cfg_dir, hz, sizes.live_s)?;
         let mut fig = latency_figures(&lat, hz, measured_s);
@@ -680,7 +685,7 @@ pub fn run(opts: &BenchOptions) -> anyhow::Result<Value> {
         {
             fig["latency_split"] = split;
         }
-        let mut ff = latency_figures(&fl.latencies_us, hz, measured_s);
+        let mut ff = latency_figures(&fl.latencies_us, hz, sizes.floor_s);
         ff["sent"] = json!(fl.sent);
         ff["echo_cpu_percent"] = json!(fl.echo_cpu_percent);
         ff["echo_peak_rss_mib"] = json!(fl.echo_peak_rss_mib);
