@@ -789,8 +789,10 @@ mod tests {
     /// compares bit-exact with a replay that computes it; a recorded covariance is compared.
     #[test]
     fn a_recording_without_the_covariance_still_compares() {
-        let mut replayed = NavSolution::default();
-        replayed.pos_sigma_ned_m = [1.0, 2.0, 3.0];
+        let mut replayed = NavSolution {
+            pos_sigma_ned_m: [1.0, 2.0, 3.0],
+            ..Default::default()
+        };
         replayed.set_pos_cov_ned_m2(&[[1.0, 0.5, 0.0], [0.5, 4.0, 0.0], [0.0, 0.0, 9.0]]);
         let mut old = replayed;
         old.pos_cov_ned_m2 = [0.0; 6];
