@@ -95,7 +95,8 @@ pub struct LocationFix {
     pub altitude: f64,
     /// ENU covariance, row-major, m².
     pub position_covariance: [f64; 9],
-    /// 2 = diagonal known.
+    /// 3 = known (the full matrix), or 2 = diagonal known for a solution recorded before it
+    /// carried its covariance.
     pub position_covariance_type: u8,
 }
 
@@ -362,17 +363,44 @@ pub fn frame_transforms(
     }
 }
 
-/// LocationFix of a solution stamped `unix_ns` (its log time).
+/// Rotation NED → ENU (`v_enu = C_ENU_NED · v_ned`): east is the second NED axis, north the
+/// first, up the negated down.
+pub const C_ENU_NED: [[f64; 3]; 3] = [[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]];
+
+/// The ENU covariance `C_ENU_NED · P · C_ENU_NEDᵀ` of a NED covariance `p_ned` (m²), row-major.
+pub fn covariance_enu_of_ned(p_ned: &[[f64; 3]; 3]) -> [f64; 9] {
+    let c = &C_ENU_NED;
+    let mut out = [0.0; 9];
+    for i in 0..3 {
+        for j in 0..3 {
+            // Σ_k Σ_l c[i][k] p[k][l] c[j][l]: one term is ±p[k][l], the others exact
+            // zeros, so the result is P's elements permuted and signed, bit for bit.
+            out[3 * i + j] = (0..3)
+                .flat_map(|k| (0..3).map(move |l| c[i][k] * p_ned[k][l] * c[j][l]))
+                .sum();
+        }
+    }
+    out
+}
+
+/// LocationFix of a solution stamped `unix_ns` (its log time): the full position covariance
+/// rotated into ENU (type 3, known); for a solution recorded before it carried its
+/// covariance, the diagonal of its σ (type 2, diagonal known).
 pub fn location_fix(nav: &NavSolution, unix_ns: u64) -> LocationFix {
-    let [sn, se, sd] = nav.pos_sigma_ned_m;
+    let (position_covariance, position_covariance_type) = if nav.has_pos_cov() {
+        (covariance_enu_of_ned(&nav.pos_cov_ned_matrix_m2()), 3)
+    } else {
+        let [sn, se, sd] = nav.pos_sigma_ned_m;
+        ([se * se, 0.0, 0.0, 0.0, sn * sn, 0.0, 0.0, 0.0, sd * sd], 2)
+    };
     LocationFix {
         timestamp: Timestamp::from_unix_ns(unix_ns),
         frame_id: BODY_FRAME,
         latitude: nav.lat_rad.to_degrees(),
         longitude: nav.lon_rad.to_degrees(),
         altitude: nav.height_m,
-        position_covariance: [se * se, 0.0, 0.0, 0.0, sn * sn, 0.0, 0.0, 0.0, sd * sd],
-        position_covariance_type: 2,
+        position_covariance,
+        position_covariance_type,
     }
 }
 
@@ -505,6 +533,52 @@ mod tests {
         assert_eq!(fix.position_covariance[0], 4.0); // east
         assert_eq!(fix.position_covariance[4], 1.0); // north
         assert_eq!(fix.timestamp.nsec, 250_000_000);
+    }
+
+    /// The ENU covariance is the NED one rotated, C·P·Cᵀ, computed here with nalgebra from
+    /// the frames' axes for a non-diagonal P (a horizontal error ellipse at 30° from north,
+    /// correlated with height); and the variance along a direction is the same in both frames.
+    #[test]
+    fn location_fix_carries_the_full_covariance_rotated_into_enu() {
+        // Horizontal ellipse: σ 3 m along the axis at 30° from north towards east, 1 m
+        // across it; down correlated with north.
+        let (a, s1, s2) = (30f64.to_radians(), 3.0, 1.0);
+        let r = Matrix3::new(a.cos(), -a.sin(), 0.0, a.sin(), a.cos(), 0.0, 0.0, 0.0, 1.0);
+        let mut p_ned = r * Matrix3::from_diagonal(&V3::new(s1 * s1, s2 * s2, 4.0)) * r.transpose();
+        p_ned[(0, 2)] = 0.7;
+        p_ned[(2, 0)] = 0.7;
+        let mut nav = NavSolution::default();
+        nav.set_pos_cov_ned_m2(&[0, 1, 2].map(|i| [0, 1, 2].map(|j| p_ned[(i, j)])));
+        nav.pos_sigma_ned_m = [0, 1, 2].map(|i| p_ned[(i, i)].sqrt());
+        let fix = location_fix(&nav, 0);
+        assert_eq!(fix.position_covariance_type, 3);
+        // ENU axes expressed in NED: east = NED y, north = NED x, up = −NED z.
+        let (e, n, u) = (
+            V3::new(0.0, 1.0, 0.0),
+            V3::new(1.0, 0.0, 0.0),
+            V3::new(0.0, 0.0, -1.0),
+        );
+        let c_enu_ned = Matrix3::from_rows(&[e.transpose(), n.transpose(), u.transpose()]);
+        let p_ned_stored = Matrix3::from_fn(|i, j| nav.pos_cov_ned_matrix_m2()[i][j]);
+        let expected = c_enu_ned * p_ned_stored * c_enu_ned.transpose();
+        let got = Matrix3::from_row_slice(&fix.position_covariance);
+        assert_eq!(got, expected);
+        assert!(
+            got[(0, 1)].abs() > 1.0,
+            "the ellipse's EN correlation: {got}"
+        );
+        assert_eq!(got[(1, 2)], -0.7); // north–up = −(north–down)
+        // Variance along the ellipse's major axis, in each frame: 9 m².
+        let major_ned = V3::new(a.cos(), a.sin(), 0.0);
+        let major_enu = c_enu_ned * major_ned;
+        let v_ned = (major_ned.transpose() * p_ned_stored * major_ned)[0];
+        let v_enu = (major_enu.transpose() * got * major_enu)[0];
+        assert!((v_ned - 9.0).abs() < 1e-12 && (v_enu - v_ned).abs() < 1e-12);
+        // A solution recorded before the covariance was carried: its σ on the diagonal.
+        nav.pos_cov_ned_m2 = [0.0; 6];
+        let old = location_fix(&nav, 0);
+        assert_eq!(old.position_covariance_type, 2);
+        assert_eq!(old.position_covariance[0], p_ned[(1, 1)].sqrt().powi(2));
     }
 
     fn rotate(q: &Quaternion, v: [f64; 3]) -> [f64; 3] {

@@ -225,7 +225,8 @@ pub fn embedded_calibration(rec: &Recording) -> Result<Option<(NavSnapshot, f64)
 }
 
 /// Compare two solutions bit for bit, except `header.send_mono_ns` and `stale` (facts of the
-/// live publication's wall clock). `Err` names the first differing field. (JSON of f64 is the
+/// live publication's wall clock), and the position covariance when the recording predates it
+/// (its σ are still compared). `Err` names the first differing field. (JSON of f64 is the
 /// shortest round-trip representation, so equal JSON text means equal bits, −0.0 included;
 /// NaN is written as null and compares equal to any NaN.)
 pub fn compare_solutions(recorded: &NavSolution, replayed: &NavSolution) -> Result<(), String> {
@@ -233,6 +234,10 @@ pub fn compare_solutions(recorded: &NavSolution, replayed: &NavSolution) -> Resu
     // Wall-clock facts of the live publication, not of the navigation: not reproducible.
     b.header.send_mono_ns = recorded.header.send_mono_ns;
     b.stale = recorded.stale;
+    // A recording made before solutions carried their covariance holds none to compare.
+    if !recorded.has_pos_cov() {
+        b.pos_cov_ned_m2 = recorded.pos_cov_ned_m2;
+    }
     let (ja, jb) = (
         serde_json::to_string(recorded).unwrap_or_default(),
         serde_json::to_string(&b).unwrap_or_default(),
@@ -774,4 +779,31 @@ pub fn replay_live(opts: &LiveOptions, stop: &AtomicBool) -> Result<LiveSummary,
     pb.finish_and_clear();
     s.wall_time_s = start.elapsed().as_secs_f64();
     Ok(s)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A recording made before solutions carried their position covariance (all zero) still
+    /// compares bit-exact with a replay that computes it; a recorded covariance is compared.
+    #[test]
+    fn a_recording_without_the_covariance_still_compares() {
+        let mut replayed = NavSolution {
+            pos_sigma_ned_m: [1.0, 2.0, 3.0],
+            ..Default::default()
+        };
+        replayed.set_pos_cov_ned_m2(&[[1.0, 0.5, 0.0], [0.5, 4.0, 0.0], [0.0, 0.0, 9.0]]);
+        let mut old = replayed;
+        old.pos_cov_ned_m2 = [0.0; 6];
+        assert_eq!(compare_solutions(&old, &replayed), Ok(()));
+        assert_eq!(compare_solutions(&replayed, &replayed), Ok(()));
+        let mut other = replayed;
+        other.pos_cov_ned_m2[1] = 0.25;
+        let err = compare_solutions(&other, &replayed).unwrap_err();
+        assert!(err.contains("pos_cov_ned_m2/1"), "{err}");
+        // The σ are compared whatever the recording's age.
+        old.pos_sigma_ned_m[0] = 1.5;
+        assert!(compare_solutions(&old, &replayed).is_err());
+    }
 }

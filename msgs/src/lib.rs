@@ -351,6 +351,46 @@ pub struct NavSolution {
     /// wall clock at publication, so an offline replay does not reproduce it.
     #[serde(default)]
     pub stale: u32,
+    /// Position error covariance in NED, m², its six distinct elements (the matrix is
+    /// symmetric) `[NN, NE, ND, EE, ED, DD]`: the diagonal is `pos_sigma_ned_m` squared, the
+    /// rest the correlations between the axes (a GNSS-aided solution's horizontal error is
+    /// an ellipse, seldom aligned with north and east). All zero in recordings made before it
+    /// was carried (serde default); [`NavSolution::pos_cov_ned_matrix_m2`] gives the 3×3 form.
+    #[serde(default)]
+    pub pos_cov_ned_m2: [f64; 6],
+}
+
+impl NavSolution {
+    /// Index of each element of the NED position covariance, row-major 3×3, in
+    /// [`NavSolution::pos_cov_ned_m2`].
+    const POS_COV_INDEX: [[usize; 3]; 3] = [[0, 1, 2], [1, 3, 4], [2, 4, 5]];
+
+    /// The position error covariance in NED as a 3×3 matrix, m² (`[row][column]`, rows and
+    /// columns north, east, down).
+    pub fn pos_cov_ned_matrix_m2(&self) -> [[f64; 3]; 3] {
+        Self::POS_COV_INDEX.map(|row| row.map(|k| self.pos_cov_ned_m2[k]))
+    }
+
+    /// Store the NED position covariance `p` (m², `[row][column]` north, east, down) in
+    /// [`NavSolution::pos_cov_ned_m2`], symmetrized: each off-diagonal element is the mean of
+    /// `p[i][j]` and `p[j][i]`, which differ only by rounding.
+    pub fn set_pos_cov_ned_m2(&mut self, p: &[[f64; 3]; 3]) {
+        for (i, row) in Self::POS_COV_INDEX.iter().enumerate() {
+            for (j, &k) in row.iter().enumerate().skip(i) {
+                self.pos_cov_ned_m2[k] = if i == j {
+                    p[i][i]
+                } else {
+                    0.5 * (p[i][j] + p[j][i])
+                };
+            }
+        }
+    }
+
+    /// Whether the solution carries its position covariance (false for a recording made
+    /// before the solution carried it: all six elements zero).
+    pub fn has_pos_cov(&self) -> bool {
+        self.pos_cov_ned_m2.iter().any(|&v| v != 0.0)
+    }
 }
 
 /// Sensor slots used in [`Status`] and bit masks.
@@ -782,6 +822,39 @@ mod tests {
         let j = serde_json::to_string(&s).unwrap();
         let back: ImuSample = serde_json::from_str(&j).unwrap();
         assert_eq!(s, back);
+    }
+
+    /// The covariance round-trips through its six stored elements, symmetrized; a solution
+    /// recorded before it was carried (no `pos_cov_ned_m2` key) still reads, without it.
+    #[test]
+    fn position_covariance_is_stored_symmetric_and_optional_on_the_wire() {
+        // NE and EN differ by rounding (4 ulps of 1.5): stored as their mean, exactly.
+        let eps = f64::EPSILON;
+        let p = [
+            [4.0, 1.5, -0.25],
+            [1.5 + 4.0 * eps, 9.0, 0.5],
+            [-0.25, 0.5, 16.0],
+        ];
+        let mut nav = NavSolution::default();
+        assert!(!nav.has_pos_cov());
+        nav.set_pos_cov_ned_m2(&p);
+        assert!(nav.has_pos_cov());
+        assert_eq!(
+            nav.pos_cov_ned_m2,
+            [4.0, 1.5 + 2.0 * eps, -0.25, 9.0, 0.5, 16.0]
+        );
+        let m = nav.pos_cov_ned_matrix_m2();
+        for (i, row) in m.iter().enumerate() {
+            for (j, v) in row.iter().enumerate() {
+                assert_eq!(*v, m[j][i]);
+                assert!((v - p[i][j]).abs() <= 2.0 * eps, "{i},{j}");
+            }
+        }
+        let mut old = serde_json::to_value(nav).unwrap();
+        old.as_object_mut().unwrap().remove("pos_cov_ned_m2");
+        let back: NavSolution = serde_json::from_value(old).unwrap();
+        assert!(!back.has_pos_cov());
+        assert_eq!(back.pos_sigma_ned_m, nav.pos_sigma_ned_m);
     }
 
     #[test]

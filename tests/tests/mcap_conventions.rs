@@ -2,7 +2,9 @@
 //! `mcap` reader: every message's `log_time` is the Unix time (UTC) of its time of validity,
 //! `publish_time` the wall time of its reception, the summary statistics span the run's real
 //! (simulated) UTC times, and recordings of the earlier convention (log time in GPS ns,
-//! publish time on CLOCK_MONOTONIC) still replay bit for bit. The Foxglove well-known-schema
+//! publish time on CLOCK_MONOTONIC, solutions without their position covariance) still replay
+//! bit for bit. Each `foxglove.LocationFix` carries its solution's full position covariance
+//! rotated into ENU (type 3, known). The Foxglove well-known-schema
 //! messages validate against Foxglove's own published JSON Schemas (`tests/data/foxglove-schemas`,
 //! from the npm package `@foxglove/schemas`).
 
@@ -84,7 +86,8 @@ fn replay_offline(rec: &Path, out: &Path) -> serde_json::Value {
 
 /// Rewrite a recording into the earlier convention (log time = GPS ns of validity, publish
 /// time = CLOCK_MONOTONIC of reception, no time-base metadata), as recordings written before
-/// the change are.
+/// the change are, and without the solutions' position covariance (`pos_cov_ned_m2`, the
+/// last field of `nav`), which recordings of that time did not carry.
 fn to_gps_monotonic(bytes: &[u8], out: &Path) {
     let summary = mcap::Summary::read(bytes).unwrap().unwrap();
     let mut metadata = BTreeMap::new();
@@ -118,6 +121,11 @@ fn to_gps_monotonic(bytes: &[u8], out: &Path) {
         } else {
             (m.publish_time as i64 - offset) as u64
         };
+        let data = if m.channel.topic == "nav" {
+            without_pos_cov(&m.data)
+        } else {
+            m.data.to_vec()
+        };
         w.write_to_known_channel(
             &mcap::records::MessageHeader {
                 channel_id: id,
@@ -125,11 +133,50 @@ fn to_gps_monotonic(bytes: &[u8], out: &Path) {
                 log_time: gps,
                 publish_time: mono,
             },
-            &m.data,
+            &data,
         )
         .unwrap();
     }
     w.finish().unwrap();
+}
+
+/// A solution's JSON text without its `pos_cov_ned_m2` member (cut from the text, so every
+/// other number keeps its bits).
+fn without_pos_cov(json: &[u8]) -> Vec<u8> {
+    let text = std::str::from_utf8(json).unwrap();
+    let key = r#","pos_cov_ned_m2":["#;
+    let start = text.find(key).expect("solution with its covariance");
+    let end = start + text[start..].find(']').unwrap() + 1;
+    let cut = format!("{}{}", &text[..start], &text[end..]);
+    let v: serde_json::Value = serde_json::from_str(&cut).unwrap();
+    assert!(v.get("pos_cov_ned_m2").is_none() && v.get("pos_sigma_ned_m").is_some());
+    cut.into_bytes()
+}
+
+/// A LocationFix's ENU covariance against its solution's NED one: C·P·Cᵀ with east = north-
+/// east-down's second axis, north its first, up its negated third, written out element by
+/// element. Returns the north-east correlation coefficient.
+fn check_location_fix_covariance(fix: &serde_json::Value, nav: &serde_json::Value) -> f64 {
+    let f = |v: &serde_json::Value| -> Vec<f64> {
+        v.as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_f64().unwrap())
+            .collect()
+    };
+    let [nn, ne, nd, ee, ed, dd] = f(&nav["pos_cov_ned_m2"])[..] else {
+        panic!("pos_cov_ned_m2 of six: {nav}");
+    };
+    let expected_enu = [ee, ne, -ed, ne, nn, -nd, -ed, -nd, dd];
+    assert_eq!(fix["position_covariance_type"], 3, "{fix}");
+    assert_eq!(f(&fix["position_covariance"]), expected_enu, "{fix}\n{nav}");
+    // The diagonal is the square of the solution's σ.
+    let sigma = f(&nav["pos_sigma_ned_m"]);
+    for (var, s) in [nn, ee, dd].iter().zip(&sigma) {
+        assert_eq!(var.sqrt(), *s, "{nav}");
+    }
+    // The north-east correlation coefficient: the tilt of the horizontal error ellipse.
+    ne / (nn * ee).sqrt()
 }
 
 #[test]
@@ -178,11 +225,26 @@ fn default_run_logs_at_utc_validates_against_foxglove_and_replays_in_both_time_b
     let mut validated: BTreeMap<String, usize> = BTreeMap::new();
     let mut untimed = 0;
     let mut n = 0;
+    // The latest solution by log time, and the LocationFixes checked against it (the view is
+    // written right after its solution, with the same log time).
+    let mut last_nav: Option<(u64, serde_json::Value)> = None;
+    let (mut fixes_checked, mut max_ne_correlation) = (0, 0.0f64);
     for m in mcap::MessageStream::new(&bytes).unwrap() {
         let m = m.unwrap();
         n += 1;
         let topic = &m.channel.topic;
         let json: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
+        if topic == "nav" {
+            last_nav = Some((m.log_time, json.clone()));
+        } else if topic == "nav/location_fix" {
+            let (t, nav) = last_nav
+                .as_ref()
+                .expect("a solution before its LocationFix");
+            assert_eq!(*t, m.log_time, "LocationFix without its solution");
+            fixes_checked += 1;
+            max_ne_correlation =
+                max_ne_correlation.max(check_location_fix_covariance(&json, nav).abs());
+        }
         match header_gps_ns(&json) {
             Some(t) if t > 0 => {
                 let utc = (t - GPS_MINUS_UTC_2025_NS + GPS_EPOCH_UNIX_NS) as u64;
@@ -240,6 +302,11 @@ fn default_run_logs_at_utc_validates_against_foxglove_and_replays_in_both_time_b
             "{name}: {validated:?}"
         );
     }
+    // Every fix carried its solution's full covariance.
+    assert!(fixes_checked >= 3000, "{fixes_checked} LocationFixes");
+    eprintln!(
+        "{fixes_checked} LocationFixes carry their solution's covariance in ENU; largest |north-east correlation| {max_ne_correlation:.3e}"
+    );
     eprintln!(
         "{n} messages, {untimed} without a time of validity; statistics {} .. {} ns; validated against Foxglove's schemas: {validated:?}",
         stats.message_start_time, stats.message_end_time

@@ -69,8 +69,14 @@ impl Navigator {
                 d.z.max(0.0).sqrt(),
             ]
         };
+        // The position error block is in ECEF: rotated into NED whole, so the horizontal
+        // error ellipse keeps its orientation (`pos_sigma_ned_m` is its diagonal's root).
+        let pos_cov_ned: Matrix3<f64> = {
+            let b: Matrix3<f64> = p.fixed_view::<3, 3>(idx::POS, idx::POS).into_owned();
+            c_n_e * b * c_n_e.transpose()
+        };
         self.solutions += 1;
-        NavSolution {
+        let mut sol = NavSolution {
             header: Header {
                 time_ns: self.time.ns,
                 seq: self.solutions,
@@ -105,7 +111,10 @@ impl Navigator {
             odometer_scale: self.core.ekf.odo_scale,
             // Judged by the daemon at publication (wall clock), not by the navigator.
             stale: 0,
-        }
+            pos_cov_ned_m2: [0.0; 6],
+        };
+        sol.set_pos_cov_ned_m2(&[0, 1, 2].map(|i| [0, 1, 2].map(|j| pos_cov_ned[(i, j)])));
+        sol
     }
 }
 
