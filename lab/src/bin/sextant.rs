@@ -44,7 +44,10 @@ enum Command {
     Bench(BenchArgs),
     /// The echo end of the bench's floor measurement (started by `sextant bench`): answers
     /// every IMU sample on PREFIX/imu with a solution on PREFIX/nav until SIGINT/SIGTERM.
-    #[command(hide = true)]
+    #[command(
+        hide = true,
+        after_help = "Example (normally started by `sextant bench`):\n  sextant bench-echo --prefix sextant-floor"
+    )]
     BenchEcho {
         /// Service-name prefix of the floor run.
         #[arg(long)]
