@@ -90,12 +90,48 @@ fn run(
     keep_imu: impl Fn(f64) -> bool,
     snapshot_at_s: Option<f64>,
 ) -> Run {
+    run_late(
+        scn,
+        nav,
+        first_s,
+        keep_imu,
+        snapshot_at_s,
+        Latency::default(),
+    )
+}
+
+/// Delivery latency of the aiding (time of validity → arrival at the navigator), s: a real
+/// receiver reports a fix tens to hundreds of milliseconds after its epoch.
+#[derive(Clone, Copy, Default)]
+struct Latency {
+    gnss_s: f64,
+    star_s: f64,
+}
+
+/// `run` with the GNSS and star-tracker samples delivered `latency` after their time of
+/// validity: each is handed to the navigator just before the first IMU sample at or after
+/// its arrival time.
+fn run_late(
+    scn: &Scenario,
+    nav: &mut Navigator,
+    first_s: f64,
+    keep_imu: impl Fn(f64) -> bool,
+    snapshot_at_s: Option<f64>,
+    latency: Latency,
+) -> Run {
     let sim = OfflineSim::new(scn);
     let epoch = sim.epoch_ns();
     let mut out = Run::default();
+    // Samples in flight: (arrival time, s; record), in arrival order per channel.
+    let mut in_flight: Vec<(f64, Record)> = Vec::new();
     for msg in sim {
         let t_s = (msg.time_ns() - epoch) as f64 * 1e-9;
-        if t_s < first_s {
+        let delay = match &msg {
+            Record::Gnss(_) => latency.gnss_s,
+            Record::StarTracker(_) => latency.star_s,
+            _ => 0.0,
+        };
+        if t_s + delay < first_s {
             continue;
         }
         match msg {
@@ -107,6 +143,11 @@ fn run(
                 }
             }
             Record::Imu(s) => {
+                in_flight.sort_by(|a, b| a.0.total_cmp(&b.0));
+                let due = in_flight.partition_point(|(arrival, _)| *arrival <= t_s);
+                for (_, m) in in_flight.drain(..due) {
+                    let _ = feed(nav, &m);
+                }
                 if !keep_imu(t_s) {
                     continue;
                 }
@@ -119,6 +160,7 @@ fn run(
                     out.snapshot = nav.snapshot();
                 }
             }
+            m if delay > 0.0 => in_flight.push((t_s + delay, m)),
             m => {
                 let _ = feed(nav, &m);
             }
@@ -239,6 +281,72 @@ fn a_navigator_started_while_driving_without_stars_aligns_from_gnss_heading() {
         &r.points,
         &[t0, t0 + 1.0, t0 + 5.0, t0 + 20.0, t0 + 40.0, t0 + 70.0],
         "started from the GNSS heading",
+    );
+}
+
+/// A receiver's latency: the GNSS fix reaches the navigator 150 ms after its epoch and the
+/// star-tracker attitude 60 ms after its exposure (30 and 12 IMU intervals at 200 Hz). The
+/// start in motion carries both to the IMU epoch with the logged increments, so it comes as
+/// soon as in time delivery allows plus the GNSS latency, consistent from the start on.
+#[test]
+fn a_navigator_started_while_driving_with_late_aiding_navigates_at_once() {
+    let scn = vehicle_with(DRIVE, DRIVE_S);
+    let mut nav = Navigator::new(default_config()).unwrap();
+    let first = 125.0;
+    let latency = Latency {
+        gnss_s: 0.15,
+        star_s: 0.06,
+    };
+    let r = run_late(&scn, &mut nav, first, |_| true, None, latency);
+    let d = nav.diagnostics();
+    println!("starts {:?}, diagnostics {d:?}", r.starts);
+    assert_eq!(r.starts.len(), 1);
+    assert_eq!(d.motion_alignments, 1);
+    assert!(
+        r.starts[0] - first <= START_BOUND_S + latency.gnss_s,
+        "navigation started {:.2} s after the first IMU sample",
+        r.starts[0] - first
+    );
+    let t0 = r.starts[0];
+    assert_consistent(
+        &r.points,
+        &[t0, t0 + 1.0, t0 + 5.0, t0 + 20.0, t0 + 40.0, t0 + 80.0],
+        "started in motion from late aiding",
+    );
+}
+
+/// The start from the GNSS heading with the fix 150 ms late: the yaw hypotheses compare each
+/// velocity with their own less the velocity change sensed since its epoch, and navigation
+/// starts during the first turn as with in-time fixes, consistent from the start on.
+#[test]
+fn a_navigator_started_while_driving_without_stars_with_late_fixes_aligns_from_gnss_heading() {
+    let mut scn = vehicle_with(DRIVE, DRIVE_S);
+    scn.spec.star_tracker.outages = vec![sextant_drivers_sim::scenario::Window {
+        start_s: 0.0,
+        duration_s: DRIVE_S,
+    }];
+    let mut nav = Navigator::new(default_config()).unwrap();
+    let first = 125.0;
+    let latency = Latency {
+        gnss_s: 0.15,
+        star_s: 0.0,
+    };
+    let r = run_late(&scn, &mut nav, first, |_| true, None, latency);
+    let d = nav.diagnostics();
+    println!("starts {:?}, diagnostics {d:?}", r.starts);
+    assert_eq!(r.starts.len(), 1);
+    assert_eq!(d.gnss_heading_alignments, 1);
+    let (turn0, turn1) = (150.0, 165.0);
+    assert!(
+        r.starts[0] > turn0 && r.starts[0] <= turn1 + latency.gnss_s,
+        "navigation started at {:.2} s, not during the first turn",
+        r.starts[0]
+    );
+    let t0 = r.starts[0];
+    assert_consistent(
+        &r.points,
+        &[t0, t0 + 1.0, t0 + 5.0, t0 + 20.0, t0 + 40.0, t0 + 70.0],
+        "started from the GNSS heading with late fixes",
     );
 }
 

@@ -70,14 +70,23 @@ pub struct YawGsfNoise {
 /// Where the bank starts: a levelled attitude (all headings) and one GNSS velocity.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct YawGsfStart {
-    /// Mean specific force over the levelling window (body), m/s².
+    /// Mean specific force over the levelling window, in the body axes at the start, m/s².
     pub f_b_m_s2: Vector3<f64>,
-    /// 1-σ of the levelled roll and pitch ([`leveling_tilt_sigma_rad`]), rad.
+    /// Mean horizontal acceleration over the same window (north, east; the GNSS velocity
+    /// change over it divided by its length), m/s²: taken out of the specific force by each
+    /// hypothesis at its own heading.
+    pub a_ne_m_s2: Vector2<f64>,
+    /// 1-σ of the levelled roll and pitch about the horizontal axes
+    /// ([`leveling_tilt_sigma_rad`]), rad.
     pub tilt_sigma_rad: f64,
     /// GNSS horizontal velocity (north, east), m/s.
     pub v_ne_m_s: Vector2<f64>,
     /// Its covariance, m²/s².
     pub p_vv_m2_s2: Matrix2<f64>,
+    /// Specific-force increment between the velocity's epoch and the start, in the body axes
+    /// at the start, m/s (zero when the velocity is of the start's epoch): each hypothesis
+    /// adds it at its own attitude.
+    pub dv_since_b_m_s: Vector3<f64>,
     /// Geodetic latitude (earth rate in NED), rad.
     pub lat_rad: f64,
     /// Earth rotation rate, rad/s.
@@ -138,21 +147,44 @@ pub struct YawGsf {
     elapsed_s: f64,
 }
 
-/// 1-σ of roll and pitch levelled from the mean specific force of a window over which the
-/// GNSS velocity changed by `dv_ne_m_s` in `dt_s` seconds (velocity σ `sigma_v_m_s` per axis
-/// at both ends): the accelerometers sense the horizontal acceleration `a_h = Δv/Δt` as a
-/// tilt of `|a_h|/g` in an unknown direction (taken per axis), the velocity noise adds
-/// `√2 σ_v/(Δt g)`, an accelerometer bias `σ_ba/g`.
+/// 1-σ of roll and pitch levelled from the mean specific force of a window of `dt_s` seconds
+/// with the horizontal acceleration over it taken out (the GNSS velocity change over the
+/// window, velocity σ `sigma_v_m_s` per axis at both ends): the velocity noise leaves an
+/// acceleration error of `√2 σ_v/Δt`, seen as a tilt of that over g, and an accelerometer bias
+/// one of `σ_ba/g`. (The error of the hypothesis' own heading tilts it too, about the apparent
+/// vertical: that part is carried in its prior covariance, [`YawGsf::new`].)
 pub fn leveling_tilt_sigma_rad(
-    dv_ne_m_s: &Vector2<f64>,
     dt_s: f64,
     sigma_v_m_s: f64,
     accel_bias_m_s2: f64,
     gravity_m_s2: f64,
 ) -> f64 {
-    let a = dv_ne_m_s.norm() / dt_s;
     let n = 2f64.sqrt() * sigma_v_m_s / dt_s;
-    (a * a + n * n + accel_bias_m_s2 * accel_bias_m_s2).sqrt() / gravity_m_s2
+    (n * n + accel_bias_m_s2 * accel_bias_m_s2).sqrt() / gravity_m_s2
+}
+
+/// Roll and pitch (rad) of the attitude with heading `yaw_rad` that turns the apparent
+/// vertical `u_n = a_n − g_n` (NED, any length) into the measured specific force `f_b` (body,
+/// any length): `C_b_n(φ, θ, ψ) û = f̂`. Pitch from the x axis, `f̂_x = cos θ û_x − sin θ û_z`
+/// (û in the heading frame, the solution nearer level), roll from the angle between the y–z
+/// components. With `a_n = 0` this is the usual levelling `φ = atan2(−f_y, −f_z)`,
+/// `θ = atan2(f_x, √(f_y² + f_z²))`.
+pub fn level_at_heading(f_b: &Vector3<f64>, u_n: &Vector3<f64>, yaw_rad: f64) -> (f64, f64) {
+    let f = f_b.normalize();
+    let (sy, cy) = yaw_rad.sin_cos();
+    let un = u_n.normalize();
+    let u = Vector3::new(cy * un.x + sy * un.y, -sy * un.x + cy * un.y, un.z);
+    let a = u.x.hypot(u.z);
+    let alpha = u.z.atan2(u.x);
+    let r = (f.x / a).clamp(-1.0, 1.0);
+    let wrap = |x: f64| (x + PI).rem_euclid(2.0 * PI) - PI;
+    let c1 = wrap(-alpha - r.acos());
+    let c2 = wrap(-alpha + r.acos());
+    let pitch = if c1.abs() <= c2.abs() { c1 } else { c2 };
+    let (sp, cp) = pitch.sin_cos();
+    let w = Vector3::new(cp * u.x - sp * u.z, u.y, sp * u.x + cp * u.z);
+    let roll = wrap(w.z.atan2(w.y) - f.z.atan2(f.y));
+    (roll, pitch)
 }
 
 fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
@@ -164,11 +196,16 @@ fn finite3(v: &Vector3<f64>) -> bool {
 }
 
 impl YawGsf {
-    /// A bank of [`GSF_MODELS`] hypotheses at headings `2π k/N`, each levelled from
-    /// `start.f_b_m_s2` (roll `atan2(−f_y, −f_z)`, pitch `atan2(f_x, √(f_y² + f_z²))`), with
-    /// the GNSS velocity, equal weights and the prior covariance
-    /// `diag(P_vv, σ_tilt², σ_tilt², (π/N)²)`: the truth is at most half a spacing, π/N, from
-    /// the nearest hypothesis.
+    /// A bank of [`GSF_MODELS`] hypotheses at headings `2π k/N`, each levelled at its heading
+    /// from `start.f_b_m_s2` and the horizontal acceleration `start.a_ne_m_s2`
+    /// ([`level_at_heading`]; without acceleration roll `atan2(−f_y, −f_z)`, pitch
+    /// `atan2(f_x, √(f_y² + f_z²))`), with the GNSS velocity carried to the start at its
+    /// attitude, equal weights and the prior covariance `P_vv` and
+    /// `P_φ = σ_ε² û ûᵀ + σ_tilt² (I − û ûᵀ)`: a hypothesis levelled at a heading δψ off the
+    /// truth is off by a rotation about the apparent vertical û = (a_n − g_n)/|a_n − g_n|
+    /// (both attitudes turn û into the same specific force), of angle ε = δψ/|û_D|; δψ is at
+    /// most half a spacing, σ_ε = (π/N)/|û_D|. Without acceleration û is the down axis and
+    /// `P_φ = diag(σ_tilt², σ_tilt², (π/N)²)`.
     pub fn new(start: &YawGsfStart, noise: YawGsfNoise) -> Result<Self, YawGsfError> {
         let f = start.f_b_m_s2;
         if !finite3(&f) || f.norm() < 0.5 * start.gravity_m_s2 {
@@ -197,24 +234,32 @@ impl YawGsf {
         param(nonneg(noise.gyro_bias_rad_s), "gyro_bias_rad_s")?;
         param(nonneg(noise.accel_bias_m_s2), "accel_bias_m_s2")?;
         check_velocity(&start.v_ne_m_s, &start.p_vv_m2_s2)?;
-        let roll = (-f.y).atan2(-f.z);
-        let pitch = f.x.atan2((f.y * f.y + f.z * f.z).sqrt());
+        let a = start.a_ne_m_s2;
+        let dv = start.dv_since_b_m_s;
+        if !(a.iter().all(|x| x.is_finite()) && a.norm() < 0.5 * start.gravity_m_s2) {
+            return Err(YawGsfError::Parameter("a_ne_m_s2"));
+        }
+        param(finite3(&dv), "dv_since_b_m_s")?;
+        let u_n = Vector3::new(a.x, a.y, -start.gravity_m_s2);
+        let u = u_n.normalize();
         let s2 = start.tilt_sigma_rad.powi(2);
-        let sy = PI / GSF_MODELS as f64;
+        let s_eps = PI / GSF_MODELS as f64 / u.z.abs();
+        let uu = u * u.transpose();
+        let p_att = uu * (s_eps * s_eps) + (Matrix3::identity() - uu) * s2;
         let mut p = Mat5::zeros();
         p.fixed_view_mut::<2, 2>(0, 0).copy_from(&start.p_vv_m2_s2);
-        p[(2, 2)] = s2;
-        p[(3, 3)] = s2;
-        p[(4, 4)] = sy * sy;
-        let models = std::array::from_fn(|k| Hypothesis {
-            q_n_b: UnitQuaternion::from_euler_angles(
-                roll,
-                pitch,
-                2.0 * PI * k as f64 / GSF_MODELS as f64,
-            ),
-            v_ne_m_s: start.v_ne_m_s,
-            p,
-            log_weight: -(GSF_MODELS as f64).ln(),
+        p.fixed_view_mut::<3, 3>(2, 2).copy_from(&p_att);
+        let models = std::array::from_fn(|k| {
+            let yaw = 2.0 * PI * k as f64 / GSF_MODELS as f64;
+            let (roll, pitch) = level_at_heading(&f, &u_n, yaw);
+            let q_n_b = UnitQuaternion::from_euler_angles(roll, pitch, yaw);
+            let dv_n = q_n_b * dv;
+            Hypothesis {
+                q_n_b,
+                v_ne_m_s: start.v_ne_m_s + Vector2::new(dv_n.x, dv_n.y),
+                p,
+                log_weight: -(GSF_MODELS as f64).ln(),
+            }
         });
         let w = start.omega_ie_rad_s;
         Ok(Self {

@@ -22,12 +22,12 @@ impl Navigator {
         self.carry_star_attitude(dth, dt_s);
         self.gsf_predict(dth, dv, dt_s);
         while let Some((ts, obs, _)) = self.star_q.pop_due(t) {
-            self.alignment_star(ts, &obs, t, dth, dt_s);
+            self.alignment_star(ts, &obs);
         }
         while let Some((ts, obs, _)) = self.gnss_q.pop_due(t) {
             self.alignment_gnss(ts, &obs);
-            if self.try_align_in_motion(ts, &obs, t, dth, dt_s)
-                || self.try_align_from_gnss_heading(ts, &obs, t, dth, dt_s)
+            if self.try_align_in_motion(ts, &obs, t)
+                || self.try_align_from_gnss_heading(ts, &obs, t)
             {
                 return;
             }

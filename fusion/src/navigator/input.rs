@@ -25,18 +25,21 @@ impl Navigator {
         // Paper 004: redundant channels combined with fault detection and exclusion.
         let (dth, dv) = self.imu_increments(s);
         match self.phase {
-            Phase::Initializing => {
-                self.phase = Phase::Aligning;
-                self.mode = NavMode::Aligning;
+            Phase::Initializing | Phase::Aligning => {
+                if self.phase == Phase::Initializing {
+                    self.phase = Phase::Aligning;
+                    self.mode = NavMode::Aligning;
+                }
                 self.time = t;
                 self.align.add(&dth, &dv, s.dt_s);
-                self.health[id].fused += 1;
-                self.consume_during_alignment(t, &dth, &dv, s.dt_s);
-                self.try_finish_alignment(t);
-            }
-            Phase::Aligning => {
-                self.time = t;
-                self.align.add(&dth, &dv, s.dt_s);
+                // Logged so that aiding arriving after its epoch can be carried to this one.
+                self.log_alignment_step(ImuLogEntry {
+                    t,
+                    prev_t,
+                    dth,
+                    dv,
+                    dt_s: s.dt_s,
+                });
                 self.health[id].fused += 1;
                 self.consume_during_alignment(t, &dth, &dv, s.dt_s);
                 self.try_finish_alignment(t);

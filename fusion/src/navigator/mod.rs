@@ -119,6 +119,7 @@ use msgs::{
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
 mod align;
+mod alignment_carry;
 mod baro;
 mod buffer;
 mod calibration_memory;
@@ -142,6 +143,7 @@ mod warm_start;
 mod zupt;
 
 use self::core::*;
+use alignment_carry::*;
 use buffer::*;
 use calibration_memory::CalibrationPrior;
 pub use calibration_memory::{
@@ -241,14 +243,17 @@ pub struct Navigator {
     health: [SensorHealth; MAX_SENSORS],
     /// Time of validity of each sensor's latest fused sample (the mode's deadlines).
     last_fused: [Option<GpsTime>; MAX_SENSORS],
-    gnss_q: TimeQueue<GnssObs, GNSS_CAP>,
+    /// Boxed like `gnss_done`: each holds 100 kB of observations (a full sky of pseudoranges
+    /// per epoch) that the navigator, held on the stack by its callers, should not carry
+    /// inline.
+    gnss_q: Box<TimeQueue<GnssObs, GNSS_CAP>>,
     celestial: CelestialCache,
     star_q: TimeQueue<StarObs, STAR_CAP>,
     odo_q: TimeQueue<f64, ODO_CAP>,
     baro_q: TimeQueue<f64, BARO_CAP>,
     imu_log: Ring<ImuLogEntry>,
     checkpoints: Ring<Checkpoint>,
-    gnss_done: TimeQueue<GnssObs, GNSS_CAP>,
+    gnss_done: Box<TimeQueue<GnssObs, GNSS_CAP>>,
     star_done: TimeQueue<StarObs, STAR_CAP>,
     odo_done: TimeQueue<f64, ODO_CAP>,
     baro_done: TimeQueue<f64, BARO_CAP>,
@@ -316,7 +321,7 @@ impl Navigator {
             last_time: [None; MAX_SENSORS],
             health: [SensorHealth::default(); MAX_SENSORS],
             last_fused: [None; MAX_SENSORS],
-            gnss_q: TimeQueue::new(),
+            gnss_q: Box::new(TimeQueue::new()),
             celestial: CelestialCache::default(),
             star_q: TimeQueue::new(),
             odo_q: TimeQueue::new(),
@@ -329,7 +334,7 @@ impl Navigator {
                     core: core.clone(),
                 },
             ),
-            gnss_done: TimeQueue::new(),
+            gnss_done: Box::new(TimeQueue::new()),
             star_done: TimeQueue::new(),
             odo_done: TimeQueue::new(),
             baro_done: TimeQueue::new(),

@@ -15,17 +15,20 @@
 //! (R = diag(σ_cross², σ_cross², σ_roll²), sensor axes; P_κκ only when the boresight is
 //! estimated — otherwise the filter takes the mount as exact, as its star updates do).
 //!
-//! Between the exposure and the start (the next GNSS epoch, ≤ one GNSS interval later) the
-//! attitude is carried by the gyros: `C_e_b ← R_z(−ω_ie Δt) · C_e_b · exp([Δθ×])`, which adds
+//! Between the exposure and the start (the next GNSS epoch, ≤ one GNSS interval later; from
+//! the logged IMU steps when the sample arrives late, `alignment_carry`) the attitude is
+//! carried by the gyros: `C_e_b ← R_z(−ω_ie Δt) · C_e_b · exp([Δθ×])`, which adds
 //! the angle random walk `ARW²·τ` and the unestimated gyro bias `(σ_bg τ)²` per axis over the
 //! carried time τ (for τ = 1 s and the navigation-grade defaults: 5·10⁻⁷ and 5·10⁻⁸ rad,
 //! two orders below the star tracker's arcseconds).
 //!
 //! # Position and velocity
-//! From the GNSS fix with its own covariance, moved from the fix epoch `t_g` to the IMU epoch
-//! `t ≥ t_g` (within one IMU interval) by `r += v·(t − t_g)`, `P_rr += (t − t_g)²·P_vv`,
-//! and from the antenna to the IMU by the lever arm `l_b` (`[gnss]`): `r −= C_e_b l_b`,
-//! `v −= C_e_b (ω_b × l_b)`. Without a star attitude the same start takes the attitude of the
+//! From the GNSS fix with its own covariance, taken from the antenna to the IMU by the lever
+//! arm `l_b` (`[gnss]`: `r −= C_e_b l_b`, `v −= C_e_b (ω_b × l_b)`) at the fix epoch and
+//! carried to the IMU epoch by the strapdown over the IMU steps logged since
+//! (`alignment_carry`, with the covariance of that carry): a fix that arrives late, as a real
+//! receiver's always does, starts navigation as well as one in time.
+//! Without a star attitude the same start takes the attitude of the
 //! GNSS-velocity heading estimator (`gsf_align`).
 //! The sensors' errors are independent, so the position, velocity and attitude blocks start
 //! uncorrelated; the sensor biases start from their priors (`sensor_prior`) or,
@@ -93,12 +96,6 @@ pub(super) struct StarAttitude {
     pub(super) carried_s: f64,
 }
 
-/// Whether a sample `age` before the IMU epoch belongs to the current IMU interval of `dt_s`
-/// seconds (with half an interval of margin for jitter).
-pub(super) fn within_interval(age: Duration, dt_s: f64) -> bool {
-    age >= Duration::ZERO && age.seconds_f64() <= 1.5 * dt_s
-}
-
 impl Navigator {
     /// During alignment: carry a star attitude over one IMU increment `dth` (body, rad) of
     /// `dt_s` seconds.
@@ -112,20 +109,9 @@ impl Navigator {
     }
 
     /// During alignment: the attitude from a star-tracker sample of exposure time `ts`, carried
-    /// to the IMU epoch `t ≥ ts` with the current increment (`dth` over `dt_s`).
-    pub(super) fn alignment_star(
-        &mut self,
-        ts: GpsTime,
-        obs: &StarObs,
-        t: GpsTime,
-        dth: &Vector3<f64>,
-        dt_s: f64,
-    ) {
-        // Only a sample of the current IMU interval (not one queued before the first IMU sample).
-        if !(self.config.motion_alignment.enabled
-            && self.config.updates.star_tracker
-            && within_interval(t - ts, dt_s))
-        {
+    /// by the gyros to the newest IMU epoch (`alignment_carry`), however late it arrived.
+    pub(super) fn alignment_star(&mut self, ts: GpsTime, obs: &StarObs) {
+        if !(self.config.motion_alignment.enabled && self.config.updates.star_tracker) {
             return;
         }
         let c_e_i = self.celestial.c_e_i(ts, &self.config.eop);
@@ -142,18 +128,17 @@ impl Navigator {
         let b = ekf::kappa_jacobian(&kappa);
         let g = c_e_b * b;
         let q_e_b = UnitQuaternion::from_rotation_matrix(&nalgebra::Rotation3::from_matrix(&c_e_b));
-        let frac = if dt_s > 0.0 {
-            ((t - ts).seconds_f64() / dt_s).clamp(0.0, 1.0)
-        } else {
-            0.0
+        // Not a sample from before the first logged IMU step (queued before the alignment
+        // began) or from across an IMU gap.
+        let Some((q_e_b, carried_s)) = self.attitude_forward_from(q_e_b, ts) else {
+            return;
         };
         self.star_attitude = Some(StarAttitude {
             q_e_b,
             p_psi: c_e_s * r * c_e_s.transpose() + g * p_kk * g.transpose(),
             p_psi_kappa: g * p_kk,
-            carried_s: 0.0,
+            carried_s,
         });
-        self.carry_star_attitude(&(dth * frac), dt_s * frac);
     }
 
     /// The boresight estimate and its covariance the star attitude is derived with: the
@@ -178,17 +163,11 @@ impl Navigator {
         (Vector3::zeros(), Matrix3::identity() * sk * sk)
     }
 
-    /// During alignment, at a GNSS epoch `ts` due at IMU epoch `t`: start navigating when the
-    /// fix shows a moving vehicle and a star attitude is at hand. True when it started.
-    pub(super) fn try_align_in_motion(
-        &mut self,
-        ts: GpsTime,
-        obs: &GnssObs,
-        t: GpsTime,
-        dth_b_rad: &Vector3<f64>,
-        dt_s: f64,
-    ) -> bool {
-        if !self.config.motion_alignment.enabled || !within_interval(t - ts, dt_s) {
+    /// During alignment, at a GNSS epoch `ts` due at IMU epoch `t` (however late it arrived):
+    /// start navigating when the fix shows a moving vehicle and a star attitude is at hand.
+    /// True when it started.
+    pub(super) fn try_align_in_motion(&mut self, ts: GpsTime, obs: &GnssObs, t: GpsTime) -> bool {
+        if !self.config.motion_alignment.enabled {
             return false;
         }
         let (Some(att), Some(fix)) = (self.star_attitude, obs.fix) else {
@@ -202,11 +181,14 @@ impl Navigator {
         let tau = att.carried_s;
         let carried = noise.arw_rad_sqrt_s.powi(2) * tau + (imu.gyro_bias_rad_s() * tau).powi(2);
         let p_psi = att.p_psi + Matrix3::identity() * carried;
+        let Some(at_t) = self.carry_fix(&fix, ts, att.q_e_b, &p_psi) else {
+            return false;
+        };
         let kappa = self
             .active_states(false)
             .boresight
             .then_some(att.p_psi_kappa);
-        self.start_in_motion(&fix, ts, t, att.q_e_b, &p_psi, kappa, dth_b_rad, dt_s);
+        self.start_in_motion(&at_t, t, att.q_e_b, &p_psi, kappa);
         true
     }
 
@@ -221,33 +203,20 @@ impl Navigator {
         speed2 >= min * min && speed2 > 9.0 * fix.vel_cov.trace()
     }
 
-    /// Start navigating in motion at IMU epoch `t` from the GNSS fix of epoch `ts` (position
-    /// and velocity with their covariance) and an attitude `q_e_b` whose ECEF error ψ has the
-    /// covariance `p_psi` (rad²) and, with the boresight estimated, the cross-covariance
-    /// `p_psi_kappa` with it. The fix is the antenna's: the IMU is `C_e_b l_b` from it and
-    /// moves `C_e_b (ω_b × l_b)` slower (ω_b from the increment `dth_b_rad` over `dt_s`).
-    #[allow(clippy::too_many_arguments)]
+    /// Start navigating in motion at IMU epoch `t` from the IMU's position and velocity there,
+    /// carried from a GNSS fix (`alignment_carry::CarriedFix`, with the antenna's lever arm
+    /// taken off), and an attitude `q_e_b` whose ECEF error ψ has the covariance `p_psi`
+    /// (rad²) and, with the boresight estimated, the cross-covariance `p_psi_kappa` with it.
     pub(super) fn start_in_motion(
         &mut self,
-        fix: &GnssFix,
-        ts: GpsTime,
+        at_t: &CarriedFix,
         t: GpsTime,
         q_e_b: UnitQuaternion<f64>,
         p_psi: &Matrix3<f64>,
         p_psi_kappa: Option<Matrix3<f64>>,
-        dth_b_rad: &Vector3<f64>,
-        dt_s: f64,
     ) {
-        let dt_fix = (t - ts).seconds_f64();
-        let lever_b = self.config.gnss.lever_arm_b();
-        let w_b = if dt_s > 0.0 {
-            dth_b_rad / dt_s
-        } else {
-            Vector3::zeros()
-        };
-        let r_e = fix.pos + fix.vel * dt_fix - q_e_b * lever_b;
-        let v_e = fix.vel - q_e_b * w_b.cross(&lever_b);
-        let p_rr = fix.pos_cov + fix.vel_cov * (dt_fix * dt_fix);
+        let r_e = at_t.r_e;
+        let v_e = at_t.v_e;
         let c_e_b = q_e_b.to_rotation_matrix().into_inner();
         // Gravity as the body senses it on average (the accelerometer-misalignment prior).
         let geo = earth::ecef_to_geodetic(&self.ell, &r_e);
@@ -256,10 +225,9 @@ impl Navigator {
             .into_inner();
         let f_b = c_e_b.transpose() * c_e_n * Vector3::new(0.0, 0.0, -G0);
         let (mut p0, x0) = self.sensor_prior(&f_b);
-        p0.fixed_view_mut::<3, 3>(idx::POS, idx::POS)
-            .copy_from(&p_rr);
-        p0.fixed_view_mut::<3, 3>(idx::VEL, idx::VEL)
-            .copy_from(&fix.vel_cov);
+        // POS and VEL are adjacent in the state vector: one 6×6 block.
+        p0.fixed_view_mut::<6, 6>(idx::POS, idx::POS)
+            .copy_from(&at_t.p_rv);
         p0.fixed_view_mut::<3, 3>(idx::ATT, idx::ATT)
             .copy_from(p_psi);
         if let Some(p_pk) = p_psi_kappa {

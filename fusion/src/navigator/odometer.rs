@@ -62,14 +62,27 @@ impl Navigator {
         }
         if self.config.updates.nonholonomic {
             let m3 = ekf::odometer_nhc(&self.core.nav, k, end_speed, 1.0, a.nhc_sigma_m_s);
-            let m = Measurement::<2> {
-                innovation: m3.innovation.fixed_rows::<2>(1).into_owned(),
-                h: m3.h.fixed_rows::<2>(1).into_owned(),
-                r: m3.r.fixed_view::<2, 2>(1, 1).into_owned(),
-            };
             self.core
                 .ekf
                 .propagate_covariance(&self.ell, &self.core.nav.r_e);
+            // The exact constraint holds only as far as its linear model does: the
+            // second-order terms (heading error × velocity error, a degree × centimetres per
+            // second after a start in motion) are added to its noise.
+            let p = &self.core.ekf.p;
+            let mut p_vel_att = nalgebra::SMatrix::<f64, 6, 6>::zeros();
+            for (i, si) in [(0, idx::VEL), (3, idx::ATT)] {
+                for (j, sj) in [(0, idx::VEL), (3, idx::ATT)] {
+                    p_vel_att
+                        .fixed_view_mut::<3, 3>(i, j)
+                        .copy_from(&p.fixed_view::<3, 3>(si, sj));
+                }
+            }
+            let m = Measurement::<2> {
+                innovation: m3.innovation.fixed_rows::<2>(1).into_owned(),
+                h: m3.h.fixed_rows::<2>(1).into_owned(),
+                r: m3.r.fixed_view::<2, 2>(1, 1).into_owned()
+                    + ekf::nhc_linearisation_covariance(&self.core.nav, &p_vel_att),
+            };
             let out = ekf::update(&self.core.ekf.p, &m, self.gates.threshold(2));
             if tally == Tally::Count {
                 self.nhc.fold(Verdict {
