@@ -350,6 +350,57 @@ fn a_navigator_started_while_driving_without_stars_with_late_fixes_aligns_from_g
     );
 }
 
+/// Without stars and with the fix 150 ms late, around circles at 10 m/s (2.1 m/s² of
+/// sustained centripetal acceleration, where levelling by gravity alone is off by 12°): a
+/// navigator powered on 20 s before driving off (too short for the 100 s static alignment)
+/// and one powered on in the middle of the second circle both start from the yaw hypotheses,
+/// each levelled for its own heading, within 60 s of driving, consistent from the start on.
+#[test]
+fn a_navigator_powered_on_before_or_while_circling_without_stars_aligns_from_gnss_heading() {
+    const CIRCLES: &str = r#"
+    { type = "hold", duration_s = 20.0 },
+    { type = "speed", to_m_s = 10.0, duration_s = 8.0 },
+    { type = "turn", angle_deg = 360.0, duration_s = 30.0 },
+    { type = "turn", angle_deg = 360.0, duration_s = 30.0 },
+    { type = "turn", angle_deg = 360.0, duration_s = 30.0 },"#;
+    let drive_off = 20.0;
+    let mut scn = vehicle_with(CIRCLES, 118.0);
+    scn.spec.star_tracker.outages = vec![sextant_drivers_sim::scenario::Window {
+        start_s: 0.0,
+        duration_s: 118.0,
+    }];
+    let latency = Latency {
+        gnss_s: 0.15,
+        star_s: 0.0,
+    };
+    for (first, what) in [(0.0, "powered on standing"), (73.0, "powered on circling")] {
+        let mut nav = Navigator::new(default_config()).unwrap();
+        let r = run_late(&scn, &mut nav, first, |_| true, None, latency);
+        let d = nav.diagnostics();
+        println!("{what}: starts {:?}, diagnostics {d:?}", r.starts);
+        assert_eq!(r.starts.len(), 1, "{what}");
+        assert_eq!(d.gnss_heading_alignments, 1, "{what}");
+        let t0 = r.starts[0];
+        let driving_from = first.max(drive_off);
+        assert!(
+            t0 > driving_from && t0 - driving_from <= 60.0,
+            "{what}: navigation started at {t0:.2} s, {:.2} s after the first IMU sample in motion",
+            t0 - driving_from
+        );
+        let last = r.points.last().expect("solutions").t_s;
+        let checks: Vec<f64> = [0.0, 1.0, 5.0, 15.0, 30.0, 50.0]
+            .iter()
+            .map(|dt| t0 + dt)
+            .filter(|t| *t < last)
+            .collect();
+        assert!(
+            checks.len() >= 4,
+            "{what}: too little driving after the start at {t0:.2} s"
+        );
+        assert_consistent(&r.points, &checks, what);
+    }
+}
+
 /// An IMU gap of 3 s in the middle of the drive (beyond the 1 s that is bridged) re-initialises
 /// the navigator; it navigates again within the start bound after the sample that confirms the
 /// gap (20 samples, 0.1 s at 200 Hz), without a standstill, and keeps its sensor-error
