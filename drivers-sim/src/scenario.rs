@@ -1121,6 +1121,13 @@ impl Scenario {
         }
         if let Some(w) = &spec.world {
             w.validate(f)?;
+            if w.vehicle().is_some() && !matches!(spec.trajectory, Trajectory::GroundVehicle(_)) {
+                return Err(invalid(
+                    f,
+                    "world.vehicle",
+                    "applies to a ground_vehicle trajectory only",
+                ));
+            }
             if w.gnss_latency_ns() >= (1e9 / spec.gnss.rate_hz) as i64 {
                 return Err(invalid(
                     f,

@@ -98,7 +98,8 @@ impl StarTrackerSim {
     }
 }
 
-/// Odometer simulator: distance along body x with a scale-factor error and white speed noise.
+/// Odometer simulator: the wheel's rolling distance (body x, or the world's wheel) with a
+/// scale-factor error and white speed noise.
 #[derive(Debug, Clone)]
 pub struct OdometerSim {
     grade: OdometerGrade,
@@ -117,7 +118,7 @@ impl OdometerSim {
     /// Sample for the interval integrals `inc` ending at GPS `t_gps_ns`.
     pub fn sample(&mut self, t_gps_ns: i64, inc: &Increments) -> OdometerSample {
         let n: f64 = self.rng.sample(StandardNormal);
-        let dist = (1.0 + self.grade.scale_factor_error_ppm * 1e-6) * inc.distance_x_m
+        let dist = (1.0 + self.grade.scale_factor_error_ppm * 1e-6) * inc.odometer_distance_m
             + self.grade.speed_noise_m_s * n * inc.dt_s;
         let mut out = OdometerSample {
             dt_s: inc.dt_s,

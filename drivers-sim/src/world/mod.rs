@@ -17,14 +17,21 @@
 
 pub mod antenna;
 pub mod gauss_markov;
+pub mod gravity;
 pub mod ionosphere;
 pub mod multipath;
 pub mod receiver_clock;
 pub mod satellite;
+pub mod spectral;
 pub mod troposphere;
+pub mod vehicle;
+
+#[cfg(test)]
+mod motion_tests;
 
 use crate::SimError;
 use antenna::GnssAntennaSpec;
+use gravity::{GravityField, GravitySpec};
 use ionosphere::{Ionosphere, IonosphereSpec};
 use multipath::{Multipath, MultipathSpec};
 use nalgebra::Vector3;
@@ -34,6 +41,10 @@ use satellite::{EphemerisSpec, SatelliteClockSpec, SignalInSpace};
 use serde::Deserialize;
 use std::path::Path;
 use troposphere::{Troposphere, TroposphereSpec};
+use vehicle::{VehicleSpec, VehicleWorld, Vibration, VibrationSpec};
+
+/// One arcsecond, rad.
+pub const ARCSEC_RAD: f64 = std::f64::consts::PI / 180.0 / 3600.0;
 
 pub(crate) fn yes() -> bool {
     true
@@ -80,6 +91,13 @@ pub struct WorldSection {
     pub receiver_clock: Option<ReceiverClockSpec>,
     /// Antenna lever arm and time-tag latency.
     pub gnss_antenna: Option<GnssAntennaSpec>,
+    /// Ground vehicle on a real road: terrain, suspension, sideslip, wheel slip, odometer
+    /// lever arm (ground-vehicle trajectories only).
+    pub vehicle: Option<VehicleSpec>,
+    /// Vibration of the IMU on its mount.
+    pub vibration: Option<VibrationSpec>,
+    /// Gravity disturbance: anomaly and deflection of the vertical.
+    pub gravity: Option<GravitySpec>,
 }
 
 fn on<T: Copy>(x: Option<T>, enabled: impl Fn(&T) -> bool) -> Option<T> {
@@ -97,6 +115,19 @@ impl WorldSection {
             || on(self.satellite_clock, |s| s.enabled).is_some()
             || on(self.ephemeris, |s| s.enabled).is_some()
             || on(self.code_noise, |s| s.enabled).is_some()
+    }
+
+    /// The vehicle spec when enabled.
+    pub fn vehicle(&self) -> Option<VehicleSpec> {
+        on(self.vehicle, |s| s.enabled)
+    }
+    /// The vibration spec when enabled.
+    pub fn vibration(&self) -> Option<VibrationSpec> {
+        on(self.vibration, |s| s.enabled)
+    }
+    /// The gravity spec when enabled.
+    pub fn gravity(&self) -> Option<GravitySpec> {
+        on(self.gravity, |s| s.enabled)
     }
 
     /// The antenna spec when enabled.
@@ -226,7 +257,116 @@ impl WorldSection {
                 ));
             }
         }
+        if let Some(s) = &self.vehicle {
+            for (key, v, max) in [
+                ("grade_sigma_deg", s.grade_sigma_deg, 15.0),
+                ("bank_sigma_deg", s.bank_sigma_deg, 10.0),
+                ("pitch_per_accel_deg", s.pitch_per_accel_deg, 2.0),
+                (
+                    "roll_per_lateral_accel_deg",
+                    s.roll_per_lateral_accel_deg,
+                    2.0,
+                ),
+                (
+                    "sideslip_per_lateral_accel_deg",
+                    s.sideslip_per_lateral_accel_deg,
+                    2.0,
+                ),
+                ("ride_heave_sigma_m", s.ride_heave_sigma_m, 0.2),
+                ("ride_pitch_sigma_deg", s.ride_pitch_sigma_deg, 3.0),
+                ("ride_roll_sigma_deg", s.ride_roll_sigma_deg, 3.0),
+                ("ride_bandwidth_hz", s.ride_bandwidth_hz, 5.0),
+                (
+                    "wheel_slip_per_accel_s2_m",
+                    s.wheel_slip_per_accel_s2_m,
+                    0.05,
+                ),
+            ] {
+                nonneg(&format!("vehicle.{key}"), v)?;
+                if v > max {
+                    return Err(bad(
+                        &format!("vehicle.{key}"),
+                        format!("{v} is above the physical bound {max}"),
+                    ));
+                }
+            }
+            positive("vehicle.grade_length_m", s.grade_length_m)?;
+            positive("vehicle.bank_length_m", s.bank_length_m)?;
+            positive("vehicle.ride_frequency_hz", s.ride_frequency_hz)?;
+            positive("vehicle.ride_half_speed_m_s", s.ride_half_speed_m_s)?;
+            for (i, v) in s.odometer_lever_arm_b_m.iter().enumerate() {
+                if !(v.is_finite() && v.abs() <= 10.0) {
+                    return Err(bad(
+                        &format!("vehicle.odometer_lever_arm_b_m[{i}]"),
+                        format!("{v} is outside ±10 m"),
+                    ));
+                }
+            }
+        }
+        if let Some(s) = &self.vibration {
+            positive("vibration.engine_rotation_hz", s.engine_rotation_hz)?;
+            for (i, v) in s.engine_order_rms_m_s2.iter().enumerate() {
+                nonneg(&format!("vibration.engine_order_rms_m_s2[{i}]"), *v)?;
+            }
+            nonneg("vibration.broadband_rms_m_s2", s.broadband_rms_m_s2)?;
+            let [lo, hi] = s.broadband_band_hz;
+            // The truth grid is 1 ms: keep every line below its 500 Hz Nyquist frequency.
+            if !(lo.is_finite() && hi.is_finite() && 0.0 < lo && lo < hi && hi <= 400.0)
+                || 4.0 * s.engine_rotation_hz > 400.0
+            {
+                return Err(bad(
+                    "vibration.broadband_band_hz",
+                    format!(
+                        "[{lo}, {hi}] Hz and engine orders up to {} Hz must lie in (0, 400] Hz",
+                        4.0 * s.engine_rotation_hz
+                    ),
+                ));
+            }
+        }
+        if let Some(s) = &self.gravity {
+            nonneg("gravity.anomaly_sigma_mgal", s.anomaly_sigma_mgal)?;
+            positive("gravity.correlation_length_km", s.correlation_length_km)?;
+        }
         Ok(())
+    }
+}
+
+/// The truth-side world of the motion, shared by every driver's truth generator: each
+/// realisation is drawn from its own stream of the scenario seed, so every process builds the
+/// same one.
+#[derive(Debug, Clone, Default)]
+pub struct MotionWorld {
+    /// Road, body and odometer wheel (ground vehicles).
+    pub vehicle: Option<VehicleWorld>,
+    /// IMU mount vibration.
+    pub vibration: Option<Vibration>,
+    /// Gravity disturbance field.
+    pub gravity: Option<GravityField>,
+}
+
+impl MotionWorld {
+    /// The motion world of `spec` for scenario seed `seed` (streams `"world_vehicle"`,
+    /// `"world_vibration"`, `"world_gravity"`); empty without a section.
+    pub fn new(spec: Option<&WorldSection>, seed: u64) -> Self {
+        let Some(w) = spec else {
+            return Self::default();
+        };
+        Self {
+            vehicle: w
+                .vehicle()
+                .map(|s| VehicleWorld::new(s, &mut crate::sensor_rng(seed, "world_vehicle"))),
+            vibration: w
+                .vibration()
+                .map(|s| Vibration::new(&s, &mut crate::sensor_rng(seed, "world_vibration"))),
+            gravity: w
+                .gravity()
+                .map(|s| GravityField::new(&s, &mut crate::sensor_rng(seed, "world_gravity"))),
+        }
+    }
+
+    /// Whether no effect is on (the truth is then computed exactly as without a world).
+    pub fn is_empty(&self) -> bool {
+        self.vehicle.is_none() && self.vibration.is_none() && self.gravity.is_none()
     }
 }
 
