@@ -133,3 +133,87 @@ fn world_accuracy_report() {
         }
     }
 }
+
+/// The default vehicle scenario with the motion world's example tables (commented out at the
+/// end of `vehicle.toml`) appended, the ones in `on` enabled.
+fn vehicle_in_motion(on: &[&str]) -> Scenario {
+    let path = root().join("config/scenarios/vehicle.toml");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let start = text
+        .find("# [world.vehicle]")
+        .expect("motion world example");
+    let mut out = text[..start].to_string();
+    let mut table = String::new();
+    for line in text[start..].lines() {
+        let l = line
+            .strip_prefix("# ")
+            .unwrap_or(line.trim_start_matches('#'));
+        if let Some(name) = l.strip_prefix("[world.") {
+            table = name.split(']').next().unwrap().to_string();
+        }
+        if l.starts_with("enabled") {
+            out.push_str(&format!("enabled = {}\n", on.contains(&table.as_str())));
+        } else {
+            out.push_str(l);
+            out.push('\n');
+        }
+    }
+    Scenario::from_toml_str(&out, &path).unwrap()
+}
+
+#[test]
+#[ignore = "600 s of 200 Hz simulation per line: minutes in release; a report, not a CI test"]
+fn world_motion_report() {
+    for on in [
+        &[][..],
+        &["vehicle"],
+        &["vibration"],
+        &["gravity"],
+        &["imu"],
+        &["star_tracker"],
+        &["baro"],
+        &[
+            "vehicle",
+            "vibration",
+            "gravity",
+            "imu",
+            "star_tracker",
+            "baro",
+        ],
+    ] {
+        let scn = vehicle_in_motion(on);
+        let sim = OfflineSim::new(&scn);
+        let epoch = sim.epoch_ns();
+        let mut nav = Navigator::new(filter_config()).unwrap();
+        let (mut h, mut v, mut yaw, mut tilt, mut nees) =
+            (Vec::new(), Vec::new(), Vec::new(), Vec::new(), 0.0);
+        let mut outage_max = 0.0f64;
+        run_navigator(sim, epoch, &mut nav, |p: &RunPoint| {
+            if p.t_s < 150.0 {
+                return;
+            }
+            let e = p.pos_err_ned_m();
+            h.push(e.x.hypot(e.y));
+            v.push(e.z);
+            let a = p.att_err_ned_rad();
+            tilt.push(a.x.hypot(a.y));
+            yaw.push(a.z);
+            nees += p.nees()[0];
+            if (300.0..360.0).contains(&p.t_s) {
+                outage_max = outage_max.max(e.x.hypot(e.y));
+            }
+        })
+        .unwrap();
+        let n = h.len() as f64;
+        println!(
+            "motion world {on:?}: horizontal RMS {:.3} m, vertical RMS {:.3} m, max horizontal \
+             in the 300–360 s GNSS outage {outage_max:.3} m, tilt RMS {:.1}″, heading RMS {:.1}″, \
+             position NEES {:.2}",
+            rms(&h),
+            rms(&v),
+            rms(&tilt).to_degrees() * 3600.0,
+            rms(&yaw).to_degrees() * 3600.0,
+            nees / n
+        );
+    }
+}

@@ -12,12 +12,28 @@
 //! ([`antenna`]); it corrects the pseudoranges with its own broadcast models and reports a
 //! least-squares fix with the covariance of its own noise model, as a receiver does.
 //!
+//! The motion world ([`MotionWorld`], built by every driver's [`crate::truth::TruthGenerator`]
+//! from its own streams of the seed, so all processes agree bit for bit) changes the truth
+//! itself: a ground vehicle on a real road ([`vehicle`]: terrain grade and bank as random
+//! functions of the distance driven, suspension load transfer and ride, sideslip in turns, a
+//! slipping odometer wheel with its lever arm), the IMU's mount vibration (engine orders and
+//! broadband) and a gravity disturbance field ([`gravity`]: anomaly and deflection of the
+//! vertical from one harmonic potential). Its random functions are sums of random-phase
+//! cosines ([`spectral`]) with analytic derivatives, so the attitude, velocity and position
+//! stay exactly consistent and the IMU's increments come from the perturbed motion: a perfect
+//! strapdown INS follows it. Only the gravity disturbance separates the IMU from a perfect
+//! INS's normal gravity, as the real field does. Off unless a table is present and enabled;
+//! `config/scenarios/vehicle.toml` carries an example, commented out.
+//!
 //! These models are the world's own: none calls `fusion`'s ionosphere, troposphere or gravity
-//! models (only its proven foundations: ellipsoid, time, frames).
+//! models, nor its sensor error models (only its proven foundations: ellipsoid, time, frames;
+//! the truth's normal gravity under the disturbance is the generator's own J2 field, as before).
 
+pub mod aiding;
 pub mod antenna;
 pub mod gauss_markov;
 pub mod gravity;
+pub mod imu_unit;
 pub mod ionosphere;
 pub mod multipath;
 pub mod receiver_clock;
@@ -98,6 +114,13 @@ pub struct WorldSection {
     pub vibration: Option<VibrationSpec>,
     /// Gravity disturbance: anomaly and deflection of the vertical.
     pub gravity: Option<GravitySpec>,
+    /// The actual IMU unit: scatter about its data sheet, g-sensitivity, warm-up.
+    pub imu: Option<imu_unit::ImuUnitSpec>,
+    /// Star tracker: thermal error, bias about the boresight, time-tag latency.
+    pub star_tracker: Option<aiding::StarTrackerWorldSpec>,
+    /// The barometer's air (day's pressure, temperature, tendency) and its sensor's
+    /// temperature coefficient.
+    pub baro: Option<aiding::BaroWorldSpec>,
 }
 
 fn on<T: Copy>(x: Option<T>, enabled: impl Fn(&T) -> bool) -> Option<T> {
@@ -128,6 +151,25 @@ impl WorldSection {
     /// The gravity spec when enabled.
     pub fn gravity(&self) -> Option<GravitySpec> {
         on(self.gravity, |s| s.enabled)
+    }
+
+    /// The star tracker's world when enabled.
+    pub fn star_tracker(&self) -> Option<aiding::StarTrackerWorldSpec> {
+        on(self.star_tracker, |s| s.enabled)
+    }
+    /// The star tracker's time-tag latency, ns (0 when off).
+    pub fn star_tracker_latency_ns(&self) -> i64 {
+        self.star_tracker()
+            .map_or(0, |s| (s.latency_s * 1e9).round() as i64)
+    }
+    /// The barometer's world when enabled.
+    pub fn baro(&self) -> Option<aiding::BaroWorldSpec> {
+        on(self.baro, |s| s.enabled)
+    }
+
+    /// The IMU unit spec when enabled.
+    pub fn imu(&self) -> Option<imu_unit::ImuUnitSpec> {
+        on(self.imu, |s| s.enabled)
     }
 
     /// The antenna spec when enabled.
@@ -320,6 +362,69 @@ impl WorldSection {
                         "[{lo}, {hi}] Hz and engine orders up to {} Hz must lie in (0, 400] Hz",
                         4.0 * s.engine_rotation_hz
                     ),
+                ));
+            }
+        }
+        if let Some(s) = &self.imu {
+            for (key, v, max) in [
+                ("noise_log_sigma", s.noise_log_sigma, 1.0),
+                (
+                    "bias_instability_log_sigma",
+                    s.bias_instability_log_sigma,
+                    1.0,
+                ),
+            ] {
+                nonneg(&format!("imu.{key}"), v)?;
+                if v > max {
+                    return Err(bad(&format!("imu.{key}"), format!("{v} is above {max}")));
+                }
+            }
+            nonneg(
+                "imu.gyro_g_sensitivity_deg_h_per_g",
+                s.gyro_g_sensitivity_deg_h_per_g,
+            )?;
+            nonneg("imu.gyro_warmup_deg_h", s.gyro_warmup_deg_h)?;
+            nonneg("imu.accel_warmup_ug", s.accel_warmup_ug)?;
+            positive("imu.warmup_tau_s", s.warmup_tau_s)?;
+        }
+        if let Some(s) = &self.star_tracker {
+            nonneg("star_tracker.thermal_sigma_arcsec", s.thermal_sigma_arcsec)?;
+            positive("star_tracker.thermal_tau_s", s.thermal_tau_s)?;
+            nonneg(
+                "star_tracker.boresight_bias_sigma_arcsec",
+                s.boresight_bias_sigma_arcsec,
+            )?;
+            let ms = s.latency_s * 1e3;
+            if !(s.latency_s.is_finite()
+                && (0.0..1.0).contains(&s.latency_s)
+                && (ms - ms.round()).abs() < 1e-6)
+            {
+                return Err(bad(
+                    "star_tracker.latency_s",
+                    format!(
+                        "{} must be a whole number of milliseconds (the truth grid) in [0, 1) s",
+                        s.latency_s
+                    ),
+                ));
+            }
+        }
+        if let Some(s) = &self.baro {
+            if !(s.sea_level_pressure_hpa.is_finite()
+                && (850.0..=1100.0).contains(&s.sea_level_pressure_hpa))
+            {
+                return Err(bad(
+                    "baro.sea_level_pressure_hpa",
+                    "outside 850..1100 hPa".into(),
+                ));
+            }
+            if !(s.temperature_offset_k.is_finite() && s.temperature_offset_k.abs() <= 40.0) {
+                return Err(bad("baro.temperature_offset_k", "outside ±40 K".into()));
+            }
+            nonneg("baro.tendency_sigma_hpa_h", s.tendency_sigma_hpa_h)?;
+            if !s.sensor_temp_coeff_pa_per_c.is_finite() {
+                return Err(bad(
+                    "baro.sensor_temp_coeff_pa_per_c",
+                    "must be finite".into(),
                 ));
             }
         }

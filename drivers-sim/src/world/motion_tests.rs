@@ -324,3 +324,116 @@ fn specific_force_sees_the_gravity_disturbance() {
     // Of the order the field is sized for (35 mGal): not zero, not metres per second squared.
     assert!((1e-6..1e-2).contains(&dg.norm()), "{dg}");
 }
+
+/// The actual unit reaches the IMU's output and the truth's biases: with the grade's noise,
+/// scale factor, misalignment and bias walk off, a standing IMU's output minus the true
+/// increment is `b·dt + G·Δv` with `b` the bias the truth process reports (turn-on,
+/// temperature and the warm-up, which decays by e^{−1} in τ) and G the unit's g-sensitivity.
+#[test]
+fn imu_unit_reaches_the_output_and_the_truth() {
+    use crate::sources::TruthSource;
+    let hold = r#"{ type = "hold", duration_s = 1.0 }"#;
+    let mut scn = vehicle_in_motion_world(&["imu"], hold, 1.0);
+    for s in [
+        &mut scn.imu.gyro.arw_deg_per_rt_h,
+        &mut scn.imu.gyro.scale_factor_ppm,
+    ] {
+        *s = 0.0;
+    }
+    scn.imu.gyro.misalignment_arcsec = 0.0;
+    scn.imu.gyro.bias_rw_deg_h_per_rt_h = 0.0;
+    scn.imu.accel.vrw_ug_per_rt_hz = 0.0;
+    scn.imu.accel.scale_factor_ppm = 0.0;
+    scn.imu.accel.misalignment_arcsec = 0.0;
+    scn.imu.accel.bias_rw_ug_per_rt_h = 0.0;
+    let mut imu = ImuSource::new(&scn, 0);
+    let mut clean = ImuSource::new(&scn, 0);
+    clean.model.enabled = false;
+    let mut truth = TruthSource::new(&scn, 0);
+    let unit = *imu.model.unit().expect("world imu");
+    let p = period_ns(scn.spec.imu.rate_hz);
+    let dt = p as f64 * 1e-9;
+    for k in 1..=200i64 {
+        let (a, c) = (imu.sample(k * p), clean.sample(k * p));
+        let t = truth.sample(k * p);
+        if k != 1 && k != 200 {
+            continue;
+        }
+        let dv = Vector3::from(c.delta_velocity_m_s);
+        let dg = Vector3::from(a.delta_angle_rad) - Vector3::from(c.delta_angle_rad);
+        let expect = Vector3::from(t.gyro_bias_rad_s) * dt + unit.gyro_g_sensitivity * dv;
+        assert!((dg - expect).norm() < 1e-15, "{dg} vs {expect}");
+        let da = Vector3::from(a.delta_velocity_m_s) - dv;
+        assert!((da - Vector3::from(t.accel_bias_m_s2) * dt).norm() < 1e-15);
+        // The truth's bias is turn-on + temperature term + the warm-up, at the interval's
+        // middle.
+        let t_mid = (k as f64 - 0.5) * dt;
+        let c = imu.model.gyro_constants();
+        let d_temp = crate::imu::temperature_c(&scn.spec.imu.temperature, t_mid)
+            - scn.imu.reference_temperature_c;
+        let b = c.bias + c.temp_coeff_per_c * d_temp + unit.warmup(t_mid).0;
+        assert!((Vector3::from(t.gyro_bias_rad_s) - b).norm() < 1e-20);
+    }
+}
+
+/// The star tracker's time tag: with its thermal error and boresight bias at zero, the sample
+/// stamped t is the world-free sample of t − L (the same noise draws), stamped t.
+#[test]
+fn star_tracker_latency_stamps_the_past_attitude() {
+    use crate::sources::StarTrackerSource;
+    let segs = r#"{ type = "speed", to_m_s = 10.0, duration_s = 2.0 },
+                  { type = "turn", angle_deg = 20.0, duration_s = 2.0 }"#;
+    let mut scn = vehicle_in_motion_world(&["star_tracker"], segs, 4.0);
+    let mut w = scn.spec.world.unwrap();
+    let st = w.star_tracker.as_mut().unwrap();
+    st.thermal_sigma_arcsec = 0.0;
+    st.boresight_bias_sigma_arcsec = 0.0;
+    let latency_ns = (st.latency_s * 1e9).round() as i64;
+    assert!(latency_ns > 0);
+    scn.spec.world = Some(w);
+    let plain = vehicle_in_motion_world(&[], segs, 4.0);
+    let (mut a, mut b) = (
+        StarTrackerSource::new(&scn, 0),
+        StarTrackerSource::new(&plain, 0),
+    );
+    let p = period_ns(scn.spec.star_tracker.rate_hz);
+    for k in 1..20 {
+        let (x, y) = (a.sample(k * p), b.sample(k * p - latency_ns));
+        assert_eq!(x.header.time_ns - y.header.time_ns, latency_ns);
+        let d: f64 = (0..4)
+            .map(|i| (x.q_sensor_icrf[i] - y.q_sensor_icrf[i]).abs())
+            .sum();
+        assert!(d < 1e-15, "{k}: {d}");
+    }
+}
+
+/// The barometer reads the world's air: its pressure minus the world-free sample's (same
+/// noise draws) is the day's pressure at the true height and time plus the sensor's
+/// temperature error, minus ISA's.
+#[test]
+fn baro_reads_the_air_of_the_day() {
+    use crate::sources::BaroSource;
+    use crate::world::aiding::BaroWorld;
+    let hold = r#"{ type = "hold", duration_s = 10.0 }"#;
+    let scn = vehicle_in_motion_world(&["baro"], hold, 10.0);
+    let plain = vehicle_in_motion_world(&[], hold, 10.0);
+    let air = BaroWorld::new(
+        &scn.spec.world.unwrap().baro.unwrap(),
+        &mut crate::sensor_rng(scn.spec.scenario.seed, "world_baro"),
+    );
+    let (mut a, mut b) = (BaroSource::new(&scn, 0), BaroSource::new(&plain, 0));
+    let h = scn.spec.site.height_m;
+    let p = period_ns(scn.spec.baro.rate_hz);
+    for k in [0i64, 1, 199] {
+        let (x, y) = (a.sample(k * p), b.sample(k * p));
+        let t = (k * p) as f64 * 1e-9;
+        let bay_c = crate::imu::temperature_c(&scn.spec.imu.temperature, t);
+        let expect =
+            air.air(h, t).0 + air.sensor_error_pa(bay_c) - fusion::atmosphere::isa_pressure_pa(h);
+        assert!(
+            (x.pressure_pa - y.pressure_pa - expect).abs() < 1e-8,
+            "{} vs {expect}",
+            x.pressure_pa - y.pressure_pa
+        );
+    }
+}
