@@ -437,3 +437,40 @@ fn baro_reads_the_air_of_the_day() {
         );
     }
 }
+
+/// Bad motion-world values are refused with the file and the dotted key.
+#[test]
+fn motion_world_is_validated() {
+    let text = std::fs::read_to_string(vehicle_path()).unwrap();
+    let start = text.find("# [world.vehicle]").unwrap();
+    let example: String = text[start..]
+        .lines()
+        .map(|l| l.strip_prefix("# ").unwrap_or(l.trim_start_matches('#')))
+        .collect::<Vec<_>>()
+        .join("\n");
+    let err = |base: &str, from: &str, to: &str| {
+        let body = example.replacen(from, to, 1);
+        match Scenario::from_toml_str(&format!("{base}\n{body}\n"), &vehicle_path()) {
+            Ok(_) => String::from("accepted"),
+            Err(e) => e.to_string(),
+        }
+    };
+    let head = &text[..start];
+    assert_eq!(err(head, "", ""), "accepted");
+    let e = err(head, "grade_sigma_deg = 2.0", "grade_sigma_deg = -2.0");
+    assert!(e.contains("world.vehicle.grade_sigma_deg"), "{e}");
+    let e = err(head, "latency_s = 0.01", "latency_s = 0.0105");
+    assert!(e.contains("world.star_tracker.latency_s"), "{e}");
+    let e = err(
+        head,
+        "broadband_band_hz = [20.0, 200.0]",
+        "broadband_band_hz = [20.0, 600.0]",
+    );
+    assert!(e.contains("world.vibration.broadband_band_hz"), "{e}");
+    let e = err(head, "warmup_tau_s = 600.0", "warmup_tau_s = 0.0");
+    assert!(e.contains("world.imu.warmup_tau_s"), "{e}");
+    // The road needs a car: a static trajectory with [world.vehicle] on is refused.
+    let stat = std::fs::read_to_string(vehicle_path().with_file_name("static_site.toml")).unwrap();
+    let e = err(&stat, "enabled = false", "enabled = true");
+    assert!(e.contains("world.vehicle"), "{e}");
+}
