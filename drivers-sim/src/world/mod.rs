@@ -22,7 +22,10 @@
 //! cosines ([`spectral`]) with analytic derivatives, so the attitude, velocity and position
 //! stay exactly consistent and the IMU's increments come from the perturbed motion: a perfect
 //! strapdown INS follows it. Only the gravity disturbance separates the IMU from a perfect
-//! INS's normal gravity, as the real field does. Off unless a table is present and enabled;
+//! INS's normal gravity, as the real field does. The sensors' own worlds: the actual IMU unit
+//! ([`imu_unit`]: its noise and bias instability scattered about the data sheet, g-sensitive
+//! gyro drift, warm-up), the star tracker's thermal error, boresight bias and time-tag latency
+//! and the barometer's day of weather ([`aiding`]). Off unless a table is present and enabled;
 //! `config/scenarios/vehicle.toml` carries an example, commented out.
 //!
 //! These models are the world's own: none calls `fusion`'s ionosphere, troposphere or gravity
