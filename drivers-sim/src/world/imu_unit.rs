@@ -11,7 +11,9 @@
 //!
 //! g-sensitivity: a gyro's bias changes with the specific force along its axes,
 //! `δω = G·f^b` (IEEE Std 952-1997 §8.1.3 "acceleration-sensitive drift", 1-σ per element of
-//! G in °/h/g); integrated over an interval it is `G·Δv`.
+//! G in °/h/g); integrated over an interval it is `G·Δv`. The truth process's reported gyro
+//! bias includes the warm-up but not this term (it depends on the motion, not on the unit's
+//! state).
 //!
 //! Warm-up: at power-on both biases settle exponentially, `b_w·e^{−t/τ}` with `b_w` drawn per
 //! axis (thermal gradients settling; Titterton & Weston, "Strapdown Inertial Navigation
