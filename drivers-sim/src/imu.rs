@@ -229,6 +229,8 @@ pub struct ImuErrorModel {
     accel: TriadErrors,
     temperature: TemperatureProfile,
     reference_temperature_c: f64,
+    /// The world's actual unit (`[world.imu]`): scatter, g-sensitivity, warm-up.
+    unit: Option<crate::world::imu_unit::ImuUnit>,
     /// When false, [`ImuErrorModel::corrupt`] returns the truth unchanged (tests).
     pub enabled: bool,
 }
@@ -236,11 +238,26 @@ pub struct ImuErrorModel {
 impl ImuErrorModel {
     /// Draw the constant errors of the scenario's IMU from its stream.
     pub fn new(scn: &Scenario) -> Self {
-        Self::from_grade(
+        let mut m = Self::from_grade(
             &scn.imu,
             scn.spec.imu.temperature,
             crate::sensor_rng(scn.spec.scenario.seed, "imu"),
-        )
+        );
+        if let Some(spec) = scn.spec.world.and_then(|w| w.imu()) {
+            let mut rng = crate::sensor_rng(scn.spec.scenario.seed, "world_imu");
+            m.set_unit(crate::world::imu_unit::ImuUnit::new(&spec, &mut rng));
+        }
+        m
+    }
+
+    /// Make this model the world's actual `unit`: its noise densities and bias instability
+    /// scaled by the unit's factors, its g-sensitivity and warm-up added.
+    pub fn set_unit(&mut self, unit: crate::world::imu_unit::ImuUnit) {
+        self.gyro.white_per_rt_s *= unit.gyro_noise_factor;
+        self.accel.white_per_rt_s *= unit.accel_noise_factor;
+        self.gyro.bias_rw_per_rt_s *= unit.gyro_bias_rw_factor;
+        self.accel.bias_rw_per_rt_s *= unit.accel_bias_rw_factor;
+        self.unit = Some(unit);
     }
 
     /// Draw the constant errors of `grade` from `rng`.
@@ -258,8 +275,14 @@ impl ImuErrorModel {
             accel,
             temperature,
             reference_temperature_c: grade.reference_temperature_c,
+            unit: None,
             enabled: true,
         }
+    }
+
+    /// The world's actual unit, when `[world.imu]` is on.
+    pub fn unit(&self) -> Option<&crate::world::imu_unit::ImuUnit> {
+        self.unit.as_ref()
     }
 
     /// The constant errors drawn for the gyro triad.
@@ -277,9 +300,13 @@ impl ImuErrorModel {
     pub fn next_interval(&mut self, t_end_s: f64, dt_s: f64) -> IntervalErrors {
         let dtemp =
             temperature_c(&self.temperature, t_end_s - 0.5 * dt_s) - self.reference_temperature_c;
+        let (gyro_warmup, accel_warmup) =
+            self.unit.map_or((Vector3::zeros(), Vector3::zeros()), |u| {
+                u.warmup(t_end_s - 0.5 * dt_s)
+            });
         let e = IntervalErrors {
-            gyro_bias_rad_s: self.gyro.bias(dtemp),
-            accel_bias_m_s2: self.accel.bias(dtemp),
+            gyro_bias_rad_s: self.gyro.bias(dtemp) + gyro_warmup,
+            accel_bias_m_s2: self.accel.bias(dtemp) + accel_warmup,
             gyro_white: gauss3(&mut self.rng),
             accel_white: gauss3(&mut self.rng),
         };
@@ -296,13 +323,14 @@ impl ImuErrorModel {
         if !self.enabled {
             return (inc.delta_angle_b_rad, inc.delta_velocity_b_m_s);
         }
+        // g-sensitive drift: ∫G·f dt = G·Δv over the interval.
+        let delta_angle = match &self.unit {
+            Some(u) => inc.delta_angle_b_rad + u.gyro_g_sensitivity * inc.delta_velocity_b_m_s,
+            None => inc.delta_angle_b_rad,
+        };
         (
-            self.gyro.apply(
-                &inc.delta_angle_b_rad,
-                inc.dt_s,
-                &e.gyro_bias_rad_s,
-                &e.gyro_white,
-            ),
+            self.gyro
+                .apply(&delta_angle, inc.dt_s, &e.gyro_bias_rad_s, &e.gyro_white),
             self.accel.apply(
                 &inc.delta_velocity_b_m_s,
                 inc.dt_s,

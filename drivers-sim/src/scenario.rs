@@ -1121,6 +1121,20 @@ impl Scenario {
         }
         if let Some(w) = &spec.world {
             w.validate(f)?;
+            if w.vehicle().is_some() && !matches!(spec.trajectory, Trajectory::GroundVehicle(_)) {
+                return Err(invalid(
+                    f,
+                    "world.vehicle",
+                    "applies to a ground_vehicle trajectory only",
+                ));
+            }
+            if w.star_tracker_latency_ns() >= (1e9 / spec.star_tracker.rate_hz) as i64 {
+                return Err(invalid(
+                    f,
+                    "world.star_tracker.latency_s",
+                    "must be shorter than the star tracker's period",
+                ));
+            }
             if w.gnss_latency_ns() >= (1e9 / spec.gnss.rate_hz) as i64 {
                 return Err(invalid(
                     f,

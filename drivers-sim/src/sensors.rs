@@ -38,6 +38,8 @@ pub struct StarTrackerSim {
     /// True mounting, `v_s = c_s_b · v_b`.
     pub c_s_b: Matrix3<f64>,
     rng: ChaCha20Rng,
+    /// Thermal error and boresight bias of `[world.star_tracker]`.
+    world: Option<crate::world::aiding::StarTrackerWorld>,
 }
 
 impl StarTrackerSim {
@@ -51,6 +53,12 @@ impl StarTrackerSim {
             eop: scn.spec.earth_orientation,
             c_s_b: c_s_b_nominal() * kappa_matrix(&kappa),
             rng: crate::sensor_rng(scn.spec.scenario.seed, "star_tracker"),
+            world: scn.spec.world.and_then(|w| w.star_tracker()).map(|s| {
+                crate::world::aiding::StarTrackerWorld::new(
+                    &s,
+                    crate::sensor_rng(scn.spec.scenario.seed, "world_star"),
+                )
+            }),
         }
     }
 
@@ -78,6 +86,7 @@ impl StarTrackerSim {
             ..Default::default()
         };
         out.header.time_ns = t_gps_ns;
+        let world_err = self.world.as_mut().map(|w| w.error_s_rad(t_s));
         if self.outages.iter().any(|w| w.contains(t_s)) {
             out.header.status = STAR_STATUS_OUTAGE;
             out.q_sensor_icrf = [1.0, 0.0, 0.0, 0.0];
@@ -87,7 +96,10 @@ impl StarTrackerSim {
         let q_true = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(c));
         // Attitude error: a small rotation about the sensor axes (z = optical axis).
         let err = UnitQuaternion::from_scaled_axis(Vector3::new(sc * n[0], sc * n[1], sr * n[2]));
-        let mut q = err * q_true;
+        let mut q = match world_err {
+            Some(e) => err * UnitQuaternion::from_scaled_axis(Vector3::from(e)) * q_true,
+            None => err * q_true,
+        };
         if q.w < 0.0 {
             q = UnitQuaternion::new_unchecked(-q.into_inner());
         }
@@ -98,7 +110,8 @@ impl StarTrackerSim {
     }
 }
 
-/// Odometer simulator: distance along body x with a scale-factor error and white speed noise.
+/// Odometer simulator: the wheel's rolling distance (body x, or the world's wheel) with a
+/// scale-factor error and white speed noise.
 #[derive(Debug, Clone)]
 pub struct OdometerSim {
     grade: OdometerGrade,
@@ -117,7 +130,7 @@ impl OdometerSim {
     /// Sample for the interval integrals `inc` ending at GPS `t_gps_ns`.
     pub fn sample(&mut self, t_gps_ns: i64, inc: &Increments) -> OdometerSample {
         let n: f64 = self.rng.sample(StandardNormal);
-        let dist = (1.0 + self.grade.scale_factor_error_ppm * 1e-6) * inc.distance_x_m
+        let dist = (1.0 + self.grade.scale_factor_error_ppm * 1e-6) * inc.odometer_distance_m
             + self.grade.speed_noise_m_s * n * inc.dt_s;
         let mut out = OdometerSample {
             dt_s: inc.dt_s,
@@ -138,6 +151,11 @@ pub struct BaroSim {
     bias_rw_pa: f64,
     last_t_s: Option<f64>,
     rng: ChaCha20Rng,
+    /// The air of `[world.baro]` and the sensor bay's temperature profile.
+    world: Option<(
+        crate::world::aiding::BaroWorld,
+        crate::scenario::TemperatureProfile,
+    )>,
 }
 
 impl BaroSim {
@@ -148,6 +166,13 @@ impl BaroSim {
             bias_rw_pa: 0.0,
             last_t_s: None,
             rng: crate::sensor_rng(scn.spec.scenario.seed, "baro"),
+            world: scn.spec.world.and_then(|w| w.baro()).map(|s| {
+                let mut rng = crate::sensor_rng(scn.spec.scenario.seed, "world_baro");
+                (
+                    crate::world::aiding::BaroWorld::new(&s, &mut rng),
+                    scn.spec.imu.temperature,
+                )
+            }),
         }
     }
 
@@ -160,12 +185,22 @@ impl BaroSim {
         }
         self.last_t_s = Some(t_s);
         let h = truth.geodetic.height_m;
+        let (air_pa, air_k) = match &self.world {
+            Some((w, bay)) => {
+                let (p, t) = w.air(h, t_s);
+                (
+                    p + w.sensor_error_pa(crate::imu::temperature_c(bay, t_s)),
+                    t,
+                )
+            }
+            None => (
+                fusion::atmosphere::isa_pressure_pa(h),
+                fusion::atmosphere::isa_temperature_k(h),
+            ),
+        };
         let mut out = BaroSample {
-            pressure_pa: fusion::atmosphere::isa_pressure_pa(h)
-                + self.grade.bias_pa
-                + self.bias_rw_pa
-                + self.grade.noise_pa * n,
-            temperature_c: fusion::atmosphere::isa_temperature_k(h) - 273.15,
+            pressure_pa: air_pa + self.grade.bias_pa + self.bias_rw_pa + self.grade.noise_pa * n,
+            temperature_c: air_k - 273.15,
             ..Default::default()
         };
         out.header.time_ns = t_gps_ns;

@@ -110,6 +110,8 @@ pub struct StarTrackerSource {
     sim: StarTrackerSim,
     epoch_ns: i64,
     period_ns: i64,
+    /// `[world.star_tracker]` latency: the sample stamped t is the attitude at t − latency.
+    latency_ns: i64,
 }
 
 impl StarTrackerSource {
@@ -120,6 +122,7 @@ impl StarTrackerSource {
             sim: StarTrackerSim::new(scn),
             epoch_ns,
             period_ns: period_ns(scn.spec.star_tracker.rate_hz),
+            latency_ns: scn.spec.world.map_or(0, |w| w.star_tracker_latency_ns()),
         }
     }
 }
@@ -133,9 +136,22 @@ impl SampleSource for StarTrackerSource {
         0
     }
     fn sample(&mut self, t_ns: i64) -> StarTrackerSample {
-        self.gen_.advance_to(t_ns);
-        self.sim
-            .sample(secs(t_ns), self.epoch_ns + t_ns, self.gen_.current())
+        if self.latency_ns == 0 {
+            self.gen_.advance_to(t_ns);
+            return self
+                .sim
+                .sample(secs(t_ns), self.epoch_ns + t_ns, self.gen_.current());
+        }
+        // Validation keeps the latency a whole number of truth-grid steps below one period.
+        let t_meas_ns = (t_ns - self.latency_ns).max(0);
+        self.gen_.advance_to(t_meas_ns);
+        let mut s = self.sim.sample(
+            secs(t_meas_ns),
+            self.epoch_ns + t_meas_ns,
+            self.gen_.current(),
+        );
+        s.header.time_ns = self.epoch_ns + t_ns;
+        s
     }
 }
 

@@ -11,6 +11,8 @@
 //! bit-identical floating-point paths without talking to each other.
 
 use crate::scenario::{FlightSegment, Scenario, Segment, TRUTH_GRID_NS, Trajectory};
+use crate::world::MotionWorld;
+use crate::world::vehicle::{Intent, VehicleState};
 use fusion::earth::{self, Ellipsoid, Geodetic, GravityModel, WGS84};
 use nalgebra::{Matrix3, Vector3};
 use std::f64::consts::{PI, TAU};
@@ -464,6 +466,14 @@ pub struct TruthPoint {
     pub f_b_m_s2: Vector3<f64>,
     /// Turntable angle, rad.
     pub turntable_rad: f64,
+    /// Rolling speed of the odometer wheel, m/s: the body-x speed, or with
+    /// `[world.vehicle]` the wheel's own (lever arm, slope, slip).
+    pub odometer_speed_m_s: f64,
+    /// Velocity of the IMU's mount vibration, body axes, m/s (zero without
+    /// `[world.vibration]`).
+    pub vibration_velocity_b_m_s: Vector3<f64>,
+    /// Acceleration of the IMU's mount vibration (included in `f_b_m_s2`), body axes, m/s².
+    pub vibration_accel_b_m_s2: Vector3<f64>,
 }
 
 impl TruthPoint {
@@ -488,6 +498,8 @@ pub struct Increments {
     pub delta_velocity_b_m_s: Vector3<f64>,
     /// ∫(body-x speed) dt, m.
     pub distance_x_m: f64,
+    /// ∫(odometer wheel's rolling speed) dt, m: `distance_x_m` unless `[world.vehicle]`.
+    pub odometer_distance_m: f64,
 }
 
 /// Steps the truth along the 1 ms grid.
@@ -495,36 +507,89 @@ pub struct Increments {
 pub struct TruthGenerator {
     profile: Profile,
     ell: Ellipsoid,
+    world: MotionWorld,
+    site: Geodetic,
     k: i64,
     lat_rad: f64,
     lon_rad: f64,
     height_m: f64,
+    /// Horizontal distance driven, m (the argument of the world's road).
+    distance_m: f64,
     point: TruthPoint,
     acc: Increments,
 }
 
+/// Step of the central differences that give the driver intent's second derivatives (V̈, ψ̈)
+/// to the world's vehicle, s: the profile's raised-cosine pieces make the truncation error
+/// `ε²/6·|x⁗|` below 1e-10 of the value.
+const INTENT_FD_STEP_S: f64 = 1e-4;
+
 impl TruthGenerator {
     /// Start at grid point 0 of the scenario.
     pub fn new(scn: &Scenario) -> Self {
-        Self::from_profile(Profile::new(scn), scn.spec.site)
+        let world = MotionWorld::new(scn.spec.world.as_ref(), scn.spec.scenario.seed);
+        Self::from_profile_in_world(Profile::new(scn), scn.spec.site, world)
     }
 
     /// Start at grid point 0 of `profile` from the geodetic point `s`.
     pub fn from_profile(profile: Profile, s: crate::scenario::Site) -> Self {
+        Self::from_profile_in_world(profile, s, MotionWorld::default())
+    }
+
+    /// Start at grid point 0 of `profile` from the geodetic point `s` in the motion `world`.
+    pub fn from_profile_in_world(
+        profile: Profile,
+        s: crate::scenario::Site,
+        world: MotionWorld,
+    ) -> Self {
         let ell = WGS84;
         let lat = s.lat_deg.to_radians();
         let lon = s.lon_deg.to_radians();
-        let point = Self::point_at(&profile, &ell, 0, lat, lon, s.height_m);
-        Self {
+        let site = Geodetic {
+            lat_rad: lat,
+            lon_rad: lon,
+            height_m: s.height_m,
+        };
+        let mut g = Self {
             profile,
             ell,
+            world,
+            site,
             k: 0,
             lat_rad: lat,
             lon_rad: lon,
             height_m: s.height_m,
-            point,
+            distance_m: 0.0,
+            point: TruthPoint {
+                t_ns: 0,
+                geodetic: site,
+                r_e_m: Vector3::zeros(),
+                v_ned_m_s: Vector3::zeros(),
+                a_ned_m_s2: Vector3::zeros(),
+                roll_pitch_heading_rad: Vector3::zeros(),
+                c_n_b: Matrix3::identity(),
+                c_e_n: Matrix3::identity(),
+                w_ib_b_rad_s: Vector3::zeros(),
+                f_b_m_s2: Vector3::zeros(),
+                turntable_rad: 0.0,
+                odometer_speed_m_s: 0.0,
+                vibration_velocity_b_m_s: Vector3::zeros(),
+                vibration_accel_b_m_s2: Vector3::zeros(),
+            },
             acc: Increments::default(),
-        }
+        };
+        g.point = g.point_at(0, lat, lon, s.height_m, 0.0);
+        g
+    }
+
+    /// The motion world the truth runs in.
+    pub fn world(&self) -> &MotionWorld {
+        &self.world
+    }
+
+    /// Horizontal distance driven since t = 0, m.
+    pub fn distance_m(&self) -> f64 {
+        self.distance_m
     }
 
     /// The truth at the current grid point.
@@ -536,30 +601,100 @@ impl TruthGenerator {
         k as f64 * GRID_STEP_S
     }
 
-    /// Rates of (lat, lon, h) at time `t_s` and position, rad/s, rad/s, m/s.
-    fn pos_rate(profile: &Profile, ell: &Ellipsoid, t_s: f64, lat: f64, h: f64) -> [f64; 3] {
-        let v = v_ned(&profile.at(t_s));
-        let (r_n, r_e) = earth::radii_of_curvature(ell, lat);
-        [v.x / (r_n + h), v.y / ((r_e + h) * lat.cos()), -v.z]
+    /// Rates of (lat, lon, h, distance) at time `t_s`, position and distance driven `s_m`,
+    /// rad/s, rad/s, m/s, m/s.
+    fn pos_rate(&self, t_s: f64, lat: f64, h: f64, s_m: f64) -> [f64; 4] {
+        let kin = self.profile.at(t_s);
+        let v = match &self.world.vehicle {
+            Some(veh) => {
+                let (sn, cs) = kin.heading_rad.sin_cos();
+                let vh = kin.speed_m_s;
+                Vector3::new(vh * cs, vh * sn, -vh * veh.slope(s_m))
+            }
+            None => v_ned(&kin),
+        };
+        let (r_n, r_e) = earth::radii_of_curvature(&self.ell, lat);
+        [
+            v.x / (r_n + h),
+            v.y / ((r_e + h) * lat.cos()),
+            -v.z,
+            kin.speed_m_s,
+        ]
     }
 
-    fn point_at(
-        profile: &Profile,
-        ell: &Ellipsoid,
-        k: i64,
-        lat: f64,
-        lon: f64,
-        h: f64,
-    ) -> TruthPoint {
+    /// The vehicle's state at `t_s` (the driver's intent with its second derivatives by
+    /// central differences of the analytic profile).
+    fn vehicle_state(
+        &self,
+        veh: &crate::world::vehicle::VehicleWorld,
+        t_s: f64,
+        kin: &Kinematics,
+        s_m: f64,
+    ) -> VehicleState {
+        let e = INTENT_FD_STEP_S;
+        let (km, kp) = (self.profile.at(t_s - e), self.profile.at(t_s + e));
+        let intent = Intent {
+            distance_m: s_m,
+            speed: [
+                kin.speed_m_s,
+                kin.speed_rate_m_s2,
+                (kp.speed_rate_m_s2 - km.speed_rate_m_s2) / (2.0 * e),
+            ],
+            course: [
+                kin.heading_rad,
+                kin.heading_rate_rad_s,
+                (kp.heading_rate_rad_s - km.heading_rate_rad_s) / (2.0 * e),
+            ],
+        };
+        veh.state(t_s, &intent)
+    }
+
+    fn point_at(&self, k: i64, lat: f64, lon: f64, h: f64, s_m: f64) -> TruthPoint {
+        let ell = &self.ell;
         let t = Self::t_of(k);
-        let kin = profile.at(t);
-        let geo = Geodetic {
+        let mut kin = self.profile.at(t);
+        let mut geo = Geodetic {
             lat_rad: lat,
             lon_rad: lon,
             height_m: h,
         };
-        let v = v_ned(&kin);
-        let a = a_ned(&kin);
+        let mut v = v_ned(&kin);
+        let mut a = a_ned(&kin);
+        let mut odometer_speed = None;
+        let mut vib = [Vector3::zeros(); 3];
+        let w = &self.world;
+        if w.vehicle.is_some() || w.vibration.is_some() {
+            // The IMU is offset from the integrated (road) point by the ride heave and the
+            // mount vibration; the offset's own rate and acceleration join the velocity and
+            // acceleration (the body's rotation of the µm-sized vibration offset is neglected).
+            let mut off = [Vector3::zeros(); 3];
+            if let Some(veh) = &w.vehicle {
+                let st = self.vehicle_state(veh, t, &kin, s_m);
+                kin = st.kinematics;
+                v = st.v_road_ned_m_s;
+                a = st.a_road_ned_m_s2;
+                for (o, z) in off.iter_mut().zip(st.heave_up) {
+                    o.z -= z;
+                }
+                odometer_speed = Some(st.odometer_speed_m_s);
+            }
+            if let Some(vibration) = &w.vibration {
+                let c_n_b = c_n_b_from_rph(kin.roll_rad, kin.pitch_rad, kin.heading_rad);
+                vib = vibration.at(t);
+                for (o, x) in off.iter_mut().zip(&vib) {
+                    *o += c_n_b * x;
+                }
+            }
+            let (r_n, r_e) = earth::radii_of_curvature(ell, lat);
+            geo = Geodetic {
+                lat_rad: lat + off[0].x / (r_n + h),
+                lon_rad: lon + off[0].y / ((r_e + h) * lat.cos()),
+                height_m: h - off[0].z,
+            };
+            v += off[1];
+            a += off[2];
+        }
+        let lat = geo.lat_rad;
         let c_n_b = c_n_b_from_rph(kin.roll_rad, kin.pitch_rad, kin.heading_rad);
         let c_b_n = c_n_b.transpose();
         let w_ie_n = Vector3::new(
@@ -569,8 +704,17 @@ impl TruthGenerator {
         );
         let w_en_n = earth::transport_rate_n(ell, &geo, &v);
         let r_e = earth::geodetic_to_ecef(ell, &geo);
-        let c_e_n = earth::c_e_n(lat, lon);
-        let g_n = c_e_n.transpose() * earth::gravity_ecef(ell, GravityModel::J2, &r_e);
+        let c_e_n = earth::c_e_n(geo.lat_rad, geo.lon_rad);
+        let mut g_n = c_e_n.transpose() * earth::gravity_ecef(ell, GravityModel::J2, &r_e);
+        if let Some(field) = &w.gravity {
+            let (r_n, r_e0) = earth::radii_of_curvature(ell, self.site.lat_rad);
+            let s0 = &self.site;
+            g_n += field.disturbance_ned_m_s2(
+                (geo.lat_rad - s0.lat_rad) * (r_n + s0.height_m),
+                wrap_pi(geo.lon_rad - s0.lon_rad) * (r_e0 + s0.height_m) * s0.lat_rad.cos(),
+                geo.height_m - s0.height_m,
+            );
+        }
         let f_n = a + (2.0 * w_ie_n + w_en_n).cross(&v) - g_n;
         TruthPoint {
             t_ns: k * TRUTH_GRID_NS,
@@ -588,32 +732,64 @@ impl TruthGenerator {
             w_ib_b_rad_s: c_b_n * (w_ie_n + w_en_n) + w_nb_b(&kin),
             f_b_m_s2: c_b_n * f_n,
             turntable_rad: kin.turntable_rad,
+            odometer_speed_m_s: odometer_speed.unwrap_or_else(|| (c_b_n * v).x),
+            vibration_velocity_b_m_s: vib[1],
+            vibration_accel_b_m_s2: vib[2],
         }
     }
 
-    /// Advance one grid step (RK4 on lat, lon, h), accumulating the interval integrals.
+    /// Advance one grid step (RK4 on lat, lon, h and distance), accumulating the interval
+    /// integrals.
     pub fn step(&mut self) {
-        let (p, e) = (&self.profile, &self.ell);
         let t0 = Self::t_of(self.k);
         let t1 = Self::t_of(self.k + 1);
         let h = t1 - t0;
         let tm = t0 + 0.5 * h;
-        let (lat, lon, hh) = (self.lat_rad, self.lon_rad, self.height_m);
-        let k1 = Self::pos_rate(p, e, t0, lat, hh);
-        let k2 = Self::pos_rate(p, e, tm, lat + 0.5 * h * k1[0], hh + 0.5 * h * k1[2]);
-        let k3 = Self::pos_rate(p, e, tm, lat + 0.5 * h * k2[0], hh + 0.5 * h * k2[2]);
-        let k4 = Self::pos_rate(p, e, t1, lat + h * k3[0], hh + h * k3[2]);
+        let (lat, lon, hh, s) = (self.lat_rad, self.lon_rad, self.height_m, self.distance_m);
+        let k1 = self.pos_rate(t0, lat, hh, s);
+        let k2 = self.pos_rate(
+            tm,
+            lat + 0.5 * h * k1[0],
+            hh + 0.5 * h * k1[2],
+            s + 0.5 * h * k1[3],
+        );
+        let k3 = self.pos_rate(
+            tm,
+            lat + 0.5 * h * k2[0],
+            hh + 0.5 * h * k2[2],
+            s + 0.5 * h * k2[3],
+        );
+        let k4 = self.pos_rate(t1, lat + h * k3[0], hh + h * k3[2], s + h * k3[3]);
         let d = |i: usize| h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
         self.lat_rad = lat + d(0);
         self.lon_rad = lon + d(1);
         self.height_m = hh + d(2);
+        self.distance_m = s + d(3);
         self.k += 1;
-        let next = Self::point_at(p, e, self.k, self.lat_rad, self.lon_rad, self.height_m);
+        let next = self.point_at(
+            self.k,
+            self.lat_rad,
+            self.lon_rad,
+            self.height_m,
+            self.distance_m,
+        );
         let prev = &self.point;
         self.acc.dt_s += h;
         self.acc.delta_angle_b_rad += 0.5 * h * (prev.w_ib_b_rad_s + next.w_ib_b_rad_s);
-        self.acc.delta_velocity_b_m_s += 0.5 * h * (prev.f_b_m_s2 + next.f_b_m_s2);
+        if self.world.vibration.is_some() {
+            // The vibration's integral is exact (its velocity's change), the trapezoid would
+            // misstate lines near the grid's Nyquist frequency.
+            self.acc.delta_velocity_b_m_s += 0.5
+                * h
+                * (prev.f_b_m_s2 - prev.vibration_accel_b_m_s2 + next.f_b_m_s2
+                    - next.vibration_accel_b_m_s2)
+                + (next.vibration_velocity_b_m_s - prev.vibration_velocity_b_m_s);
+        } else {
+            self.acc.delta_velocity_b_m_s += 0.5 * h * (prev.f_b_m_s2 + next.f_b_m_s2);
+        }
         self.acc.distance_x_m += 0.5 * h * (prev.forward_speed_m_s() + next.forward_speed_m_s());
+        self.acc.odometer_distance_m +=
+            0.5 * h * (prev.odometer_speed_m_s + next.odometer_speed_m_s);
         self.point = next;
     }
 

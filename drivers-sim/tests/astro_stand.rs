@@ -55,6 +55,7 @@ fn static_shortcut_equals_the_driver_sources() {
         delta_angle_b_rad: truth.w_ib_b_rad_s * dt,
         delta_velocity_b_m_s: truth.f_b_m_s2 * dt,
         distance_x_m: 0.0,
+        odometer_distance_m: 0.0,
     };
     for k in 1..=300i64 {
         let s = src.sample(k * p);

@@ -133,3 +133,158 @@ fn world_accuracy_report() {
         }
     }
 }
+
+/// The default vehicle scenario with the motion world's example tables (commented out at the
+/// end of `vehicle.toml`) appended, the ones in `on` enabled.
+fn vehicle_in_motion(on: &[&str]) -> Scenario {
+    let path = root().join("config/scenarios/vehicle.toml");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let start = text
+        .find("# [world.vehicle]")
+        .expect("motion world example");
+    let mut out = text[..start].to_string();
+    let mut table = String::new();
+    for line in text[start..].lines() {
+        let l = line
+            .strip_prefix("# ")
+            .unwrap_or(line.trim_start_matches('#'));
+        if let Some(name) = l.strip_prefix("[world.") {
+            table = name.split(']').next().unwrap().to_string();
+        }
+        if l.starts_with("enabled") {
+            out.push_str(&format!("enabled = {}\n", on.contains(&table.as_str())));
+        } else {
+            out.push_str(l);
+            out.push('\n');
+        }
+    }
+    Scenario::from_toml_str(&out, &path).unwrap()
+}
+
+#[test]
+#[ignore = "600 s of 200 Hz simulation per line: minutes in release; a report, not a CI test"]
+fn world_motion_report() {
+    for on in [
+        &[][..],
+        &["vehicle"],
+        &["vibration"],
+        &["gravity"],
+        &["imu"],
+        &["star_tracker"],
+        &["baro"],
+        &[
+            "vehicle",
+            "vibration",
+            "gravity",
+            "imu",
+            "star_tracker",
+            "baro",
+        ],
+    ] {
+        motion_report_line(&format!("{on:?}"), &vehicle_in_motion(on));
+    }
+}
+
+#[test]
+#[ignore = "600 s of 200 Hz simulation per line: minutes in release; a report, not a CI test"]
+fn world_motion_vehicle_breakdown() {
+    type Keep = fn(&mut sextant_drivers_sim::world::vehicle::VehicleSpec);
+    let parts: [(&str, Keep); 4] = [
+        ("road (grade, bank)", |v| {
+            v.pitch_per_accel_deg = 0.0;
+            v.roll_per_lateral_accel_deg = 0.0;
+            v.sideslip_per_lateral_accel_deg = 0.0;
+            v.ride_heave_sigma_m = 0.0;
+            v.ride_pitch_sigma_deg = 0.0;
+            v.ride_roll_sigma_deg = 0.0;
+            v.wheel_slip_per_accel_s2_m = 0.0;
+            v.odometer_lever_arm_b_m = [0.0; 3];
+        }),
+        ("body (load transfer, ride)", |v| {
+            v.grade_sigma_deg = 0.0;
+            v.bank_sigma_deg = 0.0;
+            v.sideslip_per_lateral_accel_deg = 0.0;
+            v.wheel_slip_per_accel_s2_m = 0.0;
+            v.odometer_lever_arm_b_m = [0.0; 3];
+        }),
+        ("sideslip", |v| {
+            let s = v.sideslip_per_lateral_accel_deg;
+            *v = zero_vehicle(*v);
+            v.sideslip_per_lateral_accel_deg = s;
+        }),
+        ("odometer wheel (slip, lever arm)", |v| {
+            let (s, l) = (v.wheel_slip_per_accel_s2_m, v.odometer_lever_arm_b_m);
+            *v = zero_vehicle(*v);
+            v.wheel_slip_per_accel_s2_m = s;
+            v.odometer_lever_arm_b_m = l;
+        }),
+    ];
+    for (label, keep) in parts {
+        let mut scn = vehicle_in_motion(&["vehicle"]);
+        let mut w = scn.spec.world.unwrap();
+        keep(w.vehicle.as_mut().unwrap());
+        scn.spec.world = Some(w);
+        motion_report_line(&format!("vehicle: {label}"), &scn);
+    }
+    // The car with each other effect: which ones compound.
+    for other in ["vibration", "gravity", "imu", "star_tracker", "baro"] {
+        let on = ["vehicle", other];
+        motion_report_line(&format!("{on:?}"), &vehicle_in_motion(&on));
+    }
+}
+
+/// Every magnitude of the vehicle set to zero (its lengths and frequencies kept).
+fn zero_vehicle(
+    v: sextant_drivers_sim::world::vehicle::VehicleSpec,
+) -> sextant_drivers_sim::world::vehicle::VehicleSpec {
+    sextant_drivers_sim::world::vehicle::VehicleSpec {
+        grade_sigma_deg: 0.0,
+        bank_sigma_deg: 0.0,
+        pitch_per_accel_deg: 0.0,
+        roll_per_lateral_accel_deg: 0.0,
+        sideslip_per_lateral_accel_deg: 0.0,
+        ride_heave_sigma_m: 0.0,
+        ride_pitch_sigma_deg: 0.0,
+        ride_roll_sigma_deg: 0.0,
+        wheel_slip_per_accel_s2_m: 0.0,
+        odometer_lever_arm_b_m: [0.0; 3],
+        ..v
+    }
+}
+
+/// One line of the motion world's report: the shipped loose filter on `scn`, after 150 s.
+fn motion_report_line(label: &str, scn: &Scenario) {
+    let sim = OfflineSim::new(scn);
+    let epoch = sim.epoch_ns();
+    let mut nav = Navigator::new(filter_config()).unwrap();
+    let (mut h, mut v, mut yaw, mut tilt, mut nees) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new(), 0.0);
+    let mut outage_max = 0.0f64;
+    run_navigator(sim, epoch, &mut nav, |p: &RunPoint| {
+        if p.t_s < 150.0 {
+            return;
+        }
+        let e = p.pos_err_ned_m();
+        h.push(e.x.hypot(e.y));
+        v.push(e.z);
+        let a = p.att_err_ned_rad();
+        tilt.push(a.x.hypot(a.y));
+        yaw.push(a.z);
+        nees += p.nees()[0];
+        if (300.0..360.0).contains(&p.t_s) {
+            outage_max = outage_max.max(e.x.hypot(e.y));
+        }
+    })
+    .unwrap();
+    let n = h.len() as f64;
+    println!(
+        "motion world {label}: horizontal RMS {:.3} m, vertical RMS {:.3} m, max horizontal \
+         in the 300–360 s GNSS outage {outage_max:.3} m, tilt RMS {:.1}″, heading RMS {:.1}″, \
+         position NEES {:.2}",
+        rms(&h),
+        rms(&v),
+        rms(&tilt).to_degrees() * 3600.0,
+        rms(&yaw).to_degrees() * 3600.0,
+        nees / n
+    );
+}

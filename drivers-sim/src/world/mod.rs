@@ -12,19 +12,45 @@
 //! ([`antenna`]); it corrects the pseudoranges with its own broadcast models and reports a
 //! least-squares fix with the covariance of its own noise model, as a receiver does.
 //!
+//! The motion world ([`MotionWorld`], built by every driver's [`crate::truth::TruthGenerator`]
+//! from its own streams of the seed, so all processes agree bit for bit) changes the truth
+//! itself: a ground vehicle on a real road ([`vehicle`]: terrain grade and bank as random
+//! functions of the distance driven, suspension load transfer and ride, sideslip in turns, a
+//! slipping odometer wheel with its lever arm), the IMU's mount vibration (engine orders and
+//! broadband) and a gravity disturbance field ([`gravity`]: anomaly and deflection of the
+//! vertical from one harmonic potential). Its random functions are sums of random-phase
+//! cosines ([`spectral`]) with analytic derivatives, so the attitude, velocity and position
+//! stay exactly consistent and the IMU's increments come from the perturbed motion: a perfect
+//! strapdown INS follows it. Only the gravity disturbance separates the IMU from a perfect
+//! INS's normal gravity, as the real field does. The sensors' own worlds: the actual IMU unit
+//! ([`imu_unit`]: its noise and bias instability scattered about the data sheet, g-sensitive
+//! gyro drift, warm-up), the star tracker's thermal error, boresight bias and time-tag latency
+//! and the barometer's day of weather ([`aiding`]). Off unless a table is present and enabled;
+//! `config/scenarios/vehicle.toml` carries an example, commented out.
+//!
 //! These models are the world's own: none calls `fusion`'s ionosphere, troposphere or gravity
-//! models (only its proven foundations: ellipsoid, time, frames).
+//! models, nor its sensor error models (only its proven foundations: ellipsoid, time, frames;
+//! the truth's normal gravity under the disturbance is the generator's own J2 field, as before).
 
+pub mod aiding;
 pub mod antenna;
 pub mod gauss_markov;
+pub mod gravity;
+pub mod imu_unit;
 pub mod ionosphere;
 pub mod multipath;
 pub mod receiver_clock;
 pub mod satellite;
+pub mod spectral;
 pub mod troposphere;
+pub mod vehicle;
+
+#[cfg(test)]
+mod motion_tests;
 
 use crate::SimError;
 use antenna::GnssAntennaSpec;
+use gravity::{GravityField, GravitySpec};
 use ionosphere::{Ionosphere, IonosphereSpec};
 use multipath::{Multipath, MultipathSpec};
 use nalgebra::Vector3;
@@ -34,6 +60,10 @@ use satellite::{EphemerisSpec, SatelliteClockSpec, SignalInSpace};
 use serde::Deserialize;
 use std::path::Path;
 use troposphere::{Troposphere, TroposphereSpec};
+use vehicle::{VehicleSpec, VehicleWorld, Vibration, VibrationSpec};
+
+/// One arcsecond, rad.
+pub const ARCSEC_RAD: f64 = std::f64::consts::PI / 180.0 / 3600.0;
 
 pub(crate) fn yes() -> bool {
     true
@@ -80,6 +110,20 @@ pub struct WorldSection {
     pub receiver_clock: Option<ReceiverClockSpec>,
     /// Antenna lever arm and time-tag latency.
     pub gnss_antenna: Option<GnssAntennaSpec>,
+    /// Ground vehicle on a real road: terrain, suspension, sideslip, wheel slip, odometer
+    /// lever arm (ground-vehicle trajectories only).
+    pub vehicle: Option<VehicleSpec>,
+    /// Vibration of the IMU on its mount.
+    pub vibration: Option<VibrationSpec>,
+    /// Gravity disturbance: anomaly and deflection of the vertical.
+    pub gravity: Option<GravitySpec>,
+    /// The actual IMU unit: scatter about its data sheet, g-sensitivity, warm-up.
+    pub imu: Option<imu_unit::ImuUnitSpec>,
+    /// Star tracker: thermal error, bias about the boresight, time-tag latency.
+    pub star_tracker: Option<aiding::StarTrackerWorldSpec>,
+    /// The barometer's air (day's pressure, temperature, tendency) and its sensor's
+    /// temperature coefficient.
+    pub baro: Option<aiding::BaroWorldSpec>,
 }
 
 fn on<T: Copy>(x: Option<T>, enabled: impl Fn(&T) -> bool) -> Option<T> {
@@ -97,6 +141,38 @@ impl WorldSection {
             || on(self.satellite_clock, |s| s.enabled).is_some()
             || on(self.ephemeris, |s| s.enabled).is_some()
             || on(self.code_noise, |s| s.enabled).is_some()
+    }
+
+    /// The vehicle spec when enabled.
+    pub fn vehicle(&self) -> Option<VehicleSpec> {
+        on(self.vehicle, |s| s.enabled)
+    }
+    /// The vibration spec when enabled.
+    pub fn vibration(&self) -> Option<VibrationSpec> {
+        on(self.vibration, |s| s.enabled)
+    }
+    /// The gravity spec when enabled.
+    pub fn gravity(&self) -> Option<GravitySpec> {
+        on(self.gravity, |s| s.enabled)
+    }
+
+    /// The star tracker's world when enabled.
+    pub fn star_tracker(&self) -> Option<aiding::StarTrackerWorldSpec> {
+        on(self.star_tracker, |s| s.enabled)
+    }
+    /// The star tracker's time-tag latency, ns (0 when off).
+    pub fn star_tracker_latency_ns(&self) -> i64 {
+        self.star_tracker()
+            .map_or(0, |s| (s.latency_s * 1e9).round() as i64)
+    }
+    /// The barometer's world when enabled.
+    pub fn baro(&self) -> Option<aiding::BaroWorldSpec> {
+        on(self.baro, |s| s.enabled)
+    }
+
+    /// The IMU unit spec when enabled.
+    pub fn imu(&self) -> Option<imu_unit::ImuUnitSpec> {
+        on(self.imu, |s| s.enabled)
     }
 
     /// The antenna spec when enabled.
@@ -226,7 +302,179 @@ impl WorldSection {
                 ));
             }
         }
+        if let Some(s) = &self.vehicle {
+            for (key, v, max) in [
+                ("grade_sigma_deg", s.grade_sigma_deg, 15.0),
+                ("bank_sigma_deg", s.bank_sigma_deg, 10.0),
+                ("pitch_per_accel_deg", s.pitch_per_accel_deg, 2.0),
+                (
+                    "roll_per_lateral_accel_deg",
+                    s.roll_per_lateral_accel_deg,
+                    2.0,
+                ),
+                (
+                    "sideslip_per_lateral_accel_deg",
+                    s.sideslip_per_lateral_accel_deg,
+                    2.0,
+                ),
+                ("ride_heave_sigma_m", s.ride_heave_sigma_m, 0.2),
+                ("ride_pitch_sigma_deg", s.ride_pitch_sigma_deg, 3.0),
+                ("ride_roll_sigma_deg", s.ride_roll_sigma_deg, 3.0),
+                ("ride_bandwidth_hz", s.ride_bandwidth_hz, 5.0),
+                (
+                    "wheel_slip_per_accel_s2_m",
+                    s.wheel_slip_per_accel_s2_m,
+                    0.05,
+                ),
+            ] {
+                nonneg(&format!("vehicle.{key}"), v)?;
+                if v > max {
+                    return Err(bad(
+                        &format!("vehicle.{key}"),
+                        format!("{v} is above the physical bound {max}"),
+                    ));
+                }
+            }
+            positive("vehicle.grade_length_m", s.grade_length_m)?;
+            positive("vehicle.bank_length_m", s.bank_length_m)?;
+            positive("vehicle.ride_frequency_hz", s.ride_frequency_hz)?;
+            positive("vehicle.ride_half_speed_m_s", s.ride_half_speed_m_s)?;
+            for (i, v) in s.odometer_lever_arm_b_m.iter().enumerate() {
+                if !(v.is_finite() && v.abs() <= 10.0) {
+                    return Err(bad(
+                        &format!("vehicle.odometer_lever_arm_b_m[{i}]"),
+                        format!("{v} is outside ±10 m"),
+                    ));
+                }
+            }
+        }
+        if let Some(s) = &self.vibration {
+            positive("vibration.engine_rotation_hz", s.engine_rotation_hz)?;
+            for (i, v) in s.engine_order_rms_m_s2.iter().enumerate() {
+                nonneg(&format!("vibration.engine_order_rms_m_s2[{i}]"), *v)?;
+            }
+            nonneg("vibration.broadband_rms_m_s2", s.broadband_rms_m_s2)?;
+            let [lo, hi] = s.broadband_band_hz;
+            // The truth grid is 1 ms: keep every line below its 500 Hz Nyquist frequency.
+            if !(lo.is_finite() && hi.is_finite() && 0.0 < lo && lo < hi && hi <= 400.0)
+                || 4.0 * s.engine_rotation_hz > 400.0
+            {
+                return Err(bad(
+                    "vibration.broadband_band_hz",
+                    format!(
+                        "[{lo}, {hi}] Hz and engine orders up to {} Hz must lie in (0, 400] Hz",
+                        4.0 * s.engine_rotation_hz
+                    ),
+                ));
+            }
+        }
+        if let Some(s) = &self.imu {
+            for (key, v, max) in [
+                ("noise_log_sigma", s.noise_log_sigma, 1.0),
+                (
+                    "bias_instability_log_sigma",
+                    s.bias_instability_log_sigma,
+                    1.0,
+                ),
+            ] {
+                nonneg(&format!("imu.{key}"), v)?;
+                if v > max {
+                    return Err(bad(&format!("imu.{key}"), format!("{v} is above {max}")));
+                }
+            }
+            nonneg(
+                "imu.gyro_g_sensitivity_deg_h_per_g",
+                s.gyro_g_sensitivity_deg_h_per_g,
+            )?;
+            nonneg("imu.gyro_warmup_deg_h", s.gyro_warmup_deg_h)?;
+            nonneg("imu.accel_warmup_ug", s.accel_warmup_ug)?;
+            positive("imu.warmup_tau_s", s.warmup_tau_s)?;
+        }
+        if let Some(s) = &self.star_tracker {
+            nonneg("star_tracker.thermal_sigma_arcsec", s.thermal_sigma_arcsec)?;
+            positive("star_tracker.thermal_tau_s", s.thermal_tau_s)?;
+            nonneg(
+                "star_tracker.boresight_bias_sigma_arcsec",
+                s.boresight_bias_sigma_arcsec,
+            )?;
+            let ms = s.latency_s * 1e3;
+            if !(s.latency_s.is_finite()
+                && (0.0..1.0).contains(&s.latency_s)
+                && (ms - ms.round()).abs() < 1e-6)
+            {
+                return Err(bad(
+                    "star_tracker.latency_s",
+                    format!(
+                        "{} must be a whole number of milliseconds (the truth grid) in [0, 1) s",
+                        s.latency_s
+                    ),
+                ));
+            }
+        }
+        if let Some(s) = &self.baro {
+            if !(s.sea_level_pressure_hpa.is_finite()
+                && (850.0..=1100.0).contains(&s.sea_level_pressure_hpa))
+            {
+                return Err(bad(
+                    "baro.sea_level_pressure_hpa",
+                    "outside 850..1100 hPa".into(),
+                ));
+            }
+            if !(s.temperature_offset_k.is_finite() && s.temperature_offset_k.abs() <= 40.0) {
+                return Err(bad("baro.temperature_offset_k", "outside ±40 K".into()));
+            }
+            nonneg("baro.tendency_sigma_hpa_h", s.tendency_sigma_hpa_h)?;
+            if !s.sensor_temp_coeff_pa_per_c.is_finite() {
+                return Err(bad(
+                    "baro.sensor_temp_coeff_pa_per_c",
+                    "must be finite".into(),
+                ));
+            }
+        }
+        if let Some(s) = &self.gravity {
+            nonneg("gravity.anomaly_sigma_mgal", s.anomaly_sigma_mgal)?;
+            positive("gravity.correlation_length_km", s.correlation_length_km)?;
+        }
         Ok(())
+    }
+}
+
+/// The truth-side world of the motion, shared by every driver's truth generator: each
+/// realisation is drawn from its own stream of the scenario seed, so every process builds the
+/// same one.
+#[derive(Debug, Clone, Default)]
+pub struct MotionWorld {
+    /// Road, body and odometer wheel (ground vehicles).
+    pub vehicle: Option<VehicleWorld>,
+    /// IMU mount vibration.
+    pub vibration: Option<Vibration>,
+    /// Gravity disturbance field.
+    pub gravity: Option<GravityField>,
+}
+
+impl MotionWorld {
+    /// The motion world of `spec` for scenario seed `seed` (streams `"world_vehicle"`,
+    /// `"world_vibration"`, `"world_gravity"`); empty without a section.
+    pub fn new(spec: Option<&WorldSection>, seed: u64) -> Self {
+        let Some(w) = spec else {
+            return Self::default();
+        };
+        Self {
+            vehicle: w
+                .vehicle()
+                .map(|s| VehicleWorld::new(s, &mut crate::sensor_rng(seed, "world_vehicle"))),
+            vibration: w
+                .vibration()
+                .map(|s| Vibration::new(&s, &mut crate::sensor_rng(seed, "world_vibration"))),
+            gravity: w
+                .gravity()
+                .map(|s| GravityField::new(&s, &mut crate::sensor_rng(seed, "world_gravity"))),
+        }
+    }
+
+    /// Whether no effect is on (the truth is then computed exactly as without a world).
+    pub fn is_empty(&self) -> bool {
+        self.vehicle.is_none() && self.vibration.is_none() && self.gravity.is_none()
     }
 }
 

@@ -182,6 +182,7 @@ pub fn simulate(k: usize, duration_s: f64, window_s: f64) -> Result<Record, Expe
         delta_angle_b_rad: truth.w_ib_b_rad_s * dt,
         delta_velocity_b_m_s: truth.f_b_m_s2 * dt,
         distance_x_m: 0.0,
+        odometer_distance_m: 0.0,
     };
     let n = duration_s.floor() as usize;
     let mut f_mean = Vec::with_capacity(n);

@@ -1,0 +1,207 @@
+//! Smooth stationary random functions as sums of random-phase cosines (the spectral
+//! representation of a stationary process: Shinozuka & Deodatis, "Simulation of stochastic
+//! processes by spectral representation", Appl. Mech. Rev. 44(4), 1991).
+//!
+//! `x(u) = σ·√(2/N)·Σᵢ cos(ωᵢ u + φᵢ)` with `φᵢ` uniform on [0, 2π) and `ωᵢ` drawn from the
+//! normalised power spectrum: over the ensemble of draws the mean is 0, the variance σ² and the
+//! autocovariance `σ²·E[cos ω τ]` exactly, for any N. Unlike a Gauss–Markov state, every
+//! derivative is analytic and every process evaluates the same value at the same argument
+//! without stepping, so the truth's attitude, velocity and position stay exactly consistent
+//! and every driver process agrees bit for bit.
+//!
+//! Spectra used: Gaussian (`ω ~ N(0, 1/L²)`, autocovariance `σ² e^{−τ²/2L²}`), narrow band
+//! (`ω ~ N(ω₀, σ_ω²)`, `σ² cos(ω₀τ) e^{−σ_ω²τ²/2}`) and flat band (`ω ~ U(ω₁, ω₂)`,
+//! `σ² (sin ω₂τ − sin ω₁τ)/((ω₂ − ω₁)τ)`).
+
+use rand::Rng;
+use rand_chacha::ChaCha20Rng;
+use rand_distr::StandardNormal;
+use std::f64::consts::TAU;
+
+/// Number of cosines of every process: enough for a near-Gaussian amplitude distribution
+/// (central limit), few enough to evaluate at every 1 ms truth step.
+pub const TERMS: usize = 32;
+
+/// A stationary random function of one variable (time in s or distance in m).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SpectralProcess {
+    amplitude: f64,
+    omega: Vec<f64>,
+    phase: Vec<f64>,
+}
+
+impl SpectralProcess {
+    fn from_omegas(sigma: f64, omega: Vec<f64>, rng: &mut ChaCha20Rng) -> Self {
+        let phase = omega.iter().map(|_| rng.random::<f64>() * TAU).collect();
+        Self {
+            amplitude: sigma * (2.0 / omega.len() as f64).sqrt(),
+            omega,
+            phase,
+        }
+    }
+
+    /// Gaussian autocovariance `σ² e^{−τ²/2L²}`, correlation length `length` (argument units).
+    pub fn gaussian(sigma: f64, length: f64, rng: &mut ChaCha20Rng) -> Self {
+        let omega = (0..TERMS)
+            .map(|_| rng.sample::<f64, _>(StandardNormal) / length)
+            .collect();
+        Self::from_omegas(sigma, omega, rng)
+    }
+
+    /// Narrow band around `f0_hz` with Gaussian spread `bandwidth_hz` (1-σ):
+    /// autocovariance `σ² cos(2πf₀τ) e^{−(2π·bw·τ)²/2}`.
+    pub fn narrow_band(sigma: f64, f0_hz: f64, bandwidth_hz: f64, rng: &mut ChaCha20Rng) -> Self {
+        let omega = (0..TERMS)
+            .map(|_| TAU * (f0_hz + bandwidth_hz * rng.sample::<f64, _>(StandardNormal)))
+            .collect();
+        Self::from_omegas(sigma, omega, rng)
+    }
+
+    /// Flat power spectral density between `f_lo_hz` and `f_hi_hz`: PSD `σ²/(f_hi − f_lo)`.
+    pub fn flat_band(sigma: f64, f_lo_hz: f64, f_hi_hz: f64, rng: &mut ChaCha20Rng) -> Self {
+        let omega = (0..TERMS)
+            .map(|_| TAU * (f_lo_hz + (f_hi_hz - f_lo_hz) * rng.random::<f64>()))
+            .collect();
+        Self::from_omegas(sigma, omega, rng)
+    }
+
+    /// Value and first and second derivatives at `u`.
+    pub fn eval(&self, u: f64) -> [f64; 3] {
+        let mut out = [0.0; 3];
+        for (w, p) in self.omega.iter().zip(&self.phase) {
+            let (s, c) = (w * u + p).sin_cos();
+            out[0] += c;
+            out[1] -= w * s;
+            out[2] -= w * w * c;
+        }
+        out.map(|v| v * self.amplitude)
+    }
+
+    /// Displacement, velocity and acceleration of a process whose *second derivative* is this
+    /// one (a vibration given as an acceleration): `x = −Σ a cos/ω²`, each term integrated
+    /// exactly twice, so the velocity and position it implies carry no drift.
+    pub fn eval_double_integral(&self, u: f64) -> [f64; 3] {
+        let mut out = [0.0; 3];
+        for (w, p) in self.omega.iter().zip(&self.phase) {
+            let (s, c) = (w * u + p).sin_cos();
+            out[0] -= c / (w * w);
+            out[1] += s / w;
+            out[2] += c;
+        }
+        out.map(|v| v * self.amplitude)
+    }
+}
+
+/// A sinusoid of fixed frequency and random phase whose second derivative (an acceleration)
+/// has rms `rms`: an engine order.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Harmonic {
+    amplitude: f64,
+    omega: f64,
+    phase: f64,
+}
+
+impl Harmonic {
+    /// Acceleration `√2·rms·cos(2πf t + φ)`, φ uniform.
+    pub fn new(rms: f64, f_hz: f64, rng: &mut ChaCha20Rng) -> Self {
+        Self {
+            amplitude: std::f64::consts::SQRT_2 * rms,
+            omega: TAU * f_hz,
+            phase: rng.random::<f64>() * TAU,
+        }
+    }
+
+    /// Displacement, velocity and acceleration at `t_s`.
+    pub fn eval(&self, t_s: f64) -> [f64; 3] {
+        let (s, c) = (self.omega * t_s + self.phase).sin_cos();
+        let a = self.amplitude;
+        [
+            -a * c / (self.omega * self.omega),
+            a * s / self.omega,
+            a * c,
+        ]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::world::gauss_markov::mean_and_standard_error;
+    use rand::SeedableRng;
+
+    /// Ensemble variance and autocovariance at `lag` of `make`'s processes against the closed
+    /// forms, within 4 standard errors (see [`mean_and_standard_error`]).
+    fn check(
+        name: &str,
+        runs: usize,
+        lag: f64,
+        sigma: f64,
+        rho: f64,
+        mut make: impl FnMut(&mut ChaCha20Rng) -> SpectralProcess,
+    ) {
+        let mut rng = ChaCha20Rng::seed_from_u64(7);
+        let (mut sq, mut prod) = (Vec::new(), Vec::new());
+        for _ in 0..runs {
+            let p = make(&mut rng);
+            // A random origin: the process is stationary, so any origin has the same statistics.
+            let u0 = rng.random::<f64>() * 1e3;
+            let (x0, x1) = (p.eval(u0)[0], p.eval(u0 + lag)[0]);
+            sq.push(x0 * x0);
+            prod.push(x0 * x1);
+        }
+        let (v, se_v) = mean_and_standard_error(&sq);
+        let (c, se_c) = mean_and_standard_error(&prod);
+        let s2 = sigma * sigma;
+        assert!(
+            (v - s2).abs() < 4.0 * se_v,
+            "{name}: variance {v} vs {s2} (SE {se_v})"
+        );
+        assert!(
+            (c - rho * s2).abs() < 4.0 * se_c,
+            "{name}: autocovariance {c} vs {} (SE {se_c})",
+            rho * s2
+        );
+        // The lag is informative: the model's correlation is resolved away from 0 and 1.
+        assert!((rho * s2).abs() > 4.0 * se_c && s2 - rho * s2 > 4.0 * se_c);
+    }
+
+    #[test]
+    fn gaussian_narrow_and_flat_band_spectra() {
+        check("gaussian", 3000, 100.0, 2.0, (-0.5f64).exp(), |r| {
+            SpectralProcess::gaussian(2.0, 100.0, r)
+        });
+        // Lag 0.1 s at 1.5 Hz ± 0.3 Hz: cos(0.3π)·e^{−(0.06π)²/2}.
+        let rho = (TAU * 1.5 * 0.1).cos() * (-(TAU * 0.3 * 0.1f64).powi(2) / 2.0).exp();
+        check("narrow", 3000, 0.1, 0.5, rho, |r| {
+            SpectralProcess::narrow_band(0.5, 1.5, 0.3, r)
+        });
+        // Lag 2 ms in 20..120 Hz.
+        let (w1, w2, tau) = (TAU * 20.0, TAU * 120.0, 2e-3);
+        let rho = ((w2 * tau).sin() - (w1 * tau).sin()) / ((w2 - w1) * tau);
+        check("flat", 3000, tau, 0.3, rho, |r| {
+            SpectralProcess::flat_band(0.3, 20.0, 120.0, r)
+        });
+    }
+
+    #[test]
+    fn derivatives_are_exact() {
+        // Central differences with step h: truncation h²/6·max|x‴| (h²/12·max|x⁗| for the
+        // second derivative), max|x⁽ⁿ⁾| ≤ σ√(2N)·ω_maxⁿ; round-off ε·max|x|/h.
+        let mut rng = ChaCha20Rng::seed_from_u64(3);
+        let fd = |f: &dyn Fn(f64) -> [f64; 3], h: f64, tol: f64| {
+            let (a, b, c) = (f(0.3 - h), f(0.3), f(0.3 + h));
+            assert!(((c[0] - a[0]) / (2.0 * h) - b[1]).abs() < tol, "first");
+            assert!(((c[1] - a[1]) / (2.0 * h) - b[2]).abs() < tol, "second");
+        };
+        // ω ≤ 2π·(2 + 4·0.5) Hz: bounds ≈ 1e-8 and 3e-7 at h = 1e-6.
+        let p = SpectralProcess::narrow_band(1.0, 2.0, 0.5, &mut rng);
+        fd(&|u| p.eval(u), 1e-6, 1e-6);
+        // 20..120 Hz as an acceleration: displacement and velocity are far smaller.
+        let q = SpectralProcess::flat_band(1.0, 20.0, 120.0, &mut rng);
+        fd(&|u| q.eval_double_integral(u), 1e-7, 1e-4);
+        assert_eq!(q.eval_double_integral(0.3)[2], q.eval(0.3)[0]);
+        // 80 Hz, rms 0.3: |x⁗| ≤ 0.42·503⁴ ≈ 2.7e10, h = 1e-7: 2e-5.
+        let e = Harmonic::new(0.3, 80.0, &mut rng);
+        fd(&|u| e.eval(u), 1e-7, 1e-4);
+    }
+}
