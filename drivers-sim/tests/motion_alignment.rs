@@ -248,40 +248,54 @@ fn a_navigator_started_while_driving_navigates_at_once() {
 /// comes from the GNSS velocities once the vehicle turns (`yaw_gsf`). The first IMU sample is
 /// at 125 s, on the straight at constant speed where the heading is unobservable: navigation
 /// must not start there, but within one GNSS interval of the σ reaching the threshold during
-/// the 90° turn at 150–165 s, i.e. before its end; consistent from the start on.
+/// the 90° turn at 150–165 s, i.e. before its end; consistent from the start on. The same
+/// with the fix 150 ms late: the yaw hypotheses compare each velocity with their own less the
+/// velocity change sensed since its epoch.
 #[test]
 fn a_navigator_started_while_driving_without_stars_aligns_from_gnss_heading() {
-    let mut scn = vehicle_with(DRIVE, DRIVE_S);
+    let scn = without_stars(vehicle_with(DRIVE, DRIVE_S));
+    let first = 125.0;
+    for gnss_s in [0.0, 0.15] {
+        let what = format!("started from the GNSS heading, fix {gnss_s} s late");
+        let mut nav = Navigator::new(default_config()).unwrap();
+        let latency = Latency {
+            gnss_s,
+            star_s: 0.0,
+        };
+        let r = run_late(&scn, &mut nav, first, |_| true, None, latency);
+        let d = nav.diagnostics();
+        println!("{what}: starts {:?}, diagnostics {d:?}", r.starts);
+        assert_eq!(r.starts.len(), 1, "{what}");
+        assert_eq!(d.motion_alignments, 1, "{what}");
+        assert_eq!(d.gnss_heading_alignments, 1, "{what}");
+        let (turn0, turn1) = (150.0, 165.0);
+        assert!(
+            r.starts[0] > turn0 && r.starts[0] <= turn1 + gnss_s,
+            "{what}: navigation started at {:.2} s, not during the first turn",
+            r.starts[0]
+        );
+        let t0 = r.starts[0];
+        let p0 = r.points.iter().find(|p| p.t_s >= t0).expect("a solution");
+        println!(
+            "{what}: {:.2} s after the first IMU sample, attitude σ {:.2?}°",
+            t0 - first,
+            [0, 1, 2].map(|k| p0.att_cov_e_rad2[(k, k)].sqrt().to_degrees())
+        );
+        assert_consistent(
+            &r.points,
+            &[t0, t0 + 1.0, t0 + 5.0, t0 + 20.0, t0 + 40.0, t0 + 70.0],
+            &what,
+        );
+    }
+}
+
+/// The scenario with the star tracker out for the whole run.
+fn without_stars(mut scn: Scenario) -> Scenario {
     scn.spec.star_tracker.outages = vec![sextant_drivers_sim::scenario::Window {
         start_s: 0.0,
-        duration_s: DRIVE_S,
+        duration_s: scn.spec.scenario.duration_s,
     }];
-    let mut nav = Navigator::new(default_config()).unwrap();
-    let first = 125.0;
-    let r = run(&scn, &mut nav, first, |_| true, None);
-    let d = nav.diagnostics();
-    println!("starts {:?}, diagnostics {d:?}", r.starts);
-    assert_eq!(r.starts.len(), 1);
-    assert_eq!(d.motion_alignments, 1);
-    assert_eq!(d.gnss_heading_alignments, 1);
-    let (turn0, turn1) = (150.0, 165.0);
-    assert!(
-        r.starts[0] > turn0 && r.starts[0] <= turn1,
-        "navigation started at {:.2} s, not during the first turn",
-        r.starts[0]
-    );
-    let t0 = r.starts[0];
-    let p0 = r.points.iter().find(|p| p.t_s >= t0).expect("a solution");
-    println!(
-        "started {:.2} s after the first IMU sample, attitude σ {:.2?}°",
-        t0 - first,
-        [0, 1, 2].map(|k| p0.att_cov_e_rad2[(k, k)].sqrt().to_degrees())
-    );
-    assert_consistent(
-        &r.points,
-        &[t0, t0 + 1.0, t0 + 5.0, t0 + 20.0, t0 + 40.0, t0 + 70.0],
-        "started from the GNSS heading",
-    );
+    scn
 }
 
 /// A receiver's latency: the GNSS fix reaches the navigator 150 ms after its epoch and the
@@ -315,41 +329,6 @@ fn a_navigator_started_while_driving_with_late_aiding_navigates_at_once() {
     );
 }
 
-/// The start from the GNSS heading with the fix 150 ms late: the yaw hypotheses compare each
-/// velocity with their own less the velocity change sensed since its epoch, and navigation
-/// starts during the first turn as with in-time fixes, consistent from the start on.
-#[test]
-fn a_navigator_started_while_driving_without_stars_with_late_fixes_aligns_from_gnss_heading() {
-    let mut scn = vehicle_with(DRIVE, DRIVE_S);
-    scn.spec.star_tracker.outages = vec![sextant_drivers_sim::scenario::Window {
-        start_s: 0.0,
-        duration_s: DRIVE_S,
-    }];
-    let mut nav = Navigator::new(default_config()).unwrap();
-    let first = 125.0;
-    let latency = Latency {
-        gnss_s: 0.15,
-        star_s: 0.0,
-    };
-    let r = run_late(&scn, &mut nav, first, |_| true, None, latency);
-    let d = nav.diagnostics();
-    println!("starts {:?}, diagnostics {d:?}", r.starts);
-    assert_eq!(r.starts.len(), 1);
-    assert_eq!(d.gnss_heading_alignments, 1);
-    let (turn0, turn1) = (150.0, 165.0);
-    assert!(
-        r.starts[0] > turn0 && r.starts[0] <= turn1 + latency.gnss_s,
-        "navigation started at {:.2} s, not during the first turn",
-        r.starts[0]
-    );
-    let t0 = r.starts[0];
-    assert_consistent(
-        &r.points,
-        &[t0, t0 + 1.0, t0 + 5.0, t0 + 20.0, t0 + 40.0, t0 + 70.0],
-        "started from the GNSS heading with late fixes",
-    );
-}
-
 /// Without stars and with the fix 150 ms late, around circles at 10 m/s (2.1 m/s² of
 /// sustained centripetal acceleration, where levelling by gravity alone is off by 12°): a
 /// navigator powered on 20 s before driving off (too short for the 100 s static alignment)
@@ -364,11 +343,7 @@ fn a_navigator_powered_on_before_or_while_circling_without_stars_aligns_from_gns
     { type = "turn", angle_deg = 360.0, duration_s = 30.0 },
     { type = "turn", angle_deg = 360.0, duration_s = 30.0 },"#;
     let drive_off = 20.0;
-    let mut scn = vehicle_with(CIRCLES, 118.0);
-    scn.spec.star_tracker.outages = vec![sextant_drivers_sim::scenario::Window {
-        start_s: 0.0,
-        duration_s: 118.0,
-    }];
+    let scn = without_stars(vehicle_with(CIRCLES, 118.0));
     let latency = Latency {
         gnss_s: 0.15,
         star_s: 0.0,
