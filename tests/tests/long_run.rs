@@ -7,7 +7,8 @@
 //!   them as one recording, and the replay reproduces every solution bit for bit across the
 //!   segment boundaries.
 //! - `fusion_memory_stays_flat_over_a_simulated_day` (ignored: about 15 min of both cores and
-//!   10 GB of disk; run it with `cargo test --release --test long_run -- --ignored --nocapture`):
+//!   10 GB of disk; run it with `cargo test --release -p sextant-tests --test integration
+//!   long_run -- --ignored --nocapture`):
 //!   24 h of the default scenario at 100×, the fusion daemon's resident set sampled from
 //!   `/proc` every simulated ten minutes, must stay within 2 MiB of its value after the first
 //!   simulated hour; `sextant report` on the whole day must stay under 200 MB.
