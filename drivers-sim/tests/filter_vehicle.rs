@@ -2,7 +2,8 @@
 //! horizontal/vertical/attitude RMS after alignment, for the configuration in
 //! `config/filter.toml` and variants. The full 600 s run takes longer than a CI test may, so it
 //! is `#[ignore]`d; run it with
-//! `cargo test --release -p sextant-drivers-sim --test filter_vehicle -- --ignored --nocapture`.
+//! `cargo test --release -p sextant-drivers-sim --test integration filter_vehicle -- --ignored
+//! --nocapture`.
 
 use fusion::navigator::{GnssMode, Navigator, NavigatorConfig};
 use sextant_drivers_sim::offline::{OfflineSim, RunPoint, run_navigator};

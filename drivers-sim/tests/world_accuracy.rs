@@ -4,7 +4,8 @@
 //! tight: the solution's horizontal/vertical RMS beside the receiver fix's own, with the mean
 //! position NEES (3 for a consistent filter). Minutes in release, so
 //! `#[ignore]`d; run with
-//! `cargo test --release -p sextant-drivers-sim --test world_accuracy -- --ignored --nocapture`.
+//! `cargo test --release -p sextant-drivers-sim --test integration world_accuracy -- --ignored
+//! --nocapture`.
 
 use fusion::navigator::{GnssMode, Navigator, NavigatorConfig};
 use nalgebra::Vector3;

@@ -29,7 +29,7 @@
 //!   the maximum falls in late 1990), **0.96 mas** over 1995–2050, 0.69 mas at the 25 ERFA
 //!   epochs; about 9 times cheaper (4 µs vs 36 µs per call, dev profile, opt-level 1,
 //!   test `timing_2000a_vs_2000b`). Figures printed by
-//!   `cargo test -p sextant-fusion --test celestial_erfa -- --nocapture`.
+//!   `cargo test -p sextant-fusion --test integration celestial_erfa -- --nocapture`.
 //!
 //! Neither variant includes the IERS celestial-pole offsets dX, dY (free core nutation, ≤ 0.3
 //! mas) nor the diurnal/sub-diurnal tidal and libration terms in xp, yp and UT1 — they are

@@ -16,7 +16,7 @@ use sextant_fusion::frames::Rotation;
 use sextant_fusion::navigator::{GnssMode, Navigator, NavigatorConfig};
 use sextant_fusion::time::GpsTime;
 
-mod common;
+use crate::common;
 use common::{count, samples, track_this_thread};
 
 const T0: i64 = 1_400_000_000_000_000_000;

@@ -6,7 +6,7 @@
 //! every counted epoch is cross-checked (≥ 4 satellites). Allocations of this test's thread
 //! only are counted (`common`).
 
-mod common;
+use crate::common;
 use common::{count, samples, track_this_thread};
 use msgs::{GnssSample, SensorId};
 use nalgebra::Vector3;

@@ -12,7 +12,7 @@ use nalgebra::Vector3;
 use sextant_fusion::navigator::{Navigator, NavigatorConfig};
 use sextant_fusion::redundancy::{FdiConfig, RedundantImu, pyramid_axes};
 
-mod common;
+use crate::common;
 use common::{count, samples, track_this_thread};
 
 const T0: i64 = 1_400_000_000_000_000_000;

@@ -3,13 +3,13 @@
 //! count must not move across steps with every integrator and gravity model (after a warm-up
 //! step that fills the coning/sculling history).
 
+use crate::common;
+use common::{count, track_this_thread};
 use nalgebra::{UnitQuaternion, Vector3};
 use sextant_fusion::earth::{Geodetic, GravityModel, WGS84};
 use sextant_fusion::strapdown::{
     Integrator, MechanizationConfig, NavState, Strapdown, stationary_increment,
 };
-mod common;
-use common::{count, track_this_thread};
 
 #[test]
 fn strapdown_step_allocates_nothing() {

@@ -166,7 +166,7 @@ fn dual_frequency_iono_free_within_ten_percent_of_rtklib() {
 
 /// Re-runs RTKLIB (Debian package `rtklib`) on the shipped files and checks that it still
 /// produces the checked-in solutions. Needs `rnx2rtkp` on the PATH:
-/// `cargo test -p sextant-rinex --test esbc -- --ignored`.
+/// `cargo test -p sextant-rinex --test integration esbc -- --ignored`.
 #[test]
 #[ignore = "needs rnx2rtkp (apt-get install rtklib)"]
 fn rtklib_reproduces_the_checked_in_solutions() {

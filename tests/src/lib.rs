@@ -358,3 +358,58 @@ pub fn ned_position_error(
     let s = f64s(&nav["pos_sigma_ned_m"]);
     ([n, e, dn], [s[0], s[1], s[2]])
 }
+
+/// Held by every end-to-end test that starts processes, or times or counts what they do, for
+/// its whole run. The test files share one test binary (`tests/main.rs`), whose harness runs
+/// tests on parallel threads: this keeps such tests one at a time, so none shares the machine's
+/// cores, the bus or `/dev/shm` with another (a leftover check sees only its own run, a
+/// deadline is not missed because another run took the CPU). A test that panicked while
+/// holding it poisons it; the next one takes it anyway (`unwrap_or_else(|e| e.into_inner())`).
+pub static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+#[cfg(test)]
+mod tests {
+    use super::repo_root;
+
+    /// Each crate whose integration tests are one binary (`autotests = false`, a `[[test]]`
+    /// whose `tests/main.rs` declares one module per file) compiles every file of its tests
+    /// directory: a file without its `mod` line would silently never run.
+    #[test]
+    fn every_integration_test_file_is_declared() {
+        let root = repo_root();
+        let mut checked = 0;
+        for member in std::fs::read_dir(&root).unwrap().flatten() {
+            let dir = member.path().join("tests");
+            let Ok(main) = std::fs::read_to_string(dir.join("main.rs")) else {
+                continue;
+            };
+            let manifest = std::fs::read_to_string(dir.parent().unwrap().join("Cargo.toml"))
+                .unwrap_or_default();
+            assert!(
+                manifest.contains("autotests = false"),
+                "{}: a tests/main.rs needs autotests = false in Cargo.toml",
+                dir.display()
+            );
+            for file in std::fs::read_dir(&dir).unwrap().flatten() {
+                let name = file.file_name().to_string_lossy().to_string();
+                let Some(module) = name.strip_suffix(".rs") else {
+                    continue;
+                };
+                if module == "main" {
+                    continue;
+                }
+                assert!(
+                    main.lines().any(|l| l.trim() == format!("mod {module};")),
+                    "{}/{name} is not declared in its main.rs (`mod {module};`): it would never run",
+                    dir.display()
+                );
+                checked += 1;
+            }
+        }
+        assert!(
+            checked > 0,
+            "no integration test file found under {}",
+            root.display()
+        );
+    }
+}

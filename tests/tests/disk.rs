@@ -10,11 +10,7 @@ use msgs::{NavSolution, Status};
 use sextant_tests::*;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
-use std::sync::Mutex;
 use std::time::{Duration, Instant};
-
-/// The e2e tests share the machine's two cores; run them one at a time.
-static SERIAL: Mutex<()> = Mutex::new(());
 
 const SPEED: f64 = 25.0;
 /// Alignment takes 100 s simulated; 12 s of navigation after it = 2 400 solutions at 200 Hz.

@@ -7,7 +7,8 @@
 //!   them as one recording, and the replay reproduces every solution bit for bit across the
 //!   segment boundaries.
 //! - `fusion_memory_stays_flat_over_a_simulated_day` (ignored: about 15 min of both cores and
-//!   10 GB of disk; run it with `cargo test --release --test long_run -- --ignored --nocapture`):
+//!   10 GB of disk; run it with `cargo test --release -p sextant-tests --test integration
+//!   long_run -- --ignored --nocapture`):
 //!   24 h of the default scenario at 100×, the fusion daemon's resident set sampled from
 //!   `/proc` every simulated ten minutes, must stay within 2 MiB of its value after the first
 //!   simulated hour; `sextant report` on the whole day must stay under 200 MB.
@@ -51,6 +52,7 @@ fn system_config(dir: &Path, segment_duration_s: f64) -> PathBuf {
 
 #[test]
 fn a_recording_in_segments_reads_reports_and_replays_as_one() {
+    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     let dir = tempdir("segments");
     let cfg = system_config(&dir, 20.0);
     let prefix = format!("sextant_segments_{}", std::process::id());
@@ -140,6 +142,7 @@ fn rss_kib(pid: i32) -> Option<u64> {
 #[test]
 #[ignore = "24 h of simulated time: about 15 min of both cores and 10 GB of disk"]
 fn fusion_memory_stays_flat_over_a_simulated_day() {
+    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     const SPEED: f64 = 100.0;
     const DAY_S: f64 = 86_400.0;
     let dir = tempdir("day");

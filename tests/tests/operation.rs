@@ -19,11 +19,7 @@ use nix::unistd::Pid;
 use sextant_tests::*;
 use std::path::Path;
 use std::process::{Command, Output, Stdio};
-use std::sync::Mutex;
 use std::time::{Duration, Instant};
-
-/// The e2e tests share the machine's two cores; run them one at a time.
-static SERIAL: Mutex<()> = Mutex::new(());
 
 /// `sextant run` of the vehicle scenario: `duration` s at `speed`, in `cwd`, with `args`.
 fn sextant_run(cwd: &Path, duration: f64, speed: f64, args: &[&str]) -> Command {

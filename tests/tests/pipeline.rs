@@ -6,11 +6,7 @@
 use sextant_tests::*;
 use std::path::Path;
 use std::process::Command;
-use std::sync::Mutex;
 use std::time::{Duration, Instant};
-
-/// The e2e tests share the machine's two cores; run them one at a time.
-static SERIAL: Mutex<()> = Mutex::new(());
 
 const SCENARIO: &str = "config/scenarios/vehicle.toml";
 

@@ -10,11 +10,7 @@
 use sextant_tests::*;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
-use std::sync::Mutex;
 use std::time::{Duration, Instant};
-
-/// The e2e tests share the machine's two cores; run them one at a time.
-static SERIAL: Mutex<()> = Mutex::new(());
 
 /// Alignment takes 100 s of simulated time (config/filter.toml); 20 s of navigation after it
 /// gives 4 000 solutions with GNSS, star tracker, odometer and baro updates.

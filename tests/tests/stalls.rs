@@ -18,11 +18,7 @@ use nix::unistd::Pid;
 use sextant_tests::*;
 use std::path::Path;
 use std::process::Child;
-use std::sync::Mutex;
 use std::time::Duration;
-
-/// The e2e tests share the machine's two cores; run them one at a time.
-static SERIAL: Mutex<()> = Mutex::new(());
 
 /// `run.start_delay_s` of config/sextant.toml: wall time from launch to the first sample.
 const START_DELAY_S: f64 = 2.0;

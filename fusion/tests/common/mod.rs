@@ -1,28 +1,28 @@
 //! The counting global allocator shared by the no-allocation tests: it forwards to the system
-//! allocator and counts `alloc`/`realloc` calls made on threads that called
+//! allocator and counts, per thread, the `alloc`/`realloc` calls made on threads that called
 //! [`track_this_thread`] — only the test's own thread, so that the harness's other threads
-//! (still setting up when a fast test starts) cannot make the count flaky. Each test binary
-//! uses a part of this module.
+//! (still setting up when a fast test starts, or running the other tests of the binary in
+//! parallel) cannot make the count flaky. Each test uses a part of this module.
 #![allow(dead_code)]
 
 pub mod samples;
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
-use std::sync::atomic::{AtomicUsize, Ordering};
 
 struct Counting;
-
-static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
 
 thread_local! {
     /// Set on the test thread: only its allocations are counted.
     static TRACKED: Cell<bool> = const { Cell::new(false) };
+    /// Allocations of this thread while tracked (per thread: the tests of the binary run on
+    /// parallel threads, each counting its own).
+    static ALLOCATIONS: Cell<usize> = const { Cell::new(0) };
 }
 
 fn note() {
     if TRACKED.try_with(Cell::get).unwrap_or(false) {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
+        let _ = ALLOCATIONS.try_with(|n| n.set(n.get() + 1));
     }
 }
 
@@ -80,7 +80,7 @@ pub fn static_site(
     (site, r_e, q_e_b)
 }
 
-/// Allocations counted so far.
+/// Allocations counted so far on the calling thread.
 pub fn count() -> usize {
-    ALLOCATIONS.load(Ordering::SeqCst)
+    ALLOCATIONS.with(Cell::get)
 }
