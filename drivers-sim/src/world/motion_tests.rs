@@ -7,9 +7,7 @@ use super::vehicle::{Intent, VehicleSpec, VehicleWorld, Vibration, VibrationSpec
 use crate::scenario::{Scenario, period_ns};
 use crate::sources::{ImuSource, SampleSource};
 use crate::truth::TruthGenerator;
-use fusion::earth::{GravityModel, WGS84};
-use fusion::strapdown::{ImuIncrement, Integrator, MechanizationConfig, NavState, Strapdown};
-use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
+use nalgebra::Vector3;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha20Rng;
 use std::f64::consts::TAU;
@@ -257,43 +255,11 @@ fn perfect_ins_follows_the_vehicle_on_the_road() {
            { type = "turn", angle_deg = -60.0, duration_s = 10.0 }"#,
         38.0,
     );
-    let mut src = ImuSource::new(&scn, 0);
-    src.model.enabled = false;
-    let mut truth = TruthGenerator::new(&scn);
-    let p0 = *truth.current();
-    let q0 = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(p0.c_n_b));
-    let mut state = NavState::from_geodetic(&WGS84, &p0.geodetic, &p0.v_ned_m_s, &q0);
-    let mut sd = Strapdown::new(MechanizationConfig {
-        ellipsoid: WGS84,
-        gravity: GravityModel::J2,
-        integrator: Integrator::Rk4,
-        coning_sculling: true,
-    });
-    let p = period_ns(scn.spec.imu.rate_hz);
-    let (mut max_pos, mut max_vel, mut max_att) = (0.0f64, 0.0f64, 0.0f64);
     let (mut max_pitch, mut max_slip) = (0.0f64, 0.0f64);
-    let mut k = 1;
-    while k * p <= scn.duration_ns() {
-        let m = src.sample(k * p);
-        sd.step(
-            &mut state,
-            &ImuIncrement {
-                dt_s: m.dt_s,
-                delta_angle_rad: Vector3::from(m.delta_angle_rad),
-                delta_velocity_m_s: Vector3::from(m.delta_velocity_m_s),
-            },
-        );
-        truth.advance_to(k * p);
-        let t = truth.current();
-        max_pos = max_pos.max((state.r_e - t.r_e_m).norm());
-        max_vel = max_vel.max((state.v_e - t.v_e_m_s()).norm());
-        let c_err: Matrix3<f64> =
-            state.q_e_b.to_rotation_matrix().into_inner() * (t.c_e_n * t.c_n_b).transpose();
-        max_att = max_att.max(Rotation3::from_matrix_unchecked(c_err).angle());
+    let (max_pos, max_vel, max_att) = crate::tests::perfect_ins_max_errors(&scn, |t| {
         max_pitch = max_pitch.max(t.roll_pitch_heading_rad.y.abs());
         max_slip = max_slip.max((t.c_n_b.transpose() * t.v_ned_m_s).y.abs());
-        k += 1;
-    }
+    });
     eprintln!(
         "strapdown vs road truth over 38 s: pos {max_pos:.3e} m, vel {max_vel:.3e} m/s, \
          att {max_att:.3e} rad; |pitch| ≤ {max_pitch:.4} rad, |v_y| ≤ {max_slip:.3} m/s"
