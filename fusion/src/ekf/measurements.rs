@@ -349,7 +349,8 @@ pub fn odometer_nhc(
 /// fused with the linear model alone while the heading is still uncertain by a degree and the
 /// velocity by centimetres per second (a start in motion) pins the wrong combination of
 /// states: the bilinear term `ψ × δv` is then 10⁻³ m/s, a hundred times the constraint's σ.
-/// Once the filter has converged the term is far below 10⁻⁵ m/s and changes nothing.
+/// Once the filter has converged the term is about `σψ·σv` (2″ × 3 mm/s ≈ 3·10⁻⁸ m/s), far
+/// below the constraint's σ.
 pub fn nhc_linearisation_covariance(
     nav: &NavState,
     p_vel_att: &SMatrix<f64, 6, 6>,
