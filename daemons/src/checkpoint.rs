@@ -218,6 +218,10 @@ fn write_atomic(kind: FileKind, path: &Path, bytes: &[u8]) -> Result<(), Checkpo
 #[derive(Default)]
 struct Slot {
     pending: Option<NavSnapshot>,
+    /// A written (or superseded) snapshot handed back for the next [`CheckpointWriter::buffer`],
+    /// so the filter thread reuses its covariance's storage instead of allocating one per
+    /// checkpoint.
+    spare: Option<NavSnapshot>,
     closed: bool,
 }
 
@@ -261,6 +265,12 @@ impl CheckpointWriter {
                         }
                     };
                     let r = write(&path, &snap);
+                    {
+                        let mut slot = lock.lock().unwrap_or_else(|e| e.into_inner());
+                        if slot.spare.is_none() {
+                            slot.spare = Some(snap);
+                        }
+                    }
                     let mut st = st2.lock().unwrap_or_else(|e| e.into_inner());
                     match r {
                         Ok(()) => st.written += 1,
@@ -280,11 +290,33 @@ impl CheckpointWriter {
         })
     }
 
-    /// Queue `snapshot` for writing (replacing one still waiting).
+    /// A snapshot to fill and [`submit`](Self::submit): one handed back by the writer thread
+    /// when there is one (no allocation once two have gone round), else a new one.
+    pub fn buffer(&self) -> NavSnapshot {
+        let (lock, _) = &*self.shared;
+        lock.lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .spare
+            .take()
+            .unwrap_or_default()
+    }
+
+    /// Hand back a [`buffer`](Self::buffer) that was not submitted (the engine had no
+    /// estimate), for the next one.
+    pub fn recycle(&self, snapshot: NavSnapshot) {
+        let (lock, _) = &*self.shared;
+        lock.lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .spare
+            .get_or_insert(snapshot);
+    }
+
+    /// Queue `snapshot` for writing (replacing one still waiting, which becomes the spare).
     pub fn submit(&self, snapshot: NavSnapshot) {
         let (lock, cv) = &*self.shared;
         let mut slot = lock.lock().unwrap_or_else(|e| e.into_inner());
-        if slot.pending.replace(snapshot).is_some() {
+        if let Some(old) = slot.pending.replace(snapshot) {
+            slot.spare.get_or_insert(old);
             self.stats
                 .lock()
                 .unwrap_or_else(|e| e.into_inner())

@@ -75,6 +75,17 @@ pub trait NavEngine {
     fn snapshot(&self) -> Option<NavSnapshot> {
         None
     }
+    /// [`NavEngine::snapshot`] written into `out` (false when there is none); an engine that
+    /// can fill it in place without allocating overrides this.
+    fn snapshot_into(&self, out: &mut NavSnapshot) -> bool {
+        match self.snapshot() {
+            Some(s) => {
+                *out = s;
+                true
+            }
+            None => false,
+        }
+    }
     /// What became of the checkpoint the engine was started from.
     fn warm_start_outcome(&self) -> Option<WarmStartOutcome> {
         None
@@ -152,6 +163,9 @@ impl NavEngine for Navigator {
     }
     fn snapshot(&self) -> Option<NavSnapshot> {
         Navigator::snapshot(self)
+    }
+    fn snapshot_into(&self, out: &mut NavSnapshot) -> bool {
+        Navigator::snapshot_into(self, out)
     }
     fn warm_start_outcome(&self) -> Option<WarmStartOutcome> {
         Navigator::warm_start_outcome(self)
@@ -399,9 +413,13 @@ impl<E: NavEngine> State<'_, E> {
         if t_ns - self.last_checkpoint_ns < self.checkpoint_interval_ns {
             return;
         }
-        if let Some(s) = self.engine.snapshot() {
+        // The buffer comes back from the writer thread: no allocation per checkpoint.
+        let mut s = w.buffer();
+        if self.engine.snapshot_into(&mut s) {
             w.submit(s);
             self.last_checkpoint_ns = t_ns;
+        } else {
+            w.recycle(s);
         }
     }
 

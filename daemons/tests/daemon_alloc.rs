@@ -406,3 +406,53 @@ fn daemon_loop_allocations() {
         "{total} not in [{lower}, {upper}]"
     );
 }
+
+/// The daemon's checkpoint hand-off (`CheckpointWriter::buffer`, fill, `submit`) allocates
+/// nothing on the daemon's thread once two snapshots have gone round: the writer thread hands
+/// each written snapshot back, covariance storage and all. (The navigator's own
+/// `snapshot_into` is proven allocation-free in fusion's `no_alloc_filter`.)
+#[test]
+fn checkpoint_hand_off_allocates_nothing() {
+    use sextant_daemons::checkpoint::{CheckpointWriter, read};
+    let dir = std::env::temp_dir().join(format!("sextant-test-alloc-ckpt-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let path = dir.join("navigator.checkpoint");
+    let w = CheckpointWriter::start(path.clone()).expect("writer");
+    let nx = fusion::ekf::NX;
+    // What the daemon does at each checkpoint, with the navigator's fill done by hand.
+    let round = |k: i64| {
+        let mut s = w.buffer();
+        s.gps_time_ns = k;
+        s.q_e_b = [1.0, 0.0, 0.0, 0.0];
+        s.covariance.clear();
+        s.covariance
+            .extend((0..nx * nx).map(|i| if i % (nx + 1) == 0 { 1.0 } else { 0.0 }));
+        w.submit(s);
+        // Wait until it is written, as a checkpoint interval (1 s) would.
+        let t0 = std::time::Instant::now();
+        while w.stats().written + w.stats().failed < k as u64 {
+            assert!(
+                t0.elapsed() < Duration::from_secs(10),
+                "checkpoint not written"
+            );
+            std::thread::sleep(Duration::from_millis(1));
+        }
+    };
+    track_this_thread();
+    round(1);
+    round(2);
+    let a0 = allocations();
+    for k in 3..=22 {
+        round(k);
+    }
+    let used = allocations() - a0;
+    assert_eq!(
+        used, 0,
+        "20 checkpoints allocated {used} times on the daemon's thread"
+    );
+    let stats = w.finish();
+    assert_eq!((stats.written, stats.failed), (22, 0));
+    let back = read(&path).expect("readable").expect("written");
+    assert_eq!(back.gps_time_ns, 22);
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -170,6 +170,57 @@ fn cli_invalid(key: &str, reason: String) -> SimError {
     }
 }
 
+/// The six simulated sensor processes, one binary each (`sextant-sim-imu`, …).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SimDriver {
+    /// `sextant-sim-imu`.
+    Imu,
+    /// `sextant-sim-star-tracker`.
+    StarTracker,
+    /// `sextant-sim-gnss`.
+    Gnss,
+    /// `sextant-sim-odometer`.
+    Odometer,
+    /// `sextant-sim-baro`.
+    Baro,
+    /// `sextant-sim-truth`.
+    Truth,
+}
+
+impl SimDriver {
+    /// The process's name (its binary's and its iceoryx2 node's).
+    pub fn process_name(self) -> &'static str {
+        match self {
+            Self::Imu => "sextant-sim-imu",
+            Self::StarTracker => "sextant-sim-star-tracker",
+            Self::Gnss => "sextant-sim-gnss",
+            Self::Odometer => "sextant-sim-odometer",
+            Self::Baro => "sextant-sim-baro",
+            Self::Truth => "sextant-sim-truth",
+        }
+    }
+}
+
+/// The `main` of a simulated driver process: logging, its command line, [`run`] with its
+/// source. Not generic on purpose: the six binaries link the driver loop compiled once here
+/// instead of each compiling its own copy of it (and of iceoryx2's publisher).
+pub fn main_of(driver: SimDriver) -> Result<RunSummary, SimError> {
+    use crate::sources::{
+        BaroSource, GnssSource, ImuSource, OdometerSource, StarTrackerSource, TruthSource,
+    };
+    init_logging();
+    let args = DriverArgs::parse();
+    let name = driver.process_name();
+    match driver {
+        SimDriver::Imu => run(&args, name, ImuSource::new),
+        SimDriver::StarTracker => run(&args, name, StarTrackerSource::new),
+        SimDriver::Gnss => run(&args, name, GnssSource::new),
+        SimDriver::Odometer => run(&args, name, OdometerSource::new),
+        SimDriver::Baro => run(&args, name, BaroSource::new),
+        SimDriver::Truth => run(&args, name, TruthSource::new),
+    }
+}
+
 /// Run one driver: load the scenario, build the source with `make(scenario, epoch_gps_ns)`,
 /// publish every sample on time as node `node_name`.
 pub fn run<S, F>(args: &DriverArgs, node_name: &str, make: F) -> Result<RunSummary, SimError>

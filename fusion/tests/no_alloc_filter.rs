@@ -69,11 +69,18 @@ fn filter_allocates_nothing_in_steady_state() {
         step(&mut nav_tight, k);
     }
     assert!(nav.is_navigating());
+    // The daemon's checkpoint buffer, filled once before counting (its covariance's storage).
+    let mut snapshot = nav.snapshot().expect("navigating");
     let before = count();
-    for _ in 0..5 * rate {
+    for i in 0..5 * rate {
         k += 1;
         let sol = step(&mut nav, k).expect("navigating");
         assert!(sol.lat_rad.is_finite());
+        if i % rate == 0 {
+            // A checkpoint a second, as the daemon takes one: into the same buffer.
+            assert!(nav.snapshot_into(&mut snapshot));
+            assert_eq!(snapshot.gps_time_ns, sol.header.time_ns);
+        }
         let sol = step(&mut nav_tight, k).expect("navigating");
         assert!(sol.clock_bias_m.is_finite());
     }

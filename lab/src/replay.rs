@@ -105,15 +105,27 @@ pub struct OfflineOptions {
     pub config: Option<PathBuf>,
     /// Show a progress bar.
     pub progress: bool,
+    /// Start the replay's next segment (`recording.part2.mcap`, …) when the current one spans
+    /// this much time of validity, as the live recorder does (`recorder.segment_duration_s`):
+    /// an MCAP writer holds an index entry per chunk until its file is finished, so one file
+    /// for a day-long recording grows the replay's memory with its length. `None`: one file.
+    pub segment_duration: Option<std::time::Duration>,
 }
+
+/// The live recorder's default segment length (`recorder.segment_duration_s`), used by
+/// `sextant replay --offline` unless told otherwise.
+pub const DEFAULT_SEGMENT_DURATION_S: f64 = 1800.0;
 
 /// Figures of an offline replay (the `replay` object of `summary.json`).
 #[derive(Debug, Clone, Default, Serialize, PartialEq)]
 pub struct OfflineSummary {
     /// The recording replayed.
     pub recording: String,
-    /// The recording the replay wrote.
+    /// The recording the replay wrote (its first file).
     pub replayed_recording: String,
+    /// Every file of the replay's recording, in order (the first, then `recording.part2.mcap`,
+    /// …; one file unless it spans more than a segment's duration).
+    pub replayed_segments: Vec<String>,
     /// `embedded` or the path of the configuration file used.
     pub config_source: String,
     /// True when the recording was finished (footer read); false after a crash.
@@ -331,6 +343,7 @@ pub fn replay_offline(opts: &OfflineOptions) -> Result<OfflineSummary, ReplayErr
                 } => Some(unix_minus_monotonic_ns),
                 TimeBase::GpsMonotonic => None,
             },
+            segment_duration: opts.segment_duration,
             ..Default::default()
         },
     )?;
@@ -468,10 +481,11 @@ pub fn replay_offline(opts: &OfflineOptions) -> Result<OfflineSummary, ReplayErr
         && s.solutions_bit_identical == s.solutions_compared
         && s.solutions_compared == s.solutions_recorded
         && (!s.recording_complete || unmatched == 0);
-    let stats = recorder.finish()?;
+    let (stats, segments) = recorder.finish_with_segments()?;
     if stats.dropped > 0 {
         tracing::warn!("the replay's recording dropped {} records", stats.dropped);
     }
+    s.replayed_segments = segments.iter().map(|p| p.display().to_string()).collect();
     Ok(s)
 }
 
@@ -537,6 +551,9 @@ pub fn format_offline_table(s: &OfflineSummary) -> String {
     );
     row("times real time", format!("{:.0}", s.times_real_time));
     row("replay recording", s.replayed_recording.clone());
+    if s.replayed_segments.len() > 1 {
+        row("replay segments", s.replayed_segments.len().to_string());
+    }
     t
 }
 

@@ -64,6 +64,7 @@ fn esbc_hour_imports_and_reads_back() {
             out_dir: dir.join(format!("replay-{mode:?}")),
             config: None,
             progress: false,
+            segment_duration: None,
         });
         let replay = replay.unwrap();
         assert!(replay.recording_complete, "{replay:?}");

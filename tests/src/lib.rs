@@ -359,17 +359,135 @@ pub fn ned_position_error(
     ([n, e, dn], [s[0], s[1], s[2]])
 }
 
-/// Held by every end-to-end test that starts processes, or times or counts what they do, for
+/// How many end-to-end runs share the machine at once. Measured per run: a 600 s default run at
+/// 20× keeps about half a core busy (≈ 24 CPU-s over 42 s of wall time), a stall test a third
+/// of one; two of them fit the two cores the tests are built for without one starving the
+/// other's processes.
+pub const E2E_AT_ONCE: usize = 2;
+
+/// Taken by every end-to-end test that starts processes, or times or counts what they do, for
 /// its whole run. The test files share one test binary (`tests/main.rs`), whose harness runs
-/// tests on parallel threads: this keeps such tests one at a time, so none shares the machine's
-/// cores, the bus or `/dev/shm` with another (a leftover check sees only its own run, a
-/// deadline is not missed because another run took the CPU). A test that panicked while
-/// holding it poisons it; the next one takes it anyway (`unwrap_or_else(|e| e.into_inner())`).
-pub static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
+/// tests on parallel threads: this admits at most [`E2E_AT_ONCE`] runs at a time
+/// ([`Machine::shared`]), and a test that needs the machine to itself takes it whole
+/// ([`Machine::exclusive`]): one that checks that nothing is left in `/dev/shm` (iceoryx2's
+/// files carry no prefix, so another run's would count as leaked), one that measures
+/// latency, memory or a deadline, one that floods the bus. Each test runs on its own prefix
+/// and its own output directory. A test that panicked while holding a slot gives it back as
+/// its guard drops.
+pub static MACHINE: Machine = Machine::new();
+
+/// A counting semaphore of [`E2E_AT_ONCE`] slots with an exclusive mode ([`MACHINE`]).
+pub struct Machine {
+    state: std::sync::Mutex<MachineState>,
+    changed: std::sync::Condvar,
+}
+
+#[derive(Clone, Copy)]
+struct MachineState {
+    /// Shared slots taken.
+    shared: usize,
+    /// A test holds the machine alone.
+    exclusive: bool,
+    /// Tests waiting for the machine alone: new shared takers wait behind them, so an
+    /// exclusive test is not starved by a stream of shared ones.
+    exclusive_waiting: usize,
+}
+
+/// A slot of [`MACHINE`], given back when dropped.
+#[must_use = "the slot is given back when the guard drops"]
+pub struct MachineGuard {
+    exclusive: bool,
+}
+
+impl Machine {
+    const fn new() -> Self {
+        Self {
+            state: std::sync::Mutex::new(MachineState {
+                shared: 0,
+                exclusive: false,
+                exclusive_waiting: 0,
+            }),
+            changed: std::sync::Condvar::new(),
+        }
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, MachineState> {
+        self.state.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// One of the [`E2E_AT_ONCE`] slots, for a run that may share the machine.
+    pub fn shared(&self) -> MachineGuard {
+        let mut st = self.lock();
+        while st.exclusive || st.exclusive_waiting > 0 || st.shared >= E2E_AT_ONCE {
+            st = self.changed.wait(st).unwrap_or_else(|e| e.into_inner());
+        }
+        st.shared += 1;
+        MachineGuard { exclusive: false }
+    }
+
+    /// The whole machine: waits until no other end-to-end test runs.
+    pub fn exclusive(&self) -> MachineGuard {
+        let mut st = self.lock();
+        st.exclusive_waiting += 1;
+        while st.exclusive || st.shared > 0 {
+            st = self.changed.wait(st).unwrap_or_else(|e| e.into_inner());
+        }
+        st.exclusive_waiting -= 1;
+        st.exclusive = true;
+        MachineGuard { exclusive: true }
+    }
+}
+
+impl Drop for MachineGuard {
+    fn drop(&mut self) {
+        let mut st = MACHINE.lock();
+        if self.exclusive {
+            st.exclusive = false;
+        } else {
+            st.shared -= 1;
+        }
+        drop(st);
+        MACHINE.changed.notify_all();
+    }
+}
 
 #[cfg(test)]
 mod tests {
-    use super::repo_root;
+    use super::{E2E_AT_ONCE, MACHINE, repo_root};
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    use std::time::Duration;
+
+    /// At most [`E2E_AT_ONCE`] shared holders at a time, and an exclusive holder alone.
+    #[test]
+    fn the_machine_admits_two_runs_or_one_alone() {
+        static RUNNING: AtomicUsize = AtomicUsize::new(0);
+        static MOST: AtomicUsize = AtomicUsize::new(0);
+        static ALONE_VIOLATED: AtomicUsize = AtomicUsize::new(0);
+        let threads: Vec<_> = (0..8)
+            .map(|i| {
+                std::thread::spawn(move || {
+                    let exclusive = i % 4 == 0;
+                    let _g = if exclusive {
+                        MACHINE.exclusive()
+                    } else {
+                        MACHINE.shared()
+                    };
+                    let n = RUNNING.fetch_add(1, Ordering::SeqCst) + 1;
+                    MOST.fetch_max(n, Ordering::SeqCst);
+                    std::thread::sleep(Duration::from_millis(30));
+                    if exclusive && RUNNING.load(Ordering::SeqCst) != 1 {
+                        ALONE_VIOLATED.fetch_add(1, Ordering::SeqCst);
+                    }
+                    RUNNING.fetch_sub(1, Ordering::SeqCst);
+                })
+            })
+            .collect();
+        for t in threads {
+            t.join().unwrap();
+        }
+        assert_eq!(MOST.load(Ordering::SeqCst), E2E_AT_ONCE);
+        assert_eq!(ALONE_VIOLATED.load(Ordering::SeqCst), 0);
+    }
 
     /// Each crate whose integration tests are one binary (`autotests = false`, a `[[test]]`
     /// whose `tests/main.rs` declares one module per file) compiles every file of its tests

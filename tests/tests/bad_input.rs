@@ -50,7 +50,7 @@ fn messages(path: &Path) -> Vec<(String, serde_json::Value)> {
 
 #[test]
 fn bad_samples_over_iceoryx2_are_counted_never_fused_and_the_daemon_survives() {
-    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let _g = MACHINE.exclusive();
     let dir = tempdir("bad-input");
     let prefix = format!("sextant_bad_{}", std::process::id());
     let rec_path = dir.join("recording.mcap");

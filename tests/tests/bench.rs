@@ -12,7 +12,7 @@ fn f(v: &serde_json::Value, ptr: &str) -> f64 {
 
 #[test]
 fn quick_bench_reports_every_figure() {
-    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let _g = MACHINE.exclusive();
     let out = std::env::temp_dir().join(format!("sextant-bench-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&out);
     let o = Command::new(bin("sextant").unwrap())

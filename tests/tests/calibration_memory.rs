@@ -41,7 +41,7 @@ fn run_once(out: &Path, prefix: &str, calibration: &Path) -> String {
 
 #[test]
 fn the_second_run_starts_from_the_sensor_errors_the_first_one_saved() {
-    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let _g = MACHINE.shared();
     let dir = tempdir("calibration-memory");
     let calibration = dir.join("sensor.calibration");
     let (out1, out2) = (dir.join("first"), dir.join("second"));

@@ -177,7 +177,7 @@ fn assert_kept_navigating(o: &Outcome) {
 
 #[test]
 fn unwritable_output_path_is_reported_and_navigation_continues() {
-    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let _g = MACHINE.shared();
     // A path below a regular file: ENOTDIR for everyone, root included.
     let bad = Path::new("/etc/hostname/sextant/recording.mcap");
     let o = run_fusion("unwritable", bad, None);
@@ -197,7 +197,7 @@ fn unwritable_output_path_is_reported_and_navigation_continues() {
 
 #[test]
 fn full_disk_is_reported_and_navigation_continues() {
-    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let _g = MACHINE.shared();
     if std::fs::OpenOptions::new()
         .write(true)
         .open("/dev/full")
@@ -217,7 +217,7 @@ fn full_disk_is_reported_and_navigation_continues() {
 
 #[test]
 fn disk_filling_up_mid_run_counts_the_drops_and_resumes_in_a_new_segment() {
-    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let _g = MACHINE.shared();
     let dir = tempdir("fsize-out");
     let rec = dir.join("recording.mcap");
     if Command::new("prlimit").arg("--version").output().is_err() {
@@ -413,7 +413,7 @@ fn assert_nothing_died(r: &SmallFsRun, summary: &serde_json::Value) {
 
 #[test]
 fn full_disk_during_a_run_resumes_the_recording_and_the_summary_tells_the_truth() {
-    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let _g = MACHINE.shared();
     // 4 MiB free: full after ≈ 60 s of scenario (65 kB/s), freed 7 s after the start (≈ 125 s
     // of scenario, after the 100 s alignment); the run is 200 s.
     let r = run_on_small_fs("resume", 200.0, 4 * 1024 * 1024, Some(7.0));
@@ -470,7 +470,7 @@ fn full_disk_during_a_run_resumes_the_recording_and_the_summary_tells_the_truth(
 
 #[test]
 fn disk_full_to_the_end_leaves_no_empty_summary_and_fails_the_command() {
-    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let _g = MACHINE.shared();
     // 16 kB free, never freed: no recording, no room for the summary.
     let r = run_on_small_fs("stays-full", 110.0, 16 * 1024, None);
     assert_ne!(r.code, Some(0), "{}\n{}", r.stdout, r.stderr);

@@ -55,7 +55,7 @@ fn log_text(out: &Path) -> String {
 
 #[test]
 fn killed_driver_is_reported_degrades_and_is_used_again_after_restart() {
-    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let _g = MACHINE.shared();
     let out = tempdir("fault-driver");
     let prefix = format!("sextant_fault_drv_{}", std::process::id());
     // Vehicle scenario: alignment ends at 100 s, the drive starts at 120 s; its GNSS outage
@@ -220,7 +220,7 @@ fn killed_driver_is_reported_degrades_and_is_used_again_after_restart() {
 
 #[test]
 fn killed_fusion_is_restarted_with_a_new_recording_and_the_old_one_is_readable() {
-    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let _g = MACHINE.shared();
     let out = tempdir("fault-fusion");
     let prefix = format!("sextant_fault_fus_{}", std::process::id());
     let speed = 20.0;
@@ -296,7 +296,7 @@ fn killed_fusion_is_restarted_with_a_new_recording_and_the_old_one_is_readable()
 
 #[test]
 fn shared_memory_of_a_crashed_run_is_cleaned_at_the_next_start() {
-    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let _g = MACHINE.exclusive();
     let out = tempdir("fault-shm");
     let prefix = format!("sextant_fault_shm_{}", std::process::id());
     let before = iceoryx_entries();

@@ -146,7 +146,7 @@ fn utc_of_gps(gps_ns: i64) -> u64 {
 
 #[test]
 fn live_solution_over_foxglove_websocket_and_clients_never_disturb_navigation() {
-    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let _g = MACHINE.exclusive();
     let out = out_dir("run");
     let prefix = format!("sextant_foxlive_{}", std::process::id());
     let addr: SocketAddr = ([127, 0, 0, 1], free_port()).into();

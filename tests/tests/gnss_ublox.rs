@@ -210,7 +210,7 @@ fn unread(slave: &std::os::fd::OwnedFd) -> i32 {
 
 #[test]
 fn ublox_and_nmea_bytes_through_a_pty_are_fused_and_the_faults_counted() {
-    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let _g = MACHINE.shared();
     let dir = tempdir("gnss-ublox");
     let prefix = format!("sextant_ublox_{}", std::process::id());
     let root = repo_root();

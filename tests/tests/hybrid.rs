@@ -24,7 +24,7 @@ const SPEED: f64 = 20.0;
 
 #[test]
 fn real_gnss_played_into_a_simulated_bench_is_fused() {
-    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let _g = MACHINE.shared();
     let root = repo_root();
     let dir = std::env::temp_dir().join(format!("sextant-hybrid-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);

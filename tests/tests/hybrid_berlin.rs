@@ -8,7 +8,7 @@ use std::process::Command;
 
 #[test]
 fn data_from_a_directory_equals_the_embedded_slice() {
-    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let _g = MACHINE.shared();
     let root = repo_root();
     let dir = std::env::temp_dir().join(format!("sextant-berlin-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);

@@ -37,7 +37,7 @@ const CONVERGE_S: f64 = 10.0;
 
 #[test]
 fn real_pseudoranges_and_odometer_played_live_into_a_simulated_imu() {
-    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let _g = MACHINE.shared();
     let root = repo_root();
     let dir = tempdir("hybrid-berlin-live");
     let data = root.join("tests/data/smartloc-berlin");

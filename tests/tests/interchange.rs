@@ -166,7 +166,7 @@ fn assert_same_solutions(a: &[serde_json::Value], b: &[serde_json::Value], what:
 
 #[test]
 fn csv_and_kfgins_round_trips_reproduce_the_solution() {
-    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let _g = MACHINE.shared();
     let dir = out_dir("roundtrip");
     let source = source_recording(&dir);
     let original = replay(&source, &dir.join("replay-source"));
@@ -286,7 +286,7 @@ fn csv_and_kfgins_round_trips_reproduce_the_solution() {
 /// variances by a relative δ, far below the bound 1e-9 relative used here.
 #[test]
 fn real_rtk_positions_import_row_for_row() {
-    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let _g = MACHINE.shared();
     let dir = out_dir("rtk");
     let slice = repo_root().join("tests/data/kfgins-rtk/GNSS-RTK-slice.txt");
     let rec = dir.join("rtk.mcap");
@@ -330,7 +330,7 @@ fn real_rtk_positions_import_row_for_row() {
 
 #[test]
 fn bad_input_is_reported_with_file_line_and_column() {
-    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let _g = MACHINE.shared();
     let dir = out_dir("bad");
     let imu = dir.join("imu.txt");
     std::fs::write(&imu, "100.000 0 0 0 0 0 0\n100.005 0 0 0 0 0 oops\n").unwrap();

@@ -5,9 +5,9 @@
 //! file here needs its `mod` line below (`every_integration_test_file_is_declared` checks it).
 //!
 //! The files' tests run on the harness's threads in this one process: every test that starts
-//! processes, or times or counts what they do, holds [`sextant_tests::SERIAL`] for its whole
-//! run, so it never shares the machine, the bus or `/dev/shm` with another such test (as when
-//! each file was its own process and the files ran one after another).
+//! processes, or times or counts what they do, takes a slot of [`sextant_tests::MACHINE`] for
+//! its whole run: at most two such runs share the machine, and a test that checks `/dev/shm`
+//! for leftovers or measures latency, memory or a deadline takes the machine alone.
 
 mod bad_input;
 mod bench;

@@ -181,7 +181,7 @@ fn check_location_fix_covariance(fix: &serde_json::Value, nav: &serde_json::Valu
 
 #[test]
 fn default_run_logs_at_utc_validates_against_foxglove_and_replays_in_both_time_bases() {
-    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let _g = MACHINE.shared();
     let out = out_dir("run");
     let prefix = format!("sextant_mcapconv_{}", std::process::id());
     let wall_start = unix_now_ns();

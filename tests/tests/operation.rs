@@ -80,7 +80,7 @@ fn wait_for_pid(prefix: &str, program: &str) -> i32 {
 
 #[test]
 fn one_bus_per_prefix_and_an_earlier_run_is_never_overwritten() {
-    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let _g = MACHINE.shared();
     let dir = tempdir("prefix");
     let prefix = format!("sextant_op_prefix_{}", std::process::id());
     // An earlier run in the default output directory (out/run of the configuration).
@@ -182,7 +182,7 @@ fn sextant_daemons_live(prefix: &str) -> usize {
 
 #[test]
 fn a_failed_log_write_is_never_fatal() {
-    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let _g = MACHINE.shared();
     let full = || {
         std::fs::OpenOptions::new()
             .write(true)
@@ -248,7 +248,7 @@ fn a_failed_log_write_is_never_fatal() {
 
 #[test]
 fn a_short_driver_stall_is_no_deadline_miss_at_the_configured_speed_up() {
-    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let _g = MACHINE.exclusive();
     let dir = tempdir("stall");
     let prefix = format!("sextant_op_stall_{}", std::process::id());
     let out = dir.join("run");

@@ -99,7 +99,7 @@ fn sextant_run(root: &Path, prefix: &str, out: &Path) -> Command {
 
 #[test]
 fn run_records_every_channel_and_navigates_within_sensor_bounds() {
-    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let _g = MACHINE.exclusive();
     let root = repo_root();
     let out = tempdir("pipeline");
     let prefix = format!("sextant_e2e_{}", std::process::id());
@@ -310,7 +310,7 @@ fn run_records_every_channel_and_navigates_within_sensor_bounds() {
 
 #[test]
 fn ctrl_c_leaves_no_process_no_shared_memory_and_a_readable_recording() {
-    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let _g = MACHINE.exclusive();
     let root = repo_root();
     let out = tempdir("sigint");
     let prefix = format!("sextant_sigint_{}", std::process::id());

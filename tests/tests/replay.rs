@@ -106,7 +106,7 @@ fn replay_offline(rec: &Path, out: &Path, config: Option<&Path>) -> std::process
 
 #[test]
 fn offline_replay_reproduces_the_live_solution_bit_for_bit() {
-    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let _g = MACHINE.shared();
     let rec = live_recording();
     let out = out_dir("offline");
     let t0 = Instant::now();
@@ -180,7 +180,7 @@ fn offline_replay_reproduces_the_live_solution_bit_for_bit() {
 
 #[test]
 fn truncated_recording_replays_up_to_the_cut_and_names_the_offset() {
-    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let _g = MACHINE.shared();
     let rec = live_recording();
     let out = out_dir("truncated");
     let bytes = std::fs::read(&rec).unwrap();
@@ -263,7 +263,7 @@ fn epochs_with_a_sample_pending(inputs: &[(String, i64, i64)]) -> std::collectio
 
 #[test]
 fn live_replay_drives_a_real_fusion_daemon_like_the_drivers() {
-    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let _g = MACHINE.shared();
     let rec = live_recording();
     let out = out_dir("live-replay");
     let prefix = format!("sextant_replay_live_{}", std::process::id());

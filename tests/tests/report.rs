@@ -27,7 +27,7 @@ fn ned(r: &[f64], r_true: &[f64], lat: f64, lon: f64) -> [f64; 3] {
 
 #[test]
 fn report_of_a_live_recording_matches_an_independent_computation() {
-    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let _g = MACHINE.shared();
     let out = out_dir("run");
     let prefix = format!("sextant_report_e2e_{}", std::process::id());
     let st = Command::new(bin("sextant").unwrap())

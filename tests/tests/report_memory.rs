@@ -162,7 +162,7 @@ fn report_peak_kib(rec: &Path, out: &Path) -> (u64, serde_json::Value) {
 
 #[test]
 fn report_memory_does_not_grow_with_the_recording() {
-    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let _g = MACHINE.exclusive();
     let dir = tempdir("report-memory");
     let (short, long) = (
         dir.join("short/recording.mcap"),

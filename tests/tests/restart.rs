@@ -267,18 +267,18 @@ fn kill_and_check(tag: &str, delete_checkpoint: bool, stars: bool) -> Figures {
 
 #[test]
 fn killed_fusion_resumes_from_its_checkpoint_while_driving() {
-    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let _g = MACHINE.exclusive();
     kill_and_check("ckpt", false, true);
 }
 
 #[test]
 fn killed_fusion_without_checkpoint_aligns_in_motion_from_the_stars() {
-    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let _g = MACHINE.exclusive();
     kill_and_check("nockpt", true, true);
 }
 
 #[test]
 fn killed_fusion_without_checkpoint_or_stars_aligns_from_the_gnss_heading() {
-    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let _g = MACHINE.exclusive();
     kill_and_check("nostars", true, false);
 }

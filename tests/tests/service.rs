@@ -25,7 +25,7 @@ const WATCHDOG: Duration = Duration::from_secs(1);
 
 #[test]
 fn fusion_notifies_ready_status_watchdog_and_stopping() {
-    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let _g = MACHINE.shared();
     let dir = out_dir("notify");
     let sock_path = dir.join("notify.sock");
     let manager = UnixDatagram::bind(&sock_path).unwrap();

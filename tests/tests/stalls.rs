@@ -153,7 +153,7 @@ fn navigates_at_the_end(rec: &Recording) {
 
 #[test]
 fn stopped_imu_driver_drops_overdue_samples_counts_them_and_navigation_resumes() {
-    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let _g = MACHINE.shared();
     let (out, prefix, mut child) = run("imu", &[]);
     // 40 s simulated (2 s wall) into the drive, stop the IMU driver for 1.5 s of wall time:
     // 30 s of simulated IMU data fall due while it is stopped.
@@ -192,7 +192,7 @@ fn stopped_imu_driver_drops_overdue_samples_counts_them_and_navigation_resumes()
 
 #[test]
 fn stopped_fusion_daemon_publishes_nothing_stale_as_fresh_counts_losses_and_replays_bit_exactly() {
-    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let _g = MACHINE.shared();
     let (out, prefix, mut child) = run("fusion", &[]);
     std::thread::sleep(Duration::from_secs_f64(START_DELAY_S + 2.0));
     let fusion = pid_of(&prefix, "sextant-fusion").expect("fusion running");
@@ -217,7 +217,7 @@ fn stopped_fusion_daemon_publishes_nothing_stale_as_fresh_counts_losses_and_repl
 
 #[test]
 fn hung_driver_is_killed_restarted_and_its_lost_samples_counted() {
-    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let _g = MACHINE.shared();
     let (out, prefix, mut child) = run("hung", &["--heartbeat-timeout", "1"]);
     std::thread::sleep(Duration::from_secs_f64(START_DELAY_S + 1.0));
     let odo = pid_of(&prefix, "sextant-sim-odometer").expect("odometer driver running");
@@ -267,7 +267,7 @@ fn hung_driver_is_killed_restarted_and_its_lost_samples_counted() {
 
 #[test]
 fn fusion_stopped_for_ten_seconds_is_killed_resumes_warm_and_every_loss_is_counted() {
-    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let _g = MACHINE.shared();
     // At 5× the 85 s drive lasts 17 s of wall time; the 10 s stop (50 s simulated) begins
     // 10 s into the drive. The default 5 s heartbeat timeout kills the stopped daemon; the
     // supervisor restarts it and it resumes from its checkpoint (written every

@@ -1,12 +1,8 @@
 //! `sextant-sim-gnss`: simulated driver process (command line: docs/ARCHITECTURE.md, process contract).
 
-use clap::Parser;
-use sextant_drivers_sim::driver::{self, DriverArgs};
-use sextant_drivers_sim::sources::GnssSource;
+use sextant_drivers_sim::driver::{SimDriver, main_of};
 
 fn main() -> anyhow::Result<()> {
-    driver::init_logging();
-    let args = DriverArgs::parse();
-    driver::run(&args, "sextant-sim-gnss", GnssSource::new)?;
+    main_of(SimDriver::Gnss)?;
     Ok(())
 }

@@ -1,12 +1,8 @@
 //! `sextant-sim-truth`: simulated driver process (command line: docs/ARCHITECTURE.md, process contract).
 
-use clap::Parser;
-use sextant_drivers_sim::driver::{self, DriverArgs};
-use sextant_drivers_sim::sources::TruthSource;
+use sextant_drivers_sim::driver::{SimDriver, main_of};
 
 fn main() -> anyhow::Result<()> {
-    driver::init_logging();
-    let args = DriverArgs::parse();
-    driver::run(&args, "sextant-sim-truth", TruthSource::new)?;
+    main_of(SimDriver::Truth)?;
     Ok(())
 }

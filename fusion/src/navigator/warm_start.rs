@@ -58,7 +58,7 @@ impl WarmStartConfig {
 
 /// The navigator's estimate at one IMU epoch, for a warm restart: inertial state, every
 /// sensor-error estimate and the full error-state covariance (layout in [`crate::ekf`]).
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct NavSnapshot {
     /// IMU epoch of the estimate, GPS nanoseconds.
@@ -201,30 +201,41 @@ impl Navigator {
     /// The current estimate as a [`NavSnapshot`] (None before navigation starts). The
     /// covariance is that of the last propagation (at most `covariance_interval_s` old).
     pub fn snapshot(&self) -> Option<NavSnapshot> {
+        let mut out = NavSnapshot::default();
+        self.snapshot_into(&mut out).then_some(out)
+    }
+
+    /// [`Navigator::snapshot`] written into `out` (false, `out` untouched, before navigation
+    /// starts). Allocation-free once `out.covariance` has held a covariance: the daemon hands
+    /// the same few snapshots back and forth with its checkpoint writer.
+    pub fn snapshot_into(&self, out: &mut NavSnapshot) -> bool {
         if self.phase != Phase::Navigating {
-            return None;
+            return false;
         }
         let e = &self.core.ekf;
         let v3 = |v: &Vector3<f64>| [v.x, v.y, v.z];
         let q = self.core.nav.q_e_b;
-        Some(NavSnapshot {
-            gps_time_ns: self.time.ns,
-            r_e_m: v3(&self.core.nav.r_e),
-            v_e_m_s: v3(&self.core.nav.v_e),
-            q_e_b: [q.w, q.i, q.j, q.k],
-            gyro_bias_rad_s: v3(&e.gyro_bias_rad_s),
-            accel_bias_m_s2: v3(&e.accel_bias_m_s2),
-            baro_bias_m: e.baro_bias_m,
-            odo_scale: e.odo_scale,
-            gyro_scale: v3(&e.gyro_scale),
-            accel_scale: v3(&e.accel_scale),
-            kappa_rad: v3(&e.kappa_rad),
-            gyro_misalignment_rad: v3(&e.gyro_misalignment_rad),
-            clock_bias_m: e.clock_bias_m,
-            clock_drift_m_s: e.clock_drift_m_s,
-            clock_initialized: self.core.clock_initialized,
-            covariance: e.p.transpose().iter().copied().collect(),
-        })
+        out.gps_time_ns = self.time.ns;
+        out.r_e_m = v3(&self.core.nav.r_e);
+        out.v_e_m_s = v3(&self.core.nav.v_e);
+        out.q_e_b = [q.w, q.i, q.j, q.k];
+        out.gyro_bias_rad_s = v3(&e.gyro_bias_rad_s);
+        out.accel_bias_m_s2 = v3(&e.accel_bias_m_s2);
+        out.baro_bias_m = e.baro_bias_m;
+        out.odo_scale = e.odo_scale;
+        out.gyro_scale = v3(&e.gyro_scale);
+        out.accel_scale = v3(&e.accel_scale);
+        out.kappa_rad = v3(&e.kappa_rad);
+        out.gyro_misalignment_rad = v3(&e.gyro_misalignment_rad);
+        out.clock_bias_m = e.clock_bias_m;
+        out.clock_drift_m_s = e.clock_drift_m_s;
+        out.clock_initialized = self.core.clock_initialized;
+        // Row-major: nalgebra stores column-major, so the transpose's storage order. P is
+        // symmetric, but the file's layout is documented as row-major and read as such.
+        out.covariance.clear();
+        out.covariance
+            .extend((0..e.p.nrows()).flat_map(|i| (0..e.p.ncols()).map(move |j| e.p[(i, j)])));
+        true
     }
 
     /// Resume from `snapshot` (call before the first sample): its age is checked at the first

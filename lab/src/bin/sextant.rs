@@ -260,6 +260,11 @@ struct ReplayArgs {
     /// configuration embedded in the recording (offline).
     #[arg(long)]
     config: Option<PathBuf>,
+    /// Start the replay's next file (`recording.part2.mcap`, …) every this many seconds of
+    /// recorded time, as the live recorder does, so that replaying days holds the memory of
+    /// one segment (offline; 0: one file).
+    #[arg(long, default_value_t = sextant_lab::replay::DEFAULT_SEGMENT_DURATION_S, value_parser = parse_non_negative_s)]
+    segment_duration_s: f64,
     /// Speed-up of simulated over wall time (live).
     #[arg(long, default_value_t = 1.0)]
     speed: f64,
@@ -281,6 +286,15 @@ struct ReplayArgs {
 }
 
 /// A channel name of `--only`.
+/// A duration in seconds: finite and not negative.
+fn parse_non_negative_s(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
+        Ok(v) => Err(format!("{v} s: a duration is finite and not negative")),
+        Err(e) => Err(format!("{s:?}: {e}")),
+    }
+}
+
 fn parse_channel(s: &str) -> Result<msgs::Channel, String> {
     msgs::Channel::from_name(s).ok_or_else(|| {
         let known: Vec<&str> = msgs::Channel::ALL.iter().map(|c| c.name()).collect();
@@ -1204,6 +1218,8 @@ fn replay(args: ReplayArgs) -> anyhow::Result<()> {
             out_dir: args.out.clone(),
             config: args.config,
             progress: true,
+            segment_duration: (args.segment_duration_s > 0.0)
+                .then(|| std::time::Duration::from_secs_f64(args.segment_duration_s)),
         })?;
         out!("{}", rp::format_offline_table(&s));
         let replayed = std::path::Path::new(&s.replayed_recording);
