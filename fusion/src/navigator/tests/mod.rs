@@ -196,8 +196,10 @@ fn vehicle_violation_is_the_derived_class_figure() {
     // [-1.5, -0.8, 1.0] on a straight road, vertical 0.080 m/s, lateral and forward 0.021
     // m/s, no manoeuvre part; in a turn at a_y = 3 m/s² the rear tyres' slip k_β·V·a_y, in a
     // speed change at a_x = 1 m/s² the squat k_p·V·a_x and the wheel slip k_s·V·a_x.
-    let mut v = VehicleModel::default();
-    v.wheel_lever_arm_b_m = [-1.5, -0.8, 1.0];
+    let v = VehicleModel {
+        wheel_lever_arm_b_m: [-1.5, -0.8, 1.0],
+        ..VehicleModel::default()
+    };
     let straight = v.violation_sigmas_m_s(20.0, 0.0, 0.0);
     let w = straight.white_m_s;
     assert!((w.z - 0.080).abs() < 5e-4, "{w}");
