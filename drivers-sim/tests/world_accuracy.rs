@@ -347,15 +347,31 @@ fn motion_report_line_with(label: &str, scn: &Scenario, cfg: NavigatorConfig) {
     })
     .unwrap();
     let n = h.len() as f64;
+    let health = nav.health();
+    let [odo, baro] = [msgs::SensorId::Odometer, msgs::SensorId::Baro].map(|id| {
+        let s = health[id as usize];
+        (
+            s.nis_sum / s.nis_dof_sum.max(1) as f64,
+            s.fused,
+            s.rejected_gate,
+        )
+    });
+    let c = nav.nhc_health();
     println!(
         "motion world {label}: horizontal RMS {:.3} m, vertical RMS {:.3} m, max horizontal \
          in the 300–360 s GNSS outage {outage_max:.3} m, tilt RMS {:.1}″, heading RMS {:.1}″, \
-         position NEES {:.2}",
+         position NEES {:.2}; NIS/dof odometer {:.2}, constraint {:.2} (rejected {}); baro \
+         fused {} rejected {}",
         rms(&h),
         rms(&v),
         rms(&tilt).to_degrees() * 3600.0,
         rms(&yaw).to_degrees() * 3600.0,
-        nees / n
+        nees / n,
+        odo.0,
+        c.nis_sum / (2 * c.fused.max(1)) as f64,
+        c.rejected_gate,
+        baro.1,
+        baro.2,
     );
 }
 
