@@ -19,7 +19,7 @@ fn default_config() -> NavigatorConfig {
 }
 
 /// `config/filter.toml` told the car it drives: the default scenario's car (no
-/// `[world.vehicle]`) is rigid, its wheel at the IMU, without slip or ride, so the class
+/// `[world.vehicle]`) is rigid, its wheel at the IMU, without slip, ride or vibration, so the class
 /// noise of `[vehicle]` (a passenger car's) is zero for it and only the odometer's white noise
 /// is left to test.
 fn matched_car_config() -> NavigatorConfig {
@@ -32,6 +32,7 @@ fn matched_car_config() -> NavigatorConfig {
     v.ride_heave_sigma_m = 0.0;
     v.ride_pitch_sigma_deg = 0.0;
     v.ride_roll_sigma_deg = 0.0;
+    v.mount_vibration_velocity_sigma_m_s = 0.0;
     c
 }
 

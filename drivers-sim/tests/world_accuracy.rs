@@ -320,6 +320,7 @@ fn rigid(c: &mut NavigatorConfig) {
     v.ride_heave_sigma_m = 0.0;
     v.ride_pitch_sigma_deg = 0.0;
     v.ride_roll_sigma_deg = 0.0;
+    v.mount_vibration_velocity_sigma_m_s = 0.0;
 }
 
 /// One line of the motion world's report with the filter configuration `cfg`.

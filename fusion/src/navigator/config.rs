@@ -331,6 +331,8 @@ pub struct VehicleModel {
     pub ride_roll_sigma_deg: f64,
     /// Natural frequency of the body on its springs, Hz.
     pub ride_frequency_hz: f64,
+    /// 1-σ velocity of the IMU vibrating on its mount (engine orders, road), per axis, m/s.
+    pub mount_vibration_velocity_sigma_m_s: f64,
     /// Correlation time of the violations that follow the driver's manoeuvres (sideslip in a
     /// turn, squat and wheel slip in a speed change), s: they are fused with the inflation of
     /// [`crate::ekf::correlated`]. 0: white.
@@ -348,6 +350,7 @@ impl Default for VehicleModel {
             ride_pitch_sigma_deg: 0.15,
             ride_roll_sigma_deg: 0.15,
             ride_frequency_hz: 1.3,
+            mount_vibration_velocity_sigma_m_s: 0.0015,
             maneuver_correlation_time_s: 5.0,
         }
     }
@@ -390,6 +393,10 @@ impl VehicleModel {
             (self.ride_pitch_sigma_deg, "vehicle.ride_pitch_sigma_deg"),
             (self.ride_roll_sigma_deg, "vehicle.ride_roll_sigma_deg"),
             (
+                self.mount_vibration_velocity_sigma_m_s,
+                "vehicle.mount_vibration_velocity_sigma_m_s",
+            ),
+            (
                 self.maneuver_correlation_time_s,
                 "vehicle.maneuver_correlation_time_s",
             ),
@@ -416,7 +423,8 @@ impl VehicleModel {
     ///   that the wheel does not see, `|l_z|·ω_θ`; the wheel slips by `k_s·a_x·V`;
     /// - lateral: the roll rate's `|l_z|·ω_φ`; the rear tyres slip by `k_β·a_y·V`;
     /// - vertical: heave rate, the body's pitch against the road `V·σ_θ`, the rates times the
-    ///   arm `|l_x|·ω_θ`, `|l_y|·ω_φ`; squat and dive `k_p·a_x·V`.
+    ///   arm `|l_x|·ω_θ`, `|l_y|·ω_φ`; squat and dive `k_p·a_x·V`;
+    /// - every axis: the IMU's vibration on its mount.
     pub fn violation_sigmas_m_s(
         &self,
         speed_m_s: f64,
@@ -429,13 +437,19 @@ impl VehicleModel {
         let w_roll = w0 * self.ride_roll_sigma_deg.to_radians();
         let v = speed_m_s.abs();
         let (ax, ay) = (accel_long_m_s2.abs(), accel_lat_m_s2.abs());
+        let vib2 = self.mount_vibration_velocity_sigma_m_s.powi(2);
         let vertical = ((w0 * self.ride_heave_sigma_m).powi(2)
             + (v * self.ride_pitch_sigma_deg.to_radians()).powi(2)
             + (l[0] * w_pitch).powi(2)
-            + (l[1] * w_roll).powi(2))
-        .sqrt();
+            + (l[1] * w_roll).powi(2)
+            + vib2)
+            .sqrt();
         ViolationSigmas {
-            white_m_s: Vector3::new((l[2] * w_pitch).abs(), (l[2] * w_roll).abs(), vertical),
+            white_m_s: Vector3::new(
+                ((l[2] * w_pitch).powi(2) + vib2).sqrt(),
+                ((l[2] * w_roll).powi(2) + vib2).sqrt(),
+                vertical,
+            ),
             maneuver_m_s: Vector3::new(
                 self.wheel_slip_per_accel_s2_m * ax * v,
                 self.rear_slip_per_lateral_accel_deg.to_radians() * ay * v,
