@@ -213,7 +213,7 @@ fn world_motion_vehicle_breakdown() {
             *v = zero_vehicle(*v);
             v.sideslip_per_lateral_accel_deg = s;
         }),
-        ("odometer wheel (slip, lever arm)", |v| {
+        ("rear wheel (slip, lever arm, kinematic sideslip)", |v| {
             let (s, l) = (v.wheel_slip_per_accel_s2_m, v.odometer_lever_arm_b_m);
             *v = zero_vehicle(*v);
             v.wheel_slip_per_accel_s2_m = s;
@@ -225,7 +225,12 @@ fn world_motion_vehicle_breakdown() {
         let mut w = scn.spec.world.unwrap();
         keep(w.vehicle.as_mut().unwrap());
         scn.spec.world = Some(w);
-        motion_report_line(&format!("vehicle: {label}"), &scn);
+        // Each part is a car of its own: only the last reads its odometer off the IMU.
+        let mut cfg = filter_config();
+        if label.starts_with("rear wheel") {
+            cfg.vehicle.wheel_lever_arm_b_m = WHEEL_TAPE_B_M;
+        }
+        motion_report_line_with(&format!("vehicle: {label}"), &scn, cfg);
     }
     // The car with each other effect: which ones compound.
     for other in ["vibration", "gravity", "imu", "star_tracker", "baro"] {
@@ -253,11 +258,76 @@ fn zero_vehicle(
     }
 }
 
-/// One line of the motion world's report: the shipped loose filter on `scn`, after 150 s.
+/// The odometer wheel's contact point from the IMU on the car of `[world.vehicle]`, as a user
+/// measures it with a tape (`config/filter.toml` `[vehicle]` comment), body axes, m.
+const WHEEL_TAPE_B_M: [f64; 3] = [-1.5, -0.8, 1.0];
+
+/// One line of the motion world's report: the shipped loose filter on `scn`, after 150 s,
+/// told the wheel's lever arm when the car is the one of `[world.vehicle]` (the matched car
+/// reads its odometer at the IMU).
 fn motion_report_line(label: &str, scn: &Scenario) {
+    let mut cfg = filter_config();
+    if scn.spec.world.as_ref().and_then(|w| w.vehicle()).is_some() {
+        cfg.vehicle.wheel_lever_arm_b_m = WHEEL_TAPE_B_M;
+    }
+    motion_report_line_with(label, scn, cfg);
+}
+
+/// The filter's vehicle model, part by part, on the car of `[world.vehicle]` (and with every
+/// motion-world table): the rigid model at the IMU (no lever arm, no class noise: the
+/// constraint σ alone, as before the vehicle model), the lever arm alone, the class noise
+/// alone, both.
+#[test]
+#[ignore = "600 s of 200 Hz simulation per line: minutes in release; a report, not a CI test"]
+fn world_motion_vehicle_model() {
+    type Model = fn(&mut NavigatorConfig);
+    let models: [(&str, Model); 4] = [
+        ("rigid at the IMU", |c| {
+            c.vehicle.wheel_lever_arm_b_m = [0.0; 3];
+            rigid(c);
+        }),
+        ("lever arm, no class noise", rigid),
+        ("class noise at the IMU", |c| {
+            c.vehicle.wheel_lever_arm_b_m = [0.0; 3]
+        }),
+        ("lever arm and class noise", |_| {}),
+    ];
+    let all = [
+        "vehicle",
+        "vibration",
+        "gravity",
+        "imu",
+        "star_tracker",
+        "baro",
+    ];
+    for on in [&["vehicle"][..], &["vehicle", "baro"], &all] {
+        let scn = vehicle_in_motion(on);
+        for (label, model) in models {
+            let mut cfg = filter_config();
+            cfg.vehicle.wheel_lever_arm_b_m = WHEEL_TAPE_B_M;
+            model(&mut cfg);
+            motion_report_line_with(&format!("{on:?}, filter {label}"), &scn, cfg);
+        }
+    }
+}
+
+/// The vehicle class's noise switched off: a rigid car, the constraint σ alone.
+fn rigid(c: &mut NavigatorConfig) {
+    let v = &mut c.vehicle;
+    v.rear_slip_per_lateral_accel_deg = 0.0;
+    v.pitch_per_accel_deg = 0.0;
+    v.wheel_slip_per_accel_s2_m = 0.0;
+    v.ride_heave_sigma_m = 0.0;
+    v.ride_pitch_sigma_deg = 0.0;
+    v.ride_roll_sigma_deg = 0.0;
+    v.mount_vibration_velocity_sigma_m_s = 0.0;
+}
+
+/// One line of the motion world's report with the filter configuration `cfg`.
+fn motion_report_line_with(label: &str, scn: &Scenario, cfg: NavigatorConfig) {
     let sim = OfflineSim::new(scn);
     let epoch = sim.epoch_ns();
-    let mut nav = Navigator::new(filter_config()).unwrap();
+    let mut nav = Navigator::new(cfg).unwrap();
     let (mut h, mut v, mut yaw, mut tilt, mut nees) =
         (Vec::new(), Vec::new(), Vec::new(), Vec::new(), 0.0);
     let mut outage_max = 0.0f64;
@@ -278,14 +348,98 @@ fn motion_report_line(label: &str, scn: &Scenario) {
     })
     .unwrap();
     let n = h.len() as f64;
+    let health = nav.health();
+    let [odo, baro] = [msgs::SensorId::Odometer, msgs::SensorId::Baro].map(|id| {
+        let s = health[id as usize];
+        (
+            s.nis_sum / s.nis_dof_sum.max(1) as f64,
+            s.fused,
+            s.rejected_gate,
+        )
+    });
+    let c = nav.nhc_health();
     println!(
         "motion world {label}: horizontal RMS {:.3} m, vertical RMS {:.3} m, max horizontal \
          in the 300–360 s GNSS outage {outage_max:.3} m, tilt RMS {:.1}″, heading RMS {:.1}″, \
-         position NEES {:.2}",
+         position NEES {:.2}; NIS/dof odometer {:.2}, constraint {:.2} (rejected {}); baro \
+         fused {} rejected {}",
         rms(&h),
         rms(&v),
         rms(&tilt).to_degrees() * 3600.0,
         rms(&yaw).to_degrees() * 3600.0,
-        nees / n
+        nees / n,
+        odo.0,
+        c.nis_sum / (2 * c.fused.max(1)) as f64,
+        c.rejected_gate,
+        baro.1,
+        baro.2,
     );
+}
+
+/// The whole motion world with the rigid filter (the constraint σ alone at the IMU) and with
+/// the vehicle model: vertical error, its σ and the vertical velocity error every 50 s, then
+/// the gate rejections of GNSS and baro and the constraint's NIS per dof — where the
+/// interaction of the car with the other effects goes.
+#[test]
+#[ignore = "600 s of 200 Hz simulation per line: minutes in release; a report, not a CI test"]
+fn world_motion_interaction() {
+    let all = [
+        "vehicle",
+        "vibration",
+        "gravity",
+        "imu",
+        "star_tracker",
+        "baro",
+    ];
+    let scn = vehicle_in_motion(&all);
+    type Model = fn(&mut NavigatorConfig);
+    let models: [(&str, Model); 2] = [
+        ("rigid at the IMU", |c| {
+            c.vehicle.wheel_lever_arm_b_m = [0.0; 3];
+            rigid(c);
+        }),
+        ("lever arm and class noise", |_| {}),
+    ];
+    for (label, model) in models {
+        let mut cfg = filter_config();
+        cfg.vehicle.wheel_lever_arm_b_m = WHEEL_TAPE_B_M;
+        model(&mut cfg);
+        let sim = OfflineSim::new(&scn);
+        let epoch = sim.epoch_ns();
+        let mut nav = Navigator::new(cfg).unwrap();
+        let mut next = 150.0;
+        run_navigator(sim, epoch, &mut nav, |p: &RunPoint| {
+            if p.t_s >= next {
+                next += 50.0;
+                let c = p.c_e_n.transpose() * p.pos_cov_e_m2 * p.c_e_n;
+                let ab = p.accel_bias_true_m_s2 - p.accel_bias_est_m_s2;
+                println!(
+                    "{label} t {:.0} s: down error {:.3} m (σ {:.3}), down velocity error \
+                     {:.4} m/s, accel bias error z {:.1} µg",
+                    p.t_s,
+                    p.pos_err_ned_m().z,
+                    c[(2, 2)].sqrt(),
+                    p.vel_err_ned_m_s().z,
+                    ab.z / 9.80665e-6
+                );
+            }
+        })
+        .unwrap();
+        let h = nav.health();
+        let g = h[msgs::SensorId::Gnss as usize];
+        let b = h[msgs::SensorId::Baro as usize];
+        let c = nav.nhc_health();
+        println!(
+            "{label}: GNSS fused {} rejected {}, baro fused {} rejected {}, constraint NIS/dof \
+             {:.3} over {} (rejected {}), baro bias estimate {:.2} m",
+            g.fused,
+            g.rejected_gate,
+            b.fused,
+            b.rejected_gate,
+            c.nis_sum / (2 * c.fused.max(1)) as f64,
+            c.fused,
+            c.rejected_gate,
+            nav.baro_bias_m()
+        );
+    }
 }

@@ -264,7 +264,14 @@ fn bench(c: &mut Criterion) {
     });
     c.bench_function("update_odometer_nhc", |b| {
         b.iter(|| {
-            let m = ekf::odometer_nhc(black_box(&nav), 0.0, 10.2, 0.05, 0.05);
+            let m = ekf::odometer_nhc(
+                black_box(&nav),
+                &ekf::WheelContact::AT_IMU,
+                0.0,
+                10.2,
+                0.05,
+                0.05,
+            );
             ekf::update(&f.p, &m, gates.threshold(3))
         })
     });

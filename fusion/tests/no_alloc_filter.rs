@@ -187,14 +187,14 @@ fn filter_allocates_nothing_in_steady_state() {
         .nis,
         ekf::update(
             &p,
-            &ekf::odometer_nhc(&state, 0.0, 0.0, 0.05, 0.05),
+            &ekf::odometer_nhc(&state, &ekf::WheelContact::AT_IMU, 0.0, 0.0, 0.05, 0.05),
             gates.threshold(3),
         )
         .residual
         .nis,
         ekf::update(
             &p,
-            &ekf::odometer_speed(&state, 0.0, 0.0, 0.05),
+            &ekf::odometer_speed(&state, &ekf::WheelContact::AT_IMU, 0.0, 0.0, 0.05),
             gates.threshold(1),
         )
         .residual

@@ -173,8 +173,10 @@ fn vibration_magnitude_and_correlation() {
 
 /// The odometer reads the wheel: accelerating from 0 to 10 m/s on a straight level road adds
 /// the slip `k_s·∫V V̇ dt = k_s·V²/2`; a 90° right turn at 10 m/s adds `−l_y·Δψ` (the rear-left
-/// wheel runs on the outside); the body points into the turn by `k_β·Vψ̇`, so the velocity has
-/// a body-y component `−V sin β`; the body squats by `k_p·V̇` and rolls out by `k_r·Vψ̇`.
+/// wheel runs on the outside); the body's slip angle at the IMU is `β = k_β·Vψ̇ + x_r·ψ̇/V`
+/// (rear tyre slip, and the IMU ahead of the rear axle), so the velocity has a body-y
+/// component `−V sin β`, and the rear axle's lateral velocity is the tyre slip's alone; the
+/// body squats by `k_p·V̇` and rolls out by `k_r·Vψ̇`.
 /// Terrain and ride are switched off to isolate the effects (their statistics are tested above).
 #[test]
 fn odometer_wheel_slip_lever_arm_sideslip_and_load_transfer() {
@@ -217,8 +219,12 @@ fn odometer_wheel_slip_lever_arm_sideslip_and_load_transfer() {
     // Mid-turn (13 s): ψ̇ = 2·(π/2)/10 s, lateral acceleration V·ψ̇.
     truth.advance_to(13_000_000_000);
     let p = *truth.current();
-    let a_lat = 10.0 * std::f64::consts::PI / 10.0;
-    let beta = vs.sideslip_per_lateral_accel_deg.to_radians() * a_lat;
+    let psi_rate = std::f64::consts::PI / 10.0;
+    let a_lat = 10.0 * psi_rate;
+    // Tyre slip at the rear axle plus the IMU's place ahead of it (x_r·ψ̇/V, regularised).
+    let inv_v = 10.0 / (100.0 + crate::world::vehicle::KINEMATIC_SPEED_FLOOR_M_S.powi(2));
+    let beta = vs.sideslip_per_lateral_accel_deg.to_radians() * a_lat
+        + vs.odometer_lever_arm_b_m[0] * psi_rate * inv_v;
     let roll = -vs.roll_per_lateral_accel_deg.to_radians() * a_lat;
     // Horizontal velocity, body yawed by β and rolled by φ: v_y^b = −V sin β cos φ.
     let v_b = p.c_n_b.transpose() * p.v_ned_m_s;
@@ -227,6 +233,17 @@ fn odometer_wheel_slip_lever_arm_sideslip_and_load_transfer() {
         "{v_b}"
     );
     assert!((p.roll_pitch_heading_rad.x - roll).abs() < 1e-9);
+    // At the rear axle (ω × l with the body's rate; mid-turn β̇ = 0 on the raised cosine's
+    // crest) the lateral velocity is the tyre slip's −V·k_β·a_y, up to O(β³) ≈ 1e-5 m/s.
+    let l = nalgebra::Vector3::from(vs.odometer_lever_arm_b_m);
+    let w_nb_b = p.w_ib_b_rad_s; // the Earth's rate adds ~1e-4 m/s over 1.5 m
+    let v_axle = v_b + w_nb_b.cross(&l);
+    let slip = -10.0 * vs.sideslip_per_lateral_accel_deg.to_radians() * a_lat;
+    assert!((v_axle.y - slip).abs() < 5e-4, "{v_axle} vs {slip}");
+    assert!(
+        (v_b.y - slip).abs() > 0.1,
+        "the IMU itself slips by the geometry"
+    );
     // Over the whole turn (8–18 s) the wheel adds −l_y·Δψ_b to the body-x distance; the
     // sideslip is zero at both ends, so Δψ_b = 90°.
     let mut truth = TruthGenerator::new(&scn);

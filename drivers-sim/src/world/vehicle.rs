@@ -12,9 +12,14 @@
 //!   `−k_r·Vψ̇`; **ride**: heave, pitch and roll of the body on its springs excited by the
 //!   road, narrow-band processes around the body's natural frequency
 //!   ([`SpectralProcess::narrow_band`]) scaled by `V²/(V² + V½²)` (no ride when stopped).
-//! - **Sideslip**: the body points into the turn by `β = k_β·Vψ̇` (a car's body slip angle
-//!   grows with lateral acceleration), so the velocity has a body-y component: the
-//!   non-holonomic constraint is violated as on a real car.
+//! - **Sideslip**: the odometer wheel is a rear (non-steered) wheel, and the rear axle (at the
+//!   wheel's `x`) is the point whose velocity leaves the body's x–z plane only by the rear
+//!   tyres' slip angle `k_β·a_y` (lateral acceleration `a_y = Vψ̇`; the slip angle of a tyre
+//!   grows with its lateral force). The IMU, `−x_r` ahead of the rear axle, sees in addition
+//!   the turn's geometry: the body's slip angle there is `β = k_β·a_y + x_r·ψ̇/V`, so its
+//!   velocity has a body-y component `−V sin β` even in a slow turn. A non-holonomic constraint
+//!   is therefore violated at the IMU by the geometry, and at the rear axle by the slip alone,
+//!   as on a real car.
 //! - **Odometer wheel**: the wheel at body `l` rolls with the road speed of its contact point,
 //!   `(V cos β − ψ̇_b l_y)·√(1 + g²)` (a rigid body's yaw makes the inner wheel slower), times
 //!   `1 + k_s·V̇`, the longitudinal slip ratio of a driven wheel (tyre longitudinal stiffness:
@@ -53,7 +58,8 @@ pub struct VehicleSpec {
     pub pitch_per_accel_deg: f64,
     /// Body roll out of the turn per m/s² of lateral acceleration, deg.
     pub roll_per_lateral_accel_deg: f64,
-    /// Body sideslip into the turn per m/s² of lateral acceleration, deg.
+    /// Rear tyres' slip angle per m/s² of lateral acceleration (the body points into the turn
+    /// by it at the rear axle), deg.
     pub sideslip_per_lateral_accel_deg: f64,
     /// 1-σ ride heave at speed, m.
     pub ride_heave_sigma_m: f64,
@@ -69,8 +75,9 @@ pub struct VehicleSpec {
     pub ride_half_speed_m_s: f64,
     /// Longitudinal slip ratio of the odometer wheel per m/s² of acceleration, s²/m.
     pub wheel_slip_per_accel_s2_m: f64,
-    /// Odometer wheel's contact point from the IMU, body axes, m (only `y` changes the
-    /// reading of a rigid car: the wheel's forward speed is `V − ψ̇ l_y`).
+    /// Odometer wheel's contact point from the IMU, body axes, m: a rear wheel, so `x` is also
+    /// the rear axle's (the kinematic sideslip at the IMU), and `y` changes the reading (the
+    /// wheel's forward speed is `V cos β − ψ̇_b l_y`).
     pub odometer_lever_arm_b_m: [f64; 3],
 }
 
@@ -116,6 +123,10 @@ pub struct VehicleState {
     /// Rolling speed the odometer wheel reads, m/s.
     pub odometer_speed_m_s: f64,
 }
+
+/// Speed below which the kinematic sideslip's `1/V` is regularised as `V/(V² + v₀²)`, m/s
+/// (turns happen at speed; this only keeps a turn on the spot finite).
+pub const KINEMATIC_SPEED_FLOOR_M_S: f64 = 0.1;
 
 /// One realisation of the vehicle's road and body.
 #[derive(Debug, Clone, PartialEq)]
@@ -189,8 +200,17 @@ impl VehicleWorld {
             md * h[0] + m * h[1],
             mdd * h[0] + 2.0 * md * h[1] + m * h[2],
         ];
-        let beta = kb * a_lat;
-        let heading_rate = psid + kb * a_lat_d;
+        // Body slip angle at the IMU: the rear axle's tyre slip `k_β·a_y` plus the geometry of
+        // a point `−x_r` ahead of the rear axle (`x_r` < 0 behind the IMU), whose velocity
+        // turns into the curve by `−x_r·κ` (κ = ψ̇/V, the path's curvature, regularised
+        // below `KINEMATIC_SPEED_FLOOR_M_S`): the rear axle's lateral velocity is then
+        // `−V·sin(k_β·a_y)` up to the transient `x_r·β̇` and `O(β³)`.
+        let x_r = sp.odometer_lever_arm_b_m[0];
+        let e2 = KINEMATIC_SPEED_FLOOR_M_S * KINEMATIC_SPEED_FLOOR_M_S;
+        let qk = v * v + e2;
+        let (inv_v, inv_v_d) = (v / qk, vd * (e2 - v * v) / (qk * qk));
+        let beta = kb * a_lat + x_r * psid * inv_v;
+        let heading_rate = psid + kb * a_lat_d + x_r * (psidd * inv_v + psid * inv_v_d);
         let kinematics = Kinematics {
             speed_m_s: v,
             speed_rate_m_s2: vd,

@@ -3,7 +3,8 @@
 //! [`gnss_position`], [`gnss_velocity`] (loose), [`gnss_pseudorange`], [`gnss_range_rate`]
 //! (tight, one satellite each, paper 003), [`star_attitude`] (with boresight κ),
 //! [`gnss_baseline_attitude`] (dual-baseline GNSS attitude, paper 003),
-//! [`baro_height`], [`odometer_nhc`] / [`odometer_speed`], [`zero_velocity`]; each returns a
+//! [`baro_height`], [`odometer_nhc`] / [`odometer_speed`] (at the wheel, [`WheelContact`]),
+//! [`zero_velocity`]; each returns a
 //! [`Measurement`] (innovation, `H`, `R`) evaluated at the inertial state of the sample's time
 //! of validity.
 
@@ -304,18 +305,61 @@ fn body_velocity_jacobians(nav: &NavState) -> (Vector3<f64>, Matrix3<f64>, Matri
     (c_b_e * nav.v_e, c_b_e, c_b_e * skew(&nav.v_e))
 }
 
+/// Where the odometer wheel touches the road and how the body turns: the lever arm from the
+/// IMU to the wheel's contact point in body axes (m, configured: `vehicle.wheel_lever_arm_b_m`)
+/// and the body's inertial angular rate (rad/s, body axes; the last bias-corrected gyro rate).
+///
+/// The odometer reads the forward speed of the contact point, and a car's non-holonomic
+/// constraint (no lateral, no vertical velocity) holds at its rear axle, not at the IMU: in a
+/// turn the IMU ahead of the rear axle moves sideways by `−ψ̇·l_x`, and a wheel beside it rolls
+/// faster or slower by `−ψ̇·l_y`. The contact point, rigidly attached to the body, moves with
+/// `v_c^b = C_b_e v_e + ω_eb^b × l` (`ω_eb^b = ω_ib^b − C_b_e ω_ie^e`). With
+/// `C_b_e = Ĉ_b_e (I − [ψ×])` (module [`super`]):
+/// `δv_c^b = Ĉ_b_e δv + Ĉ_b_e [v̂×] ψ + [l×] Ĉ_b_e [ω_ie×] ψ`. The gyro-bias term
+/// (`[l×] δb_g`, 10⁻⁸ m/s for a navigation-grade bias and 2 m) is left out. The body's
+/// suspension pitch and roll are rotations the contact point does *not* share; their rates
+/// times the lever arm are part of the constraint's noise (`config/filter.toml` `[vehicle]`).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct WheelContact {
+    /// Lever arm IMU → odometer wheel contact point, body axes, m.
+    pub lever_arm_b_m: Vector3<f64>,
+    /// Inertial angular rate of the body, body axes, rad/s.
+    pub w_ib_b_rad_s: Vector3<f64>,
+}
+
+impl WheelContact {
+    /// A wheel at the IMU (no lever arm).
+    pub const AT_IMU: Self = Self {
+        lever_arm_b_m: Vector3::new(0.0, 0.0, 0.0),
+        w_ib_b_rad_s: Vector3::new(0.0, 0.0, 0.0),
+    };
+
+    /// Velocity of the contact point relative to the Earth in body axes (m/s) and its
+    /// Jacobians `∂δv_c^b/∂δv`, `∂δv_c^b/∂ψ` at the inertial state `nav`.
+    pub fn body_velocity(&self, nav: &NavState) -> (Vector3<f64>, Matrix3<f64>, Matrix3<f64>) {
+        let (v_b, h_v, h_psi) = body_velocity_jacobians(nav);
+        let w_ie = crate::earth::WGS84.omega_ie_e();
+        let l = self.lever_arm_b_m;
+        let w_eb_b = self.w_ib_b_rad_s - h_v * w_ie;
+        let v_c = v_b + w_eb_b.cross(&l);
+        let h_psi_c = h_psi + skew(&l) * h_v * skew(&w_ie);
+        (v_c, h_v, h_psi_c)
+    }
+}
+
 /// Odometer speed along body x plus non-holonomic constraints (zero lateral and vertical body
-/// velocity) for a ground vehicle: `z = [speed, 0, 0]` (body, m/s), noise
-/// `diag(σ_odo², σ_nhc², σ_nhc²)`. The odometer reads `(1 + k)·v_x`, `k` the scale-factor
-/// state with estimate `odo_scale`.
+/// velocity) for a ground vehicle, both at the odometer wheel's contact point `wheel`:
+/// `z = [speed, 0, 0]` (body, m/s), noise `diag(σ_odo², σ_nhc², σ_nhc²)`. The odometer reads
+/// `(1 + k)·v_c,x`, `k` the scale-factor state with estimate `odo_scale`.
 pub fn odometer_nhc(
     nav: &NavState,
+    wheel: &WheelContact,
     odo_scale: f64,
     speed_m_s: f64,
     sigma_speed_m_s: f64,
     sigma_nhc_m_s: f64,
 ) -> Measurement<3> {
-    let (v_b, h_v, h_psi) = body_velocity_jacobians(nav);
+    let (v_c, h_v, h_psi) = wheel.body_velocity(nav);
     let mut h = SMatrix::<f64, 3, NX>::zeros();
     h.fixed_view_mut::<3, 3>(0, idx::VEL).copy_from(&h_v);
     h.fixed_view_mut::<3, 3>(0, idx::ATT).copy_from(&h_psi);
@@ -323,9 +367,9 @@ pub fn odometer_nhc(
     for j in 0..NX {
         h[(0, j)] *= scale;
     }
-    h[(0, idx::ODO)] = v_b.x;
+    h[(0, idx::ODO)] = v_c.x;
     Measurement {
-        innovation: Vector3::new(speed_m_s - scale * v_b.x, -v_b.y, -v_b.z),
+        innovation: Vector3::new(speed_m_s - scale * v_c.x, -v_c.y, -v_c.z),
         h,
         r: Matrix3::from_diagonal(&Vector3::new(
             sigma_speed_m_s.powi(2),
@@ -371,23 +415,25 @@ pub fn nhc_linearisation_covariance(
     nalgebra::Matrix2::from_fn(|i, j| 0.5 * (hp[i] * hp[j]).trace())
 }
 
-/// Odometer speed along body x alone (non-holonomic constraints switched off).
+/// Odometer speed along body x alone (non-holonomic constraints switched off), at the wheel's
+/// contact point ([`WheelContact`]).
 pub fn odometer_speed(
     nav: &NavState,
+    wheel: &WheelContact,
     odo_scale: f64,
     speed_m_s: f64,
     sigma_speed_m_s: f64,
 ) -> Measurement<1> {
-    let (v_b, h_v, h_psi) = body_velocity_jacobians(nav);
+    let (v_c, h_v, h_psi) = wheel.body_velocity(nav);
     let scale = 1.0 + odo_scale;
     let mut h = SMatrix::<f64, 1, NX>::zeros();
     h.fixed_view_mut::<1, 3>(0, idx::VEL)
         .copy_from(&(h_v.fixed_rows::<1>(0) * scale));
     h.fixed_view_mut::<1, 3>(0, idx::ATT)
         .copy_from(&(h_psi.fixed_rows::<1>(0) * scale));
-    h[(0, idx::ODO)] = v_b.x;
+    h[(0, idx::ODO)] = v_c.x;
     Measurement {
-        innovation: SVector::<f64, 1>::new(speed_m_s - scale * v_b.x),
+        innovation: SVector::<f64, 1>::new(speed_m_s - scale * v_c.x),
         h,
         r: SMatrix::<f64, 1, 1>::new(sigma_speed_m_s.powi(2)),
     }
@@ -629,18 +675,72 @@ mod tests {
 
     #[test]
     fn odometer_jacobian_matches_finite_difference() {
+        // Estimate moved by dx (velocity, attitude): the innovations of the odometer and the
+        // constraints at a wheel 1.8 m from the IMU must change by H·dx up to second order:
+        // |δv|·|ψ| ≈ 3e-6 m/s and |ψ|²·|v|/2 ≈ 1e-7 m/s here. The attitude's lever-arm term
+        // (|[l×] C [ω_ie×] ψ| ≈ 1e-8 m/s) is below that; the check against the IMU's model
+        // shows the lever arm's velocity itself is in the prediction.
         let mut nav = nav_at_origin();
         nav.v_e = Vector3::new(1.0, 10.0, -2.0);
         nav.q_e_b = UnitQuaternion::from_euler_angles(0.2, 0.1, 1.3);
-        let m0 = odometer_nhc(&nav, 0.0, 5.0, 0.1, 0.1);
+        let wheel = WheelContact {
+            lever_arm_b_m: Vector3::new(-1.5, -0.8, 1.0),
+            w_ib_b_rad_s: Vector3::new(0.02, -0.01, 0.25),
+        };
+        let m0 = odometer_nhc(&nav, &wheel, 0.002, 5.0, 0.1, 0.1);
+        let s0 = odometer_speed(&nav, &wheel, 0.002, 5.0, 0.1);
         let mut dx = StateVector::zeros();
-        dx[idx::VEL + 1] = 0.01;
-        dx[idx::ATT + 2] = 1e-5;
+        dx.fixed_rows_mut::<3>(idx::VEL)
+            .copy_from(&Vector3::new(0.01, -0.02, 0.005));
+        dx.fixed_rows_mut::<3>(idx::ATT)
+            .copy_from(&Vector3::new(1e-4, -5e-5, 1.5e-4));
+        dx[idx::ODO] = 1e-4;
         let mut nav2 = nav;
         correct_nav_state(&mut nav2, &dx);
-        let m1 = odometer_nhc(&nav2, 0.0, 5.0, 0.1, 0.1);
-        // Innovation shrinks by H·dx when the estimate moves by dx.
+        let k2 = 0.002 + 1e-4;
+        let m1 = odometer_nhc(&nav2, &wheel, k2, 5.0, 0.1, 0.1);
+        let s1 = odometer_speed(&nav2, &wheel, k2, 5.0, 0.1);
         let d = m0.innovation - m1.innovation - m0.h * dx;
-        assert!(d.norm() < 1e-6, "{d}"); // second order: |δv|·|ψ| = 1e-7
+        assert!(d.norm() < 1e-5, "{d}");
+        let d1 = s0.innovation[0] - s1.innovation[0] - (s0.h * dx)[0];
+        assert!((d1 - d[0]).abs() < 1e-12 && (s0.h - m0.h.fixed_rows::<1>(0)).norm() < 1e-15);
+        // The attitude columns alone: ψ moves the contact point's body velocity by more than
+        // the tolerance (|v|·|ψ| ≈ 1e-3 m/s), so a wrong H_ψ fails.
+        let mut dpsi = StateVector::zeros();
+        dpsi.fixed_rows_mut::<3>(idx::ATT)
+            .copy_from(&dx.fixed_rows::<3>(idx::ATT));
+        let mut nav3 = nav;
+        correct_nav_state(&mut nav3, &dpsi);
+        let m3 = odometer_nhc(&nav3, &wheel, 0.002, 5.0, 0.1, 0.1);
+        let e = m0.innovation - m3.innovation - m0.h * dpsi;
+        assert!(e.norm() < 1e-6 && (m0.h * dpsi).norm() > 5e-4, "{e}");
+        // The wheel's prediction is not the IMU's.
+        let at_imu = odometer_nhc(&nav, &WheelContact::AT_IMU, 0.002, 5.0, 0.1, 0.1);
+        assert!((at_imu.innovation - m0.innovation).norm() > 0.1);
+    }
+
+    #[test]
+    fn wheel_velocity_in_a_steady_turn_is_the_closed_form() {
+        // Steady right turn about body z at V = 10 m/s along body x (the IMU), yaw rate
+        // relative to the Earth r = 0.2 rad/s (the gyro reads r plus the Earth's rate in body
+        // axes): the rigid body's contact point at l moves with (V − r·l_y, r·l_x, 0) in body
+        // axes. The Earth's rate (|ω_ie × l| ≈ 1e-4 m/s) must cancel exactly.
+        let mut nav = nav_at_origin();
+        nav.q_e_b = UnitQuaternion::from_euler_angles(0.0, 0.0, 0.7);
+        nav.v_e = nav.q_e_b * Vector3::new(10.0, 0.0, 0.0);
+        let c_b_e = nav.q_e_b.to_rotation_matrix().into_inner().transpose();
+        let r = 0.2;
+        let w_ie_b = c_b_e * crate::earth::WGS84.omega_ie_e();
+        let l = Vector3::new(-1.5, -0.8, 1.0);
+        let wheel = WheelContact {
+            lever_arm_b_m: l,
+            w_ib_b_rad_s: Vector3::new(0.0, 0.0, r) + w_ie_b,
+        };
+        let (v_c, _, _) = wheel.body_velocity(&nav);
+        let closed = Vector3::new(10.0 - r * l.y, r * l.x, 0.0);
+        assert!((v_c - closed).norm() < 1e-9, "{v_c} vs {closed}");
+        // The outer (left) wheel of a right turn rolls faster, and the constraint sees the
+        // rear axle's sideways motion relative to the IMU.
+        assert!(v_c.x > 10.0 && v_c.y < -0.29);
     }
 }

@@ -70,9 +70,9 @@ pub use dynamics::{
     gravity_gradient, nonorthogonality_jacobian, nonorthogonality_matrix,
 };
 pub use measurements::{
-    GnssAntenna, baro_height, gnss_baseline_attitude, gnss_position, gnss_pseudorange,
-    gnss_range_rate, gnss_velocity, kappa_jacobian, kappa_matrix, nhc_linearisation_covariance,
-    odometer_nhc, odometer_speed, star_attitude, zero_velocity,
+    GnssAntenna, WheelContact, baro_height, gnss_baseline_attitude, gnss_position,
+    gnss_pseudorange, gnss_range_rate, gnss_velocity, kappa_jacobian, kappa_matrix,
+    nhc_linearisation_covariance, odometer_nhc, odometer_speed, star_attitude, zero_velocity,
 };
 pub use update::{Measurement, Residual, UpdateOutcome, augment_covariance, symmetrize, update};
 

@@ -303,6 +303,162 @@ impl Default for AidingNoise {
     }
 }
 
+/// The ground vehicle the IMU rides in (`[vehicle]` of `config/filter.toml`, whose comment
+/// derives each value): where the odometer wheel touches the road, and how far a car of its
+/// class departs from the non-holonomic constraint and from rolling without slip. The
+/// odometer and the constraints are applied at the wheel's contact point
+/// ([`crate::ekf::WheelContact`]); their noise is computed at each update from the speed and
+/// the accelerations ([`VehicleModel::violation_sigmas_m_s`]).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct VehicleModel {
+    /// Contact point of the odometer wheel (a rear, non-steered wheel: the non-holonomic
+    /// constraint holds at the rear axle) from the IMU, body axes (x forward, y right,
+    /// z down), m, measured on the vehicle.
+    pub wheel_lever_arm_b_m: [f64; 3],
+    /// Slip angle of the rear tyres per m/s² of lateral acceleration, deg/(m/s²).
+    pub rear_slip_per_lateral_accel_deg: f64,
+    /// Body pitch against the wheel plane per m/s² of longitudinal acceleration (squat and
+    /// dive), deg/(m/s²).
+    pub pitch_per_accel_deg: f64,
+    /// Longitudinal slip ratio of the odometer wheel per m/s² of acceleration, s²/m.
+    pub wheel_slip_per_accel_s2_m: f64,
+    /// 1-σ heave of the body on its springs at speed, m.
+    pub ride_heave_sigma_m: f64,
+    /// 1-σ pitch of the body on its springs at speed, deg.
+    pub ride_pitch_sigma_deg: f64,
+    /// 1-σ roll of the body on its springs at speed, deg.
+    pub ride_roll_sigma_deg: f64,
+    /// Natural frequency of the body on its springs, Hz.
+    pub ride_frequency_hz: f64,
+    /// 1-σ velocity of the IMU vibrating on its mount (engine orders, road), per axis, m/s.
+    pub mount_vibration_velocity_sigma_m_s: f64,
+    /// Correlation time of the violations that follow the driver's manoeuvres (sideslip in a
+    /// turn, squat and wheel slip in a speed change), s: they are fused with the inflation of
+    /// [`crate::ekf::correlated`]. 0: white.
+    pub maneuver_correlation_time_s: f64,
+}
+
+impl Default for VehicleModel {
+    fn default() -> Self {
+        Self {
+            wheel_lever_arm_b_m: [0.0; 3],
+            rear_slip_per_lateral_accel_deg: 0.4,
+            pitch_per_accel_deg: 0.2,
+            wheel_slip_per_accel_s2_m: 0.005,
+            ride_heave_sigma_m: 0.006,
+            ride_pitch_sigma_deg: 0.15,
+            ride_roll_sigma_deg: 0.15,
+            ride_frequency_hz: 1.3,
+            mount_vibration_velocity_sigma_m_s: 0.0015,
+            maneuver_correlation_time_s: 5.0,
+        }
+    }
+}
+
+/// 1-σ departures of a car from the odometer's and the constraints' model at the wheel's
+/// contact point, body axes `[forward, lateral, vertical]`, m/s: the part that changes within
+/// a second (ride; fused as white noise) and the part that follows the manoeuvres (fused with
+/// a correlation time).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ViolationSigmas {
+    /// Ride part, m/s.
+    pub white_m_s: Vector3<f64>,
+    /// Manoeuvre part, m/s.
+    pub maneuver_m_s: Vector3<f64>,
+}
+
+impl VehicleModel {
+    /// Checks naming the key: a finite lever arm within 10 m of the IMU, finite non-negative
+    /// class values, a positive ride frequency.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        for (i, x) in self.wheel_lever_arm_b_m.iter().enumerate() {
+            check(
+                x.is_finite() && x.abs() <= 10.0,
+                &format!("vehicle.wheel_lever_arm_b_m[{i}]"),
+                "must be a finite distance within 10 m",
+            )?;
+        }
+        for (v, k) in [
+            (
+                self.rear_slip_per_lateral_accel_deg,
+                "vehicle.rear_slip_per_lateral_accel_deg",
+            ),
+            (self.pitch_per_accel_deg, "vehicle.pitch_per_accel_deg"),
+            (
+                self.wheel_slip_per_accel_s2_m,
+                "vehicle.wheel_slip_per_accel_s2_m",
+            ),
+            (self.ride_heave_sigma_m, "vehicle.ride_heave_sigma_m"),
+            (self.ride_pitch_sigma_deg, "vehicle.ride_pitch_sigma_deg"),
+            (self.ride_roll_sigma_deg, "vehicle.ride_roll_sigma_deg"),
+            (
+                self.mount_vibration_velocity_sigma_m_s,
+                "vehicle.mount_vibration_velocity_sigma_m_s",
+            ),
+            (
+                self.maneuver_correlation_time_s,
+                "vehicle.maneuver_correlation_time_s",
+            ),
+        ] {
+            check(nonneg(v), k, "must be a finite number >= 0")?;
+        }
+        check(
+            pos(self.ride_frequency_hz),
+            "vehicle.ride_frequency_hz",
+            "must be a finite number > 0",
+        )
+    }
+
+    /// The lever arm as a vector, body axes, m.
+    pub fn wheel_lever_arm_b(&self) -> Vector3<f64> {
+        Vector3::from(self.wheel_lever_arm_b_m)
+    }
+
+    /// The departures at forward speed `speed_m_s`, longitudinal acceleration
+    /// `accel_long_m_s2` and lateral acceleration `accel_lat_m_s2` (the derivation is the
+    /// comment of `[vehicle]` in `config/filter.toml`). With ride angular rates
+    /// `ω_θ = 2πf·σ_θ`, `ω_φ = 2πf·σ_φ` and heave rate `2πf·σ_h`:
+    /// - forward: the body's pitch rate on its springs turns the rigid lever arm's `ω_y·l_z`
+    ///   that the wheel does not see, `|l_z|·ω_θ`; the wheel slips by `k_s·a_x·V`;
+    /// - lateral: the roll rate's `|l_z|·ω_φ`; the rear tyres slip by `k_β·a_y·V`;
+    /// - vertical: heave rate, the body's pitch against the road `V·σ_θ`, the rates times the
+    ///   arm `|l_x|·ω_θ`, `|l_y|·ω_φ`; squat and dive `k_p·a_x·V`;
+    /// - every axis: the IMU's vibration on its mount.
+    pub fn violation_sigmas_m_s(
+        &self,
+        speed_m_s: f64,
+        accel_long_m_s2: f64,
+        accel_lat_m_s2: f64,
+    ) -> ViolationSigmas {
+        let l = self.wheel_lever_arm_b_m;
+        let w0 = std::f64::consts::TAU * self.ride_frequency_hz;
+        let w_pitch = w0 * self.ride_pitch_sigma_deg.to_radians();
+        let w_roll = w0 * self.ride_roll_sigma_deg.to_radians();
+        let v = speed_m_s.abs();
+        let (ax, ay) = (accel_long_m_s2.abs(), accel_lat_m_s2.abs());
+        let vib2 = self.mount_vibration_velocity_sigma_m_s.powi(2);
+        let vertical = ((w0 * self.ride_heave_sigma_m).powi(2)
+            + (v * self.ride_pitch_sigma_deg.to_radians()).powi(2)
+            + (l[0] * w_pitch).powi(2)
+            + (l[1] * w_roll).powi(2)
+            + vib2)
+            .sqrt();
+        ViolationSigmas {
+            white_m_s: Vector3::new(
+                ((l[2] * w_pitch).powi(2) + vib2).sqrt(),
+                ((l[2] * w_roll).powi(2) + vib2).sqrt(),
+                vertical,
+            ),
+            maneuver_m_s: Vector3::new(
+                self.wheel_slip_per_accel_s2_m * ax * v,
+                self.rear_slip_per_lateral_accel_deg.to_radians() * ay * v,
+                self.pitch_per_accel_deg.to_radians() * ax * v,
+            ),
+        }
+    }
+}
+
 /// An aiding source counts for the navigation mode while it has been fused within this age of
 /// the IMU time, s.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize, serde::Serialize)]
@@ -387,6 +543,9 @@ pub struct NavigatorConfig {
     pub updates: UpdateSwitches,
     /// Aiding noise and scheduling.
     pub aiding: AidingNoise,
+    /// The ground vehicle: odometer wheel lever arm and the class's departures from the
+    /// non-holonomic constraint.
+    pub vehicle: VehicleModel,
     /// Aiding deadlines for the navigation mode.
     pub deadlines: Deadlines,
     /// Redundant-channel fault detection (paper 004; used when the IMU has channels).
@@ -420,6 +579,7 @@ impl Default for NavigatorConfig {
             initial: InitialUncertainty::default(),
             updates: UpdateSwitches::default(),
             aiding: AidingNoise::default(),
+            vehicle: VehicleModel::default(),
             deadlines: Deadlines::default(),
             redundancy: crate::redundancy::RedundancyConfig::default(),
             motion_alignment: MotionAlignment::default(),
@@ -578,6 +738,7 @@ impl NavigatorConfig {
             "imu.max_specific_force_m_s2",
             "must exceed 2 g",
         )?;
+        self.vehicle.validate()?;
         self.redundancy.validate()?;
         self.validate_filter_keys()
     }

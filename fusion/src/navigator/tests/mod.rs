@@ -177,6 +177,48 @@ fn filter_toml_is_the_default_and_validates() {
     c.gnss.error_correlation_time_s = -60.0;
     let e = c.validate().unwrap_err().to_string();
     assert!(e.contains("gnss.error_correlation_time_s"), "{e}");
+    c = NavigatorConfig::default();
+    c.vehicle.wheel_lever_arm_b_m[2] = f64::INFINITY;
+    let e = c.validate().unwrap_err().to_string();
+    assert!(e.contains("filter.vehicle.wheel_lever_arm_b_m[2]"), "{e}");
+    c = NavigatorConfig::default();
+    c.vehicle.ride_frequency_hz = 0.0;
+    let e = c.validate().unwrap_err().to_string();
+    assert!(e.contains("filter.vehicle.ride_frequency_hz"), "{e}");
+    // A configuration written before the vehicle model loads, with the default car.
+    let old: NavigatorConfig = toml::from_str("[aiding]\nnhc_sigma_m_s = 1e-5\n").unwrap();
+    assert_eq!(old.vehicle, VehicleModel::default());
+}
+
+#[test]
+fn vehicle_violation_is_the_derived_class_figure() {
+    // The figures of the `[vehicle]` comment in config/filter.toml: at 20 m/s with the arm
+    // [-1.5, -0.8, 1.0] on a straight road, vertical 0.080 m/s, lateral and forward 0.021
+    // m/s, no manoeuvre part; in a turn at a_y = 3 m/s² the rear tyres' slip k_β·V·a_y, in a
+    // speed change at a_x = 1 m/s² the squat k_p·V·a_x and the wheel slip k_s·V·a_x.
+    let v = VehicleModel {
+        wheel_lever_arm_b_m: [-1.5, -0.8, 1.0],
+        ..VehicleModel::default()
+    };
+    let straight = v.violation_sigmas_m_s(20.0, 0.0, 0.0);
+    let w = straight.white_m_s;
+    assert!((w.z - 0.080).abs() < 5e-4, "{w}");
+    assert!(
+        (w.y - 0.021).abs() < 5e-4 && (w.x - 0.021).abs() < 5e-4,
+        "{w}"
+    );
+    assert_eq!(straight.maneuver_m_s, Vector3::zeros());
+    let turn = v.violation_sigmas_m_s(20.0, 0.0, -3.0);
+    let slip = 0.4f64.to_radians() * 20.0 * 3.0;
+    assert!((turn.maneuver_m_s.y - slip).abs() < 1e-12 && turn.white_m_s == w);
+    let speed_up = v.violation_sigmas_m_s(20.0, 1.0, 0.0).maneuver_m_s;
+    assert!((speed_up.z - 0.2f64.to_radians() * 20.0).abs() < 1e-12);
+    assert!((speed_up.x - 0.005 * 20.0).abs() < 1e-12);
+    // A wheel at the IMU: the ride's rates have no arm; heave, pitch and the mount's
+    // vibration remain.
+    let at_imu = VehicleModel::default().violation_sigmas_m_s(20.0, 0.0, 0.0);
+    assert_eq!((at_imu.white_m_s.x, at_imu.white_m_s.y), (0.0015, 0.0015));
+    assert!(at_imu.white_m_s.z > 0.07 && at_imu.white_m_s.z < w.z);
 }
 
 #[test]
