@@ -14,6 +14,16 @@ use sextant_drivers_sim::scenario::Scenario;
 use sextant_drivers_sim::sources::GnssSource;
 use std::path::Path;
 
+/// Every `[world.*]` table of the scenario's example, each switched on by its name.
+const ALL_WORLD_TABLES: [&str; 6] = [
+    "vehicle",
+    "vibration",
+    "gravity",
+    "imu",
+    "star_tracker",
+    "baro",
+];
+
 fn root() -> &'static Path {
     Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
 }
@@ -173,14 +183,7 @@ fn world_motion_report() {
         &["imu"],
         &["star_tracker"],
         &["baro"],
-        &[
-            "vehicle",
-            "vibration",
-            "gravity",
-            "imu",
-            "star_tracker",
-            "baro",
-        ],
+        &ALL_WORLD_TABLES,
     ] {
         motion_report_line(&format!("{on:?}"), &vehicle_in_motion(on));
     }
@@ -292,14 +295,7 @@ fn world_motion_vehicle_model() {
         }),
         ("lever arm and class noise", |_| {}),
     ];
-    let all = [
-        "vehicle",
-        "vibration",
-        "gravity",
-        "imu",
-        "star_tracker",
-        "baro",
-    ];
+    let all = ALL_WORLD_TABLES;
     for on in [&["vehicle"][..], &["vehicle", "baro"], &all] {
         let scn = vehicle_in_motion(on);
         for (label, model) in models {
@@ -383,14 +379,7 @@ fn motion_report_line_with(label: &str, scn: &Scenario, cfg: NavigatorConfig) {
 #[test]
 #[ignore = "600 s of 200 Hz simulation per line: minutes in release; a report, not a CI test"]
 fn world_motion_interaction() {
-    let all = [
-        "vehicle",
-        "vibration",
-        "gravity",
-        "imu",
-        "star_tracker",
-        "baro",
-    ];
+    let all = ALL_WORLD_TABLES;
     let scn = vehicle_in_motion(&all);
     type Model = fn(&mut NavigatorConfig);
     let models: [(&str, Model); 2] = [

@@ -1,5 +1,14 @@
 //! Barometric height updates (ISA height against the ellipsoidal height plus the baro bias
 //! state).
+//!
+//! Bias acquisition: when the gate has refused `aiding.baro_reacquire_after` samples in a
+//! row, the bias state's old estimate is given up: its covariance row and column are cleared
+//! and its variance set to cover the innovation, `max(σ_b0², (2ν)²)`, so that the next sample
+//! is fused and moves the bias by (almost) the whole innovation while the other states move by
+//! their share of it. What the bias then knows is the height's uncertainty plus the baro's
+//! noise, as after any first fix of an unknown offset. Why: the bias is the day's weather
+//! (≈ 8.5 m per hPa off the standard atmosphere, drifting ≈ 1 hPa/h), not an instrument
+//! constant a prior can bound.
 
 use super::*;
 
@@ -23,8 +32,34 @@ impl Navigator {
             self.config.aiding.baro_sigma_m,
         );
         self.core.last_baro_fused = Some(ts);
-        if self.run_update(Counter::Sensor(id), &m, tally).accepted() {
+        let after = self.config.aiding.baro_reacquire_after;
+        if after > 0 && self.core.baro_rejected_in_row >= after {
+            self.reacquire_baro_bias(m.innovation[0], tally);
+        }
+        let v = self.run_update(Counter::Sensor(id), &m, tally);
+        if v.accepted() {
+            self.core.baro_rejected_in_row = 0;
             self.mark_fused(id, ts, tally);
+        } else if v.rejected {
+            self.core.baro_rejected_in_row += 1;
+        }
+    }
+
+    /// Give up the baro bias estimate (module docs): its covariance row and column cleared,
+    /// its variance set to cover `innovation_m`.
+    fn reacquire_baro_bias(&mut self, innovation_m: f64, tally: Tally) {
+        let e = &mut self.core.ekf;
+        // At the current time first, so no pending transition re-couples the old estimate.
+        e.propagate_covariance(&self.ell, &self.core.nav.r_e);
+        let b = ekf::idx::BARO;
+        let sigma0 = self.config.aiding.baro_bias_sigma_m;
+        let var = sigma0.powi(2).max((2.0 * innovation_m).powi(2));
+        e.p.row_mut(b).fill(0.0);
+        e.p.column_mut(b).fill(0.0);
+        e.p[(b, b)] = var;
+        self.core.baro_rejected_in_row = 0;
+        if tally == Tally::Count {
+            self.diagnostics.baro_bias_reacquisitions += 1;
         }
     }
 }

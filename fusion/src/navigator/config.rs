@@ -249,6 +249,11 @@ pub struct AidingNoise {
     pub baro_bias_rw_m_sqrt_s: f64,
     /// Minimum time between two fused baro samples, s (the samples in between are not fused).
     pub baro_min_interval_s: f64,
+    /// Baro samples rejected by the gate in a row after which the baro bias is acquired anew
+    /// from the next one (0: never). A barometer reads the day's air, not the standard
+    /// atmosphere: 10 hPa off ISA is ≈ 85 m of bias, far outside any prior a fixed start can
+    /// give it, and the gate would then refuse the sensor for good.
+    pub baro_reacquire_after: u32,
     /// Odometer speed white-noise σ, m/s (the mean speed over the odometer interval is
     /// converted to the end-point speed before the update, `fuse_odometer`).
     pub odometer_sigma_m_s: f64,
@@ -286,6 +291,7 @@ impl Default for AidingNoise {
             baro_bias_sigma_m: 10.0,
             baro_bias_rw_m_sqrt_s: 0.005,
             baro_min_interval_s: 0.2,
+            baro_reacquire_after: 10,
             odometer_sigma_m_s: 0.02,
             odometer_scale_sigma: 0.003,
             nhc_sigma_m_s: 1e-5,

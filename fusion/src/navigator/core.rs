@@ -24,6 +24,9 @@ pub(super) struct Core {
     pub(super) last_zupt: Option<GpsTime>,
     /// Time of validity of the last fused baro sample (`aiding.baro_min_interval_s`).
     pub(super) last_baro_fused: Option<GpsTime>,
+    /// Baro samples rejected by the gate since the last accepted one
+    /// (`aiding.baro_reacquire_after`).
+    pub(super) baro_rejected_in_row: u32,
     /// Time of validity and speed (m/s) of the last odometer sample (ZUPT veto).
     pub(super) last_odo: Option<(GpsTime, f64)>,
     /// Whether the receiver clock states have been started (tight coupling).
@@ -55,6 +58,7 @@ impl Core {
             static_since: None,
             last_zupt: None,
             last_baro_fused: None,
+            baro_rejected_in_row: 0,
             last_odo: None,
             clock_initialized: false,
             last_gnss_ranging: None,

@@ -132,4 +132,7 @@ pub struct NavigatorDiagnostics {
     pub gnss_heading_alignments: u64,
     /// Starts of navigation that resumed the sensor-error states from a snapshot.
     pub warm_starts: u64,
+    /// Times the baro bias was acquired anew after `aiding.baro_reacquire_after` rejections
+    /// in a row (the day's pressure far from the bias state's belief).
+    pub baro_bias_reacquisitions: u64,
 }

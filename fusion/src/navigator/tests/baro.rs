@@ -116,3 +116,57 @@ fn arrival_order_changes_only_the_epochs_with_a_sample_pending() {
         assert_eq!(hb.dropped_late, 0, "{s:?}");
     }
 }
+
+/// Static site with GNSS at 1 Hz and a baro 95 m off (a day ≈ 11 hPa below the standard
+/// atmosphere, far outside the bias prior of 10 m): the bias estimate and the counts.
+fn day_off_isa(reacquire_after: u32) -> Navigator {
+    let mut cfg = NavigatorConfig {
+        alignment_s: 60.0,
+        ..NavigatorConfig::default()
+    };
+    cfg.aiding.baro_reacquire_after = reacquire_after;
+    let mut nav = Navigator::new(cfg).unwrap();
+    let mut sim = StaticSim::new(22, 100.0);
+    for k in 1..=(200 * 100) {
+        let imu = sim.next_imu();
+        nav.push_imu(&imu).unwrap();
+        if k % 100 == 0 {
+            nav.push_gnss(&sim.gnss()).unwrap();
+        }
+        if k % 20 == 0 {
+            nav.push_baro(&baro_at(imu.header.time_ns, k as u64, 180.0 + 95.0))
+                .unwrap();
+        }
+    }
+    nav
+}
+
+#[test]
+fn a_baro_far_off_the_standard_atmosphere_is_acquired_not_refused_for_good() {
+    // Without acquisition the gate refuses every sample for good: the old behaviour.
+    let stuck = day_off_isa(0);
+    let h = stuck.health()[SensorId::Baro as usize];
+    assert_eq!(h.fused, 0, "{h:?}");
+    assert!(h.rejected_gate > 100, "{h:?}");
+
+    let nav = day_off_isa(10);
+    let h = nav.health()[SensorId::Baro as usize];
+    // Refused 10 times in a row (2 s at the 0.2 s fusion interval), acquired once, then
+    // fused from there on: after acquisition nothing is refused in a row again.
+    assert_eq!(nav.diagnostics().baro_bias_reacquisitions, 1);
+    assert_eq!(h.rejected_gate, 10, "{h:?}");
+    assert!(h.fused > 600, "{h:?}");
+    let sigma_b = nav.covariance()[(idx::BARO, idx::BARO)].sqrt();
+    assert!(
+        (nav.baro_bias_m() - 95.0).abs() < 4.0 * sigma_b + 0.05,
+        "bias {} ± {sigma_b}",
+        nav.baro_bias_m()
+    );
+    // The height, pinned by GNSS, did not follow the baro.
+    let geo = nav.nav_state().geodetic(&WGS84);
+    assert!(
+        (geo.height_m - 180.0).abs() < 1.0,
+        "height {}",
+        geo.height_m
+    );
+}
