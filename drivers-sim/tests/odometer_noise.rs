@@ -24,15 +24,8 @@ fn default_config() -> NavigatorConfig {
 /// is left to test.
 fn matched_car_config() -> NavigatorConfig {
     let mut c = default_config();
-    let v = &mut c.vehicle;
-    v.wheel_lever_arm_b_m = [0.0; 3];
-    v.rear_slip_per_lateral_accel_deg = 0.0;
-    v.pitch_per_accel_deg = 0.0;
-    v.wheel_slip_per_accel_s2_m = 0.0;
-    v.ride_heave_sigma_m = 0.0;
-    v.ride_pitch_sigma_deg = 0.0;
-    v.ride_roll_sigma_deg = 0.0;
-    v.mount_vibration_velocity_sigma_m_s = 0.0;
+    c.vehicle.wheel_lever_arm_b_m = [0.0; 3];
+    crate::world_accuracy::rigid(&mut c);
     c
 }
 

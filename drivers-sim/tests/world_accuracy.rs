@@ -308,7 +308,7 @@ fn world_motion_vehicle_model() {
 }
 
 /// The vehicle class's noise switched off: a rigid car, the constraint σ alone.
-fn rigid(c: &mut NavigatorConfig) {
+pub(crate) fn rigid(c: &mut NavigatorConfig) {
     let v = &mut c.vehicle;
     v.rear_slip_per_lateral_accel_deg = 0.0;
     v.pitch_per_accel_deg = 0.0;
