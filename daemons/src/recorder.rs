@@ -625,6 +625,66 @@ fn release_freed_memory() {
     }
 }
 
+/// Finish a segment (summary section, index, fsync); a failure to finish is a failed write,
+/// counted. Then give the memory its writer freed back to the system.
+fn close_segment(sk: Sink, counters: &Counters) {
+    let (done, unflushed) = (sk.path.clone(), sk.unflushed);
+    match sk.finish() {
+        Ok(()) => tracing::info!("recorder: {} complete", done.display()),
+        Err(e) => count_failure(counters, unflushed, &e),
+    }
+    release_freed_memory();
+}
+
+/// The thread that finishes the segments the writer thread has rotated away from. Finishing a
+/// segment writes its summary section and waits for `fsync`, which on a slow or busy disk takes
+/// from milliseconds to seconds of a file of hundreds of MB; done on the writer thread it would
+/// stall the queue the filter thread feeds, and a full queue drops records. The writer hands the
+/// old segment over and writes the next one at once.
+struct Closer {
+    tx: Option<std::sync::mpsc::Sender<Sink>>,
+    thread: Option<JoinHandle<()>>,
+}
+
+impl Closer {
+    /// Start the thread; `None` when the system refuses one (the writer then finishes inline).
+    fn start(counters: Arc<Counters>) -> Option<Self> {
+        let (tx, rx) = std::sync::mpsc::channel::<Sink>();
+        let thread = std::thread::Builder::new()
+            .name("recorder-close".into())
+            .spawn(move || {
+                for sk in rx {
+                    close_segment(sk, &counters);
+                }
+            })
+            .map_err(|e| tracing::warn!("recorder: no segment-closing thread ({e}); segments are finished on the writer thread"))
+            .ok()?;
+        Some(Self {
+            tx: Some(tx),
+            thread: Some(thread),
+        })
+    }
+
+    /// Hand a segment over to be finished; inline when the thread is gone.
+    fn close(&self, sk: Sink, counters: &Counters) {
+        if let Some(tx) = &self.tx
+            && let Err(std::sync::mpsc::SendError(sk)) = tx.send(sk)
+        {
+            close_segment(sk, counters);
+        }
+    }
+
+    /// Wait until every segment handed over is finished.
+    fn join(mut self) {
+        self.tx = None;
+        if let Some(t) = self.thread.take()
+            && t.join().is_err()
+        {
+            tracing::error!("recorder: the segment-closing thread panicked");
+        }
+    }
+}
+
 /// Where the writer thread opens its next segment after a failure.
 struct Resume {
     /// The recording's first segment.
@@ -638,6 +698,8 @@ struct Resume {
     /// Segments are regular files next to the first: not when the recording is a device
     /// (`/dev/full`, a pipe), whose directory is no place for new files.
     enabled: bool,
+    /// Finishes rotated-away segments off the writer thread (started with the writer).
+    closer: Option<Closer>,
 }
 
 impl Resume {
@@ -649,15 +711,15 @@ impl Resume {
             return sink;
         }
         let sk = sink?;
-        let (done, unflushed) = (sk.path.clone(), sk.unflushed);
-        if let Err(e) = sk.finish() {
-            count_failure(counters, unflushed, &e);
+        let done = sk.path.clone();
+        match &self.closer {
+            Some(closer) => closer.close(sk, counters),
+            None => close_segment(sk, counters),
         }
-        release_freed_memory();
         match self.open_next(counters) {
             Ok((sink, p)) => {
                 tracing::info!(
-                    "recorder: {} complete, recording continues in {}",
+                    "recorder: {} full, recording continues in {}",
                     done.display(),
                     p.display()
                 );
@@ -813,6 +875,9 @@ fn run(
     let mut last_flush = Instant::now();
     let mut sink = sink;
     let mut clock = LogClock::default();
+    if resume.enabled && resume.opts.segment_duration.is_some() {
+        resume.closer = Closer::start(counters.clone());
+    }
     loop {
         if sink.is_none() {
             sink = resume.attempt(&counters);
@@ -844,6 +909,10 @@ fn run(
         if let Err(e) = sk.finish() {
             count_failure(&counters, unflushed, &e);
         }
+    }
+    // The totals the caller reads next include the rotated segments' finishing.
+    if let Some(closer) = resume.closer.take() {
+        closer.join();
     }
     Ok(())
 }
@@ -913,6 +982,7 @@ impl Recorder {
             last_attempt: Instant::now(),
             dropped_at_failure: 0,
             enabled: std::fs::metadata(path).map_or(true, |m| m.is_file()),
+            closer: None,
         };
         let thread = std::thread::Builder::new()
             .name("recorder".into())

@@ -517,6 +517,33 @@ pub struct TruthGenerator {
     distance_m: f64,
     point: TruthPoint,
     acc: Increments,
+    /// The profile at the current grid point's time (the next step's first RK4 stage).
+    profile_now: ProfileAt,
+}
+
+/// The profile's kinematics at one time with its horizontal velocity, evaluated once per
+/// distinct time of a step: RK4 evaluates the rates at the step's start, twice at its middle
+/// and at its end, and the end is the next step's start and the next grid point. The profile
+/// is a pure function of time, so reusing it changes no result; it saves most of the
+/// trigonometry of the truth, which dominates the cost of a simulation.
+#[derive(Debug, Clone, Copy)]
+struct ProfileAt {
+    kin: Kinematics,
+    /// (sin, cos) of the heading.
+    heading_sin_cos: (f64, f64),
+    /// The profile's own NED velocity (flat road), m/s.
+    v_ned_m_s: Vector3<f64>,
+}
+
+impl ProfileAt {
+    fn of(profile: &Profile, t_s: f64) -> Self {
+        let kin = profile.at(t_s);
+        Self {
+            kin,
+            heading_sin_cos: kin.heading_rad.sin_cos(),
+            v_ned_m_s: v_ned(&kin),
+        }
+    }
 }
 
 /// Step of the central differences that give the driver intent's second derivatives (V̈, ψ̈)
@@ -550,6 +577,7 @@ impl TruthGenerator {
             lon_rad: lon,
             height_m: s.height_m,
         };
+        let profile_now = ProfileAt::of(&profile, 0.0);
         let mut g = Self {
             profile,
             ell,
@@ -577,8 +605,9 @@ impl TruthGenerator {
                 vibration_accel_b_m_s2: Vector3::zeros(),
             },
             acc: Increments::default(),
+            profile_now,
         };
-        g.point = g.point_at(0, lat, lon, s.height_m, 0.0);
+        g.point = g.point_at(0, &g.profile_now.kin, lat, lon, s.height_m, 0.0);
         g
     }
 
@@ -601,17 +630,17 @@ impl TruthGenerator {
         k as f64 * GRID_STEP_S
     }
 
-    /// Rates of (lat, lon, h, distance) at time `t_s`, position and distance driven `s_m`,
-    /// rad/s, rad/s, m/s, m/s.
-    fn pos_rate(&self, t_s: f64, lat: f64, h: f64, s_m: f64) -> [f64; 4] {
-        let kin = self.profile.at(t_s);
+    /// Rates of (lat, lon, h, distance) for the profile `p` at a time, position and distance
+    /// driven `s_m`, rad/s, rad/s, m/s, m/s.
+    fn pos_rate(&self, p: &ProfileAt, lat: f64, h: f64, s_m: f64) -> [f64; 4] {
+        let kin = &p.kin;
         let v = match &self.world.vehicle {
             Some(veh) => {
-                let (sn, cs) = kin.heading_rad.sin_cos();
+                let (sn, cs) = p.heading_sin_cos;
                 let vh = kin.speed_m_s;
                 Vector3::new(vh * cs, vh * sn, -vh * veh.slope(s_m))
             }
-            None => v_ned(&kin),
+            None => p.v_ned_m_s,
         };
         let (r_n, r_e) = earth::radii_of_curvature(&self.ell, lat);
         [
@@ -649,10 +678,19 @@ impl TruthGenerator {
         veh.state(t_s, &intent)
     }
 
-    fn point_at(&self, k: i64, lat: f64, lon: f64, h: f64, s_m: f64) -> TruthPoint {
+    /// The truth at grid point `k`, whose profile kinematics are `kin`.
+    fn point_at(
+        &self,
+        k: i64,
+        kin: &Kinematics,
+        lat: f64,
+        lon: f64,
+        h: f64,
+        s_m: f64,
+    ) -> TruthPoint {
         let ell = &self.ell;
         let t = Self::t_of(k);
-        let mut kin = self.profile.at(t);
+        let mut kin = *kin;
         let mut geo = Geodetic {
             lat_rad: lat,
             lon_rad: lon,
@@ -746,20 +784,26 @@ impl TruthGenerator {
         let h = t1 - t0;
         let tm = t0 + 0.5 * h;
         let (lat, lon, hh, s) = (self.lat_rad, self.lon_rad, self.height_m, self.distance_m);
-        let k1 = self.pos_rate(t0, lat, hh, s);
+        let (p0, pm, p1) = (
+            self.profile_now,
+            ProfileAt::of(&self.profile, tm),
+            ProfileAt::of(&self.profile, t1),
+        );
+        let k1 = self.pos_rate(&p0, lat, hh, s);
         let k2 = self.pos_rate(
-            tm,
+            &pm,
             lat + 0.5 * h * k1[0],
             hh + 0.5 * h * k1[2],
             s + 0.5 * h * k1[3],
         );
         let k3 = self.pos_rate(
-            tm,
+            &pm,
             lat + 0.5 * h * k2[0],
             hh + 0.5 * h * k2[2],
             s + 0.5 * h * k2[3],
         );
-        let k4 = self.pos_rate(t1, lat + h * k3[0], hh + h * k3[2], s + h * k3[3]);
+        let k4 = self.pos_rate(&p1, lat + h * k3[0], hh + h * k3[2], s + h * k3[3]);
+        self.profile_now = p1;
         let d = |i: usize| h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
         self.lat_rad = lat + d(0);
         self.lon_rad = lon + d(1);
@@ -768,6 +812,7 @@ impl TruthGenerator {
         self.k += 1;
         let next = self.point_at(
             self.k,
+            &p1.kin,
             self.lat_rad,
             self.lon_rad,
             self.height_m,

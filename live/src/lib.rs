@@ -297,11 +297,12 @@ fn drain<T: msgs::Message + Into<Record>>(
 }
 
 /// Serve the channels of `opts.prefix` on `opts.listen` until `stop` is set; calls `ready`
-/// with the address bound (the actual port when 0 was asked). Returns the counters.
+/// with the address bound (the actual port when 0 was asked). Returns the counters. `ready` is
+/// a trait object so that the server is compiled once, in this library, not again in each caller.
 pub fn serve(
     opts: &ServeOptions,
     stop: &AtomicBool,
-    ready: impl FnOnce(SocketAddr),
+    ready: &mut dyn FnMut(SocketAddr),
 ) -> Result<LiveCounters, LiveError> {
     use iceoryx2::prelude::*;
     let bus_err = |detail: String| LiveError::Bus {

@@ -234,44 +234,78 @@ impl Bus {
     /// Open (or create) the publish-subscribe service and event service of `T`'s channel and
     /// return a publisher that notifies after every send.
     pub fn publisher<T: Message>(&self) -> Result<Pub<T>, PublisherError> {
-        let channel = T::CHANNEL;
-        let svc = self.services::<T>()?;
-        let publisher = svc
-            .pubsub
-            .publisher_builder()
-            .create()
-            .map_err(|error| PublisherError::Publisher { channel, error })?;
-        let notifier = svc
-            .event
-            .notifier_builder()
-            .create()
-            .map_err(|error| PublisherError::Notifier { channel, error })?;
-        Ok(Pub {
-            publisher,
-            notifier,
-            seq: 0,
-        })
+        T::open_publisher(self)
     }
 
     /// Open (or create) the services of `T`'s channel and return a subscriber with its listener.
     pub fn subscriber<T: Message>(&self) -> Result<Sub<T>, SubscriberError> {
-        let channel = T::CHANNEL;
-        let svc = self.services::<T>()?;
-        let subscriber = svc
-            .pubsub
-            .subscriber_builder()
-            .buffer_size(buffer_size(channel))
-            .create()
-            .map_err(|error| SubscriberError::Subscriber { channel, error })?;
-        let listener = svc
-            .event
-            .listener_builder()
-            .create()
-            .map_err(|error| SubscriberError::Listener { channel, error })?;
-        Ok(Sub {
-            subscriber,
-            listener,
-        })
+        T::open_subscriber(self)
+    }
+}
+
+/// [`Bus::publisher`], instantiated once per message type by [`Message::open_publisher`].
+pub(crate) fn publisher_of<T: Message>(bus: &Bus) -> Result<Pub<T>, PublisherError> {
+    let channel = T::CHANNEL;
+    let svc = bus.services::<T>()?;
+    let publisher = svc
+        .pubsub
+        .publisher_builder()
+        .create()
+        .map_err(|error| PublisherError::Publisher { channel, error })?;
+    let notifier = svc
+        .event
+        .notifier_builder()
+        .create()
+        .map_err(|error| PublisherError::Notifier { channel, error })?;
+    Ok(Pub {
+        publisher,
+        notifier,
+        seq: 0,
+    })
+}
+
+/// [`Bus::subscriber`], instantiated once per message type by [`Message::open_subscriber`].
+pub(crate) fn subscriber_of<T: Message>(bus: &Bus) -> Result<Sub<T>, SubscriberError> {
+    let channel = T::CHANNEL;
+    let svc = bus.services::<T>()?;
+    let subscriber = svc
+        .pubsub
+        .subscriber_builder()
+        .buffer_size(buffer_size(channel))
+        .create()
+        .map_err(|error| SubscriberError::Subscriber { channel, error })?;
+    let listener = svc
+        .event
+        .listener_builder()
+        .create()
+        .map_err(|error| SubscriberError::Listener { channel, error })?;
+    Ok(Sub {
+        subscriber,
+        listener,
+    })
+}
+
+/// [`Pub::send_raw`], instantiated once per message type by [`Message::send_on`].
+pub(crate) fn send_raw_of<T: Message>(p: &mut Pub<T>, msg: T) -> Result<(), SendError> {
+    let channel = T::CHANNEL;
+    p.publisher
+        .send_copy(msg)
+        .map_err(|error| SendError::Send { channel, error })?;
+    p.notifier
+        .notify()
+        .map_err(|error| SendError::Notify { channel, error })?;
+    Ok(())
+}
+
+/// [`Sub::receive`], instantiated once per message type by [`Message::receive_on`].
+pub(crate) fn receive_of<T: Message>(s: &Sub<T>) -> Result<Option<T>, ReceiveError> {
+    match s.subscriber.receive() {
+        Ok(Some(sample)) => Ok(Some(*sample)),
+        Ok(None) => Ok(None),
+        Err(error) => Err(ReceiveError {
+            channel: T::CHANNEL,
+            error,
+        }),
     }
 }
 
@@ -311,14 +345,7 @@ impl<T: Message> Pub<T> {
 
     /// Send `msg` as it is (header untouched), e.g. when republishing a recording.
     pub fn send_raw(&mut self, msg: T) -> Result<(), SendError> {
-        let channel = T::CHANNEL;
-        self.publisher
-            .send_copy(msg)
-            .map_err(|error| SendError::Send { channel, error })?;
-        self.notifier
-            .notify()
-            .map_err(|error| SendError::Notify { channel, error })?;
-        Ok(())
+        T::send_on(self, msg)
     }
 }
 
@@ -341,14 +368,7 @@ impl<T: Message> Sub<T> {
 
     /// Take the next sample, copied out of shared memory.
     pub fn receive(&self) -> Result<Option<T>, ReceiveError> {
-        match self.subscriber.receive() {
-            Ok(Some(sample)) => Ok(Some(*sample)),
-            Ok(None) => Ok(None),
-            Err(error) => Err(ReceiveError {
-                channel: T::CHANNEL,
-                error,
-            }),
-        }
+        T::receive_on(self)
     }
 }
 

@@ -723,6 +723,21 @@ pub trait Message:
     fn header(&self) -> &Header;
     /// Mutable header.
     fn header_mut(&mut self) -> &mut Header;
+
+    // The shared-memory transport of this type, implemented once per message type in this
+    // crate. Rust compiles a generic function again in every crate that uses it, and iceoryx2's
+    // ports are generic over the payload: written generically, every process and test binary
+    // compiled its own copy of the transport for each message type it uses (tens of seconds of
+    // build each). Non-generic methods of a concrete type are compiled once, here. Use
+    // [`ipc::Bus::publisher`], [`ipc::Bus::subscriber`], [`ipc::Pub`] and [`ipc::Sub`].
+    #[doc(hidden)]
+    fn open_publisher(bus: &ipc::Bus) -> Result<ipc::Pub<Self>, ipc::PublisherError>;
+    #[doc(hidden)]
+    fn open_subscriber(bus: &ipc::Bus) -> Result<ipc::Sub<Self>, ipc::SubscriberError>;
+    #[doc(hidden)]
+    fn send_on(publisher: &mut ipc::Pub<Self>, msg: Self) -> Result<(), ipc::SendError>;
+    #[doc(hidden)]
+    fn receive_on(subscriber: &ipc::Sub<Self>) -> Result<Option<Self>, ipc::ReceiveError>;
 }
 
 macro_rules! message {
@@ -735,6 +750,18 @@ macro_rules! message {
             }
             fn header_mut(&mut self) -> &mut Header {
                 &mut self.header
+            }
+            fn open_publisher(bus: &ipc::Bus) -> Result<ipc::Pub<Self>, ipc::PublisherError> {
+                ipc::publisher_of::<Self>(bus)
+            }
+            fn open_subscriber(bus: &ipc::Bus) -> Result<ipc::Sub<Self>, ipc::SubscriberError> {
+                ipc::subscriber_of::<Self>(bus)
+            }
+            fn send_on(publisher: &mut ipc::Pub<Self>, msg: Self) -> Result<(), ipc::SendError> {
+                ipc::send_raw_of::<Self>(publisher, msg)
+            }
+            fn receive_on(subscriber: &ipc::Sub<Self>) -> Result<Option<Self>, ipc::ReceiveError> {
+                ipc::receive_of::<Self>(subscriber)
             }
         }
     };

@@ -47,7 +47,7 @@ fn main() -> anyhow::Result<()> {
         node_name: "sextant-foxglove".into(),
         mounts,
     };
-    let counters = sextant_live::serve(&opts, stop, |addr| {
+    let counters = sextant_live::serve(&opts, stop, &mut |addr| {
         tracing::info!(
             "serving the channels of prefix {} to Foxglove on ws://{addr}",
             args.prefix
