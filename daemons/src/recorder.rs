@@ -587,17 +587,47 @@ impl Sink {
         Ok(())
     }
 
-    fn finish(mut self) -> Result<(), RecorderError> {
+    fn finish(self) -> Result<(), RecorderError> {
+        self.write_end()?.sync()
+    }
+
+    /// Write the summary section and the end of the file and hand the file's bytes to the
+    /// kernel; the writer (its chunk index and buffers) is freed. What is left is the `fsync`.
+    fn write_end(mut self) -> Result<Unsynced, RecorderError> {
         self.writer.finish().map_err(|e| self.err(e))?;
         let path = self.path.clone();
-        let io_err = |e: std::io::Error| RecorderError::Mcap {
+        let mut inner = self.writer.into_inner();
+        std::io::Write::flush(&mut inner).map_err(|e| RecorderError::Mcap {
             path: path.clone(),
             detail: e.to_string(),
-        };
-        let mut inner = self.writer.into_inner();
-        std::io::Write::flush(&mut inner).map_err(io_err)?;
-        inner.get_ref().sync_all().map_err(io_err)?;
-        Ok(())
+        })?;
+        let file = inner.into_inner().map_err(|e| RecorderError::Mcap {
+            path: path.clone(),
+            detail: e.error().to_string(),
+        })?;
+        Ok(Unsynced {
+            file,
+            path,
+            unflushed: self.unflushed,
+        })
+    }
+}
+
+/// A finished segment whose bytes are written but not yet known to be on the disk.
+struct Unsynced {
+    file: File,
+    path: PathBuf,
+    /// Records of the segment's last chunk (lost if the `fsync` fails).
+    unflushed: u64,
+}
+
+impl Unsynced {
+    /// Wait until the file is on the disk.
+    fn sync(self) -> Result<(), RecorderError> {
+        self.file.sync_all().map_err(|e| RecorderError::Mcap {
+            path: self.path.clone(),
+            detail: e.to_string(),
+        })
     }
 }
 
@@ -625,39 +655,42 @@ fn release_freed_memory() {
     }
 }
 
-/// Finish a segment (summary section, index, fsync); a failure to finish is a failed write,
-/// counted. Then give the memory its writer freed back to the system.
-fn close_segment(sk: Sink, counters: &Counters) {
-    let (done, unflushed) = (sk.path.clone(), sk.unflushed);
-    match sk.finish() {
-        Ok(()) => tracing::info!("recorder: {} complete", done.display()),
+/// Wait until a finished segment is on the disk; a failure is a failed write, counted.
+fn sync_segment(done: Unsynced, counters: &Counters) {
+    let (path, unflushed) = (done.path.clone(), done.unflushed);
+    match done.sync() {
+        Ok(()) => tracing::info!("recorder: {} complete", path.display()),
         Err(e) => count_failure(counters, unflushed, &e),
     }
-    release_freed_memory();
 }
 
-/// The thread that finishes the segments the writer thread has rotated away from. Finishing a
-/// segment writes its summary section and waits for `fsync`, which on a slow or busy disk takes
-/// from milliseconds to seconds of a file of hundreds of MB; done on the writer thread it would
-/// stall the queue the filter thread feeds, and a full queue drops records. The writer hands the
-/// old segment over and writes the next one at once.
-struct Closer {
-    tx: Option<std::sync::mpsc::Sender<Sink>>,
+/// The thread that waits for the `fsync` of the segments the writer thread has rotated away
+/// from. On a slow or busy disk the `fsync` of a file of hundreds of MB takes from
+/// milliseconds to seconds; on the writer thread it would stall the queue the filter thread
+/// feeds, and a full queue drops records. The writer finishes the segment's file itself (the
+/// summary section is quick, and freeing the old segment's index before the next one grows
+/// keeps the memory flat), hands the file over and writes the next segment at once.
+struct Syncer {
+    tx: Option<std::sync::mpsc::Sender<Unsynced>>,
     thread: Option<JoinHandle<()>>,
 }
 
-impl Closer {
-    /// Start the thread; `None` when the system refuses one (the writer then finishes inline).
+impl Syncer {
+    /// Start the thread; `None` when the system refuses one (the writer then waits itself).
     fn start(counters: Arc<Counters>) -> Option<Self> {
-        let (tx, rx) = std::sync::mpsc::channel::<Sink>();
+        let (tx, rx) = std::sync::mpsc::channel::<Unsynced>();
         let thread = std::thread::Builder::new()
-            .name("recorder-close".into())
+            .name("recorder-sync".into())
             .spawn(move || {
-                for sk in rx {
-                    close_segment(sk, &counters);
+                for done in rx {
+                    sync_segment(done, &counters);
                 }
             })
-            .map_err(|e| tracing::warn!("recorder: no segment-closing thread ({e}); segments are finished on the writer thread"))
+            .map_err(|e| {
+                tracing::warn!(
+                    "recorder: no fsync thread ({e}); segments are synced on the writer thread"
+                )
+            })
             .ok()?;
         Some(Self {
             tx: Some(tx),
@@ -665,22 +698,22 @@ impl Closer {
         })
     }
 
-    /// Hand a segment over to be finished; inline when the thread is gone.
-    fn close(&self, sk: Sink, counters: &Counters) {
+    /// Hand a finished segment over; synced here when the thread is gone.
+    fn sync(&self, done: Unsynced, counters: &Counters) {
         if let Some(tx) = &self.tx
-            && let Err(std::sync::mpsc::SendError(sk)) = tx.send(sk)
+            && let Err(std::sync::mpsc::SendError(done)) = tx.send(done)
         {
-            close_segment(sk, counters);
+            sync_segment(done, counters);
         }
     }
 
-    /// Wait until every segment handed over is finished.
+    /// Wait until every segment handed over is on the disk.
     fn join(mut self) {
         self.tx = None;
         if let Some(t) = self.thread.take()
             && t.join().is_err()
         {
-            tracing::error!("recorder: the segment-closing thread panicked");
+            tracing::error!("recorder: the fsync thread panicked");
         }
     }
 }
@@ -698,8 +731,9 @@ struct Resume {
     /// Segments are regular files next to the first: not when the recording is a device
     /// (`/dev/full`, a pipe), whose directory is no place for new files.
     enabled: bool,
-    /// Finishes rotated-away segments off the writer thread (started with the writer).
-    closer: Option<Closer>,
+    /// Waits for the `fsync` of rotated-away segments off the writer thread (started with
+    /// the writer).
+    syncer: Option<Syncer>,
 }
 
 impl Resume {
@@ -711,15 +745,19 @@ impl Resume {
             return sink;
         }
         let sk = sink?;
-        let done = sk.path.clone();
-        match &self.closer {
-            Some(closer) => closer.close(sk, counters),
-            None => close_segment(sk, counters),
+        let (done, unflushed) = (sk.path.clone(), sk.unflushed);
+        match sk.write_end() {
+            Ok(file) => match &self.syncer {
+                Some(syncer) => syncer.sync(file, counters),
+                None => sync_segment(file, counters),
+            },
+            Err(e) => count_failure(counters, unflushed, &e),
         }
+        release_freed_memory();
         match self.open_next(counters) {
             Ok((sink, p)) => {
                 tracing::info!(
-                    "recorder: {} full, recording continues in {}",
+                    "recorder: {} ends its time span, recording continues in {}",
                     done.display(),
                     p.display()
                 );
@@ -876,7 +914,7 @@ fn run(
     let mut sink = sink;
     let mut clock = LogClock::default();
     if resume.enabled && resume.opts.segment_duration.is_some() {
-        resume.closer = Closer::start(counters.clone());
+        resume.syncer = Syncer::start(counters.clone());
     }
     loop {
         if sink.is_none() {
@@ -910,9 +948,9 @@ fn run(
             count_failure(&counters, unflushed, &e);
         }
     }
-    // The totals the caller reads next include the rotated segments' finishing.
-    if let Some(closer) = resume.closer.take() {
-        closer.join();
+    // The totals the caller reads next include the rotated segments' `fsync`.
+    if let Some(syncer) = resume.syncer.take() {
+        syncer.join();
     }
     Ok(())
 }
@@ -982,7 +1020,7 @@ impl Recorder {
             last_attempt: Instant::now(),
             dropped_at_failure: 0,
             enabled: std::fs::metadata(path).map_or(true, |m| m.is_file()),
-            closer: None,
+            syncer: None,
         };
         let thread = std::thread::Builder::new()
             .name("recorder".into())
