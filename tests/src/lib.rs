@@ -280,6 +280,21 @@ pub fn wait_exit(
     }
 }
 
+/// Wait until `sextant run` on `prefix` has claimed it: its fusion daemon is up, which it
+/// starts only after the check that refuses a prefix live processes already use. Start a
+/// process that joins the run's bus (a live replay) only then, or the run may find it first
+/// and refuse to start. Panics after `timeout`.
+pub fn wait_for_run_to_claim(prefix: &str, timeout: std::time::Duration) {
+    let t0 = std::time::Instant::now();
+    while pid_of(prefix, "sextant-fusion").is_none() {
+        assert!(
+            t0.elapsed() < timeout,
+            "sextant run on {prefix} started no fusion daemon within {timeout:?}"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+}
+
 /// Pid of the process whose executable is `program` and whose command line names `prefix`
 /// (a driver or the fusion daemon of a run, not its supervisor).
 pub fn pid_of(prefix: &str, program: &str) -> Option<i32> {

@@ -61,6 +61,7 @@ fn real_gnss_played_into_a_simulated_bench_is_fused() {
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
+    wait_for_run_to_claim(&prefix, Duration::from_secs(30));
     let replay = Command::new(&sextant)
         .args(["replay", "--live"])
         .arg(&rec)

@@ -73,7 +73,7 @@ fn real_pseudoranges_and_odometer_played_live_into_a_simulated_imu() {
     )
     .unwrap();
     // `sextant run` refuses a prefix that live processes already use: let it claim it first.
-    std::thread::sleep(Duration::from_millis(500));
+    wait_for_run_to_claim(&prefix, Duration::from_secs(30));
     let replay = Command::new(&sextant)
         .args(["replay", "--live"])
         .arg(&rec)

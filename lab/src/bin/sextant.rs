@@ -375,6 +375,11 @@ struct RunArgs {
     /// its own there at the end (default: `[fusion] calibration_file`; none when neither).
     #[arg(long, value_name = "FILE")]
     calibration: Option<PathBuf>,
+    /// Skip the analysis of the recording at the end (its table, plots and error figures in
+    /// summary.json; the counters are still written): the analysis of a day's recording
+    /// takes minutes. `sextant report` analyses the recording later, in bounded memory.
+    #[arg(long)]
+    no_analysis: bool,
 }
 
 #[derive(Debug, clap::Args)]
@@ -1045,7 +1050,13 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
         .collect();
     // The table is of the last fusion's recording (the whole run when it never crashed).
     let recording = outcome.recordings.last().cloned().unwrap_or(recording);
-    let analysis = if recording.exists() {
+    let analysis = if args.no_analysis {
+        out!(
+            "  analysis skipped (--no-analysis): sextant report {}",
+            recording.display()
+        );
+        None
+    } else if recording.exists() {
         match analysis::analyze_with_progress(&recording, &scen.gnss_outages, true) {
             Ok(a) => Some(a),
             Err(e) => {
@@ -1131,7 +1142,7 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
             ),
         );
         m.insert("recording_complete".into(), complete.into());
-        if files.len() > 1 {
+        if files.len() > 1 && !args.no_analysis {
             // Several daemon lives (or segments): the losses of the whole run, including what
             // the drivers sent while no daemon listened (`run_losses`).
             let losses = sextant_lab::run_losses::of_run(&files);
