@@ -209,6 +209,14 @@ fn full_disk_is_reported_and_navigation_continues() {
     let o = run_fusion("devfull", Path::new("/dev/full"), None);
     assert!(o.log.contains("/dev/full"), "{}", o.log);
     assert!(o.log.contains("No space left on device"), "{}", o.log);
+    // A device's directory is the system's, shared by every run: no checkpoint goes there
+    // (another run would resume from it).
+    assert!(
+        o.log
+            .contains("recording to the device /dev/full: no checkpoint"),
+        "{}",
+        o.log
+    );
     assert_kept_navigating(&o);
     let st = o.last_status.expect("a status");
     assert!(st.records_dropped > o.nav_seq_max, "{st:?}");

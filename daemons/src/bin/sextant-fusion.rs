@@ -76,30 +76,54 @@ fn main() -> anyhow::Result<()> {
     }
     let mut navigator = fusion::navigator::Navigator::new(cfg.navigator.clone())
         .with_context(|| format!("filter configuration {}", cfg.filter_path.display()))?;
-    let checkpoint = args.checkpoint.clone().unwrap_or_else(|| {
-        args.out
-            .parent()
-            .unwrap_or(std::path::Path::new(""))
-            .join("navigator.checkpoint")
+    // A recording to a device or a pipe (`/dev/full`, a FIFO) has no directory of its own:
+    // its directory is the system's, shared by every run, so the checkpoint goes there only
+    // when `--checkpoint` names it (a run must never resume from another run's checkpoint).
+    let recording_is_a_device =
+        std::fs::metadata(&args.out).is_ok_and(|m| !m.is_file() && !m.is_dir());
+    let checkpoint = args.checkpoint.clone().or_else(|| {
+        (!recording_is_a_device).then(|| {
+            args.out
+                .parent()
+                .unwrap_or(std::path::Path::new(""))
+                .join("navigator.checkpoint")
+        })
     });
     let mut started_from = None;
-    match checkpoint::read(&checkpoint) {
+    let read = match &checkpoint {
+        Some(path) => checkpoint::read(path),
+        None => {
+            tracing::info!(
+                "recording to the device {}: no checkpoint (--checkpoint FILE gives one)",
+                args.out.display()
+            );
+            Ok(None)
+        }
+    };
+    let path_of = |c: &Option<PathBuf>| {
+        c.as_ref()
+            .map_or_else(String::new, |p| p.display().to_string())
+    };
+    match read {
         Ok(Some(snapshot)) => {
             let t = snapshot.gps_time_ns;
             started_from = Some(snapshot.clone());
             match navigator.warm_start(snapshot) {
                 fusion::navigator::WarmStartOutcome::Refused(r) => tracing::warn!(
                     "checkpoint {} refused ({r}): aligning from the priors",
-                    checkpoint.display()
+                    path_of(&checkpoint)
                 ),
                 _ => tracing::info!(
                     "checkpoint {} of GPS time {:.3} s read: resuming if fresh at the first IMU sample",
-                    checkpoint.display(),
+                    path_of(&checkpoint),
                     t as f64 * 1e-9
                 ),
             }
         }
-        Ok(None) => tracing::info!("no checkpoint at {}: aligning", checkpoint.display()),
+        Ok(None) if checkpoint.is_some() => {
+            tracing::info!("no checkpoint at {}: aligning", path_of(&checkpoint))
+        }
+        Ok(None) => {}
         Err(e) => tracing::warn!("{e}: refused, aligning from the priors"),
     }
     let calibration = args
@@ -143,7 +167,7 @@ fn main() -> anyhow::Result<()> {
         system: cfg.system,
         node_name: "sextant-fusion".into(),
         metadata,
-        checkpoint: Some(checkpoint),
+        checkpoint,
     };
     let report = daemon::run(navigator, &opts, stop)?;
     tracing::info!(
