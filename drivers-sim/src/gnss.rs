@@ -459,9 +459,11 @@ impl GnssSim {
                 g.carrier_frequency_hz,
             );
             let tropo = corr::slant_troposphere_m(&zenith, el);
+            // A correction for a delay the world does not have is left out (`has_atmosphere`).
+            let (iono_on, tropo_on) = world.has_atmosphere();
             let pseudorange = range + self.clock.bias_m + errors.total_m() + sigma_code * draws[0]
-                - klobuchar
-                - tropo;
+                - if iono_on { klobuchar } else { 0.0 }
+                - if tropo_on { tropo } else { 0.0 };
             let e_rr = g.range_rate_sigma_m_s * draws[1];
             let rate = (v_s - v_rx).dot(&u);
             let (phase_flag, phase) = self.baseline_phases(&c_e_b, &u, &draws);

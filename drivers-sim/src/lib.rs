@@ -11,6 +11,7 @@
 pub mod driver;
 pub mod gnss;
 pub mod imu;
+pub mod matched;
 pub mod offline;
 pub mod reference_trajectory;
 pub mod scenario;

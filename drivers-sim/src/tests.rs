@@ -84,7 +84,7 @@ fn static_imu_measures_earth_rate_and_minus_gravity() {
 /// 37 nrad with the foundations' RK4 mechanization).
 #[test]
 fn strapdown_reproduces_truth_over_vehicle_scenario() {
-    let scn = load("vehicle");
+    let scn = crate::matched::scenario(load("vehicle"));
     let (max_pos, max_vel, max_att) = perfect_ins_max_errors(&scn, |_| {});
     eprintln!(
         "strapdown vs truth over 600 s: pos {max_pos:.3e} m, vel {max_vel:.3e} m/s, att {max_att:.3e} rad"
@@ -339,7 +339,7 @@ fn star_tracker_boresight_points_up() {
 /// GNSS outage windows empty the receiver output.
 #[test]
 fn gnss_outage_window_is_honoured() {
-    let scn = load("vehicle");
+    let scn = crate::matched::scenario(load("vehicle"));
     let mut src = GnssSource::new(&scn, scn.epoch_gps().ns);
     for k in [299i64, 300, 330, 359, 360] {
         let m = src.sample(k * 1_000_000_000);
@@ -451,7 +451,7 @@ mod parse_errors {
 #[test]
 fn odometer_distance_carries_scale_factor() {
     use crate::sources::OdometerSource;
-    let scn = load("vehicle");
+    let scn = crate::matched::scenario(load("vehicle"));
     let mut odo = OdometerSource::new(&scn, 0);
     let mut gen_ = TruthGenerator::new(&scn);
     let p = period_ns(scn.spec.odometer.rate_hz);
@@ -507,25 +507,25 @@ fn mems_outputs_are_quantised() {
     }
 }
 
-/// The static site with the vehicle scenario's `[world]`, every effect switched on.
+/// The static site with the GNSS part of the vehicle scenario's `[world]` (every effect on the
+/// pseudoranges, the oscillator and the antenna; a road needs a car).
 fn static_site_in_the_world() -> Scenario {
-    let base = std::fs::read_to_string(scenario_path("static_site")).unwrap();
-    let vehicle = std::fs::read_to_string(scenario_path("vehicle")).unwrap();
-    let mut doc: toml::Table = toml::from_str(&base).unwrap();
-    let v: toml::Table = toml::from_str(&vehicle).unwrap();
-    let mut world = v["world"].as_table().unwrap().clone();
-    for (_, effect) in world.iter_mut() {
-        effect
-            .as_table_mut()
-            .unwrap()
-            .insert("enabled".into(), true.into());
-    }
-    doc.insert("world".into(), toml::Value::Table(world));
-    Scenario::from_toml_str(
-        &toml::to_string(&doc).unwrap(),
-        &scenario_path("static_site"),
-    )
-    .unwrap()
+    let mut scn = load("static_site");
+    let car = load("vehicle").spec.world.expect("the car's world");
+    scn.spec.world = Some(
+        car.only(&[
+            "ionosphere",
+            "troposphere",
+            "multipath",
+            "satellite_clock",
+            "ephemeris",
+            "code_noise",
+            "receiver_clock",
+            "gnss_antenna",
+        ])
+        .unwrap(),
+    );
+    scn
 }
 
 /// The real receiver: its fix is the weighted least-squares solution of exactly the

@@ -53,7 +53,7 @@ impl HeadingRun {
     }
 }
 
-/// The vehicle scenario with `seed`; with `white_imu` the IMU keeps only its white noise
+/// The vehicle scenario on the matched world with `seed`; with `white_imu` the IMU keeps only its white noise
 /// (ARW, VRW): every bias, scale factor, misalignment and temperature term zero.
 fn scenario(seed: u64, white_imu: bool) -> Scenario {
     let path = Path::new(concat!(
@@ -74,7 +74,7 @@ fn scenario(seed: u64, white_imu: bool) -> Scenario {
             ),
         );
     }
-    let scn = Scenario::from_toml_str(&text, path).unwrap();
+    let scn = sextant_drivers_sim::matched::scenario(Scenario::from_toml_str(&text, path).unwrap());
     assert_eq!(scn.spec.scenario.seed, seed);
     if white_imu {
         assert_eq!(scn.imu.gyro.scale_factor_ppm, 0.0);

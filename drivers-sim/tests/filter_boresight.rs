@@ -40,7 +40,7 @@ fn scenario_path(name: &str) -> PathBuf {
     Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../config/scenarios")).join(name)
 }
 
-/// The scenario file with the star tracker mounted at `KAPPA_DEG`.
+/// The scenario file with the star tracker mounted at `KAPPA_DEG`, on the matched world.
 fn scenario_with_kappa(name: &str) -> Scenario {
     let path = scenario_path(name);
     let text = std::fs::read_to_string(&path).unwrap();
@@ -63,7 +63,7 @@ fn scenario_with_kappa(name: &str) -> Scenario {
         text.replace("[star_tracker]\n", &format!("[star_tracker]\n{line}\n"))
     };
     assert!(text.contains(&line));
-    Scenario::from_toml_str(&text, &path).unwrap()
+    sextant_drivers_sim::matched::scenario(Scenario::from_toml_str(&text, &path).unwrap())
 }
 
 const ARCSEC: f64 = std::f64::consts::PI / 180.0 / 3600.0;

@@ -43,7 +43,7 @@ fn run(mode: GnssMode, max_sats: usize, window: (f64, f64), known_start: bool) -
         env!("CARGO_MANIFEST_DIR"),
         "/../config/scenarios/vehicle.toml"
     ));
-    let scn = Scenario::load(path).unwrap();
+    let scn = sextant_drivers_sim::matched::scenario(Scenario::load(path).unwrap());
     let site = scn.spec.site;
     let sim = OfflineSim::new(&scn)
         .with_duration_s(window.1)
@@ -242,7 +242,7 @@ fn first_single_satellite_epoch_only_starts_the_clock() {
         env!("CARGO_MANIFEST_DIR"),
         "/../config/scenarios/vehicle.toml"
     ));
-    let scn = Scenario::load(path).unwrap();
+    let scn = sextant_drivers_sim::matched::scenario(Scenario::load(path).unwrap());
     let site = scn.spec.site;
     let sim = OfflineSim::new(&scn).limit_satellites(SatelliteLimit {
         start_s: 0.0,

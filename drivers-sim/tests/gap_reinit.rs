@@ -10,33 +10,14 @@ use msgs::{ImuSample, NavMode, SensorId};
 use nalgebra::Vector3;
 use sextant_drivers_sim::offline::{OfflineSim, RunPoint, compare, feed};
 use sextant_drivers_sim::scenario::Scenario;
-use std::path::Path;
-
-fn root() -> &'static Path {
-    Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
-}
 
 fn default_config() -> NavigatorConfig {
-    let text = std::fs::read_to_string(root().join("config/filter.toml")).expect("filter.toml");
-    toml::from_str(&text).expect("filter.toml parses")
+    crate::fixture::matched_filter()
 }
 
-/// The default vehicle scenario with the trajectory and duration replaced.
+/// The default vehicle scenario (matched world) with the trajectory and duration replaced.
 fn vehicle_with(segments: &str, duration_s: f64) -> Scenario {
-    let path = root().join("config/scenarios/vehicle.toml");
-    let text = std::fs::read_to_string(&path).expect("vehicle.toml");
-    let start = text.find("segments = [").expect("segments");
-    let end = start + text[start..].find("\n]\n").expect("end of segments") + 3;
-    let text = format!(
-        "{}segments = [{segments}]\n{}",
-        &text[..start],
-        &text[end..]
-    )
-    .replace(
-        "duration_s = 600.0",
-        &format!("duration_s = {duration_s:.1}"),
-    );
-    Scenario::from_toml_str(&text, &path).unwrap_or_else(|e| panic!("{e}"))
+    crate::fixture::matched_vehicle_with(segments, duration_s)
 }
 
 /// One drive: speed up, cruise, a 90° turn, cruise, stop (75 s).

@@ -9,10 +9,12 @@ use sextant_drivers_sim::sources::GnssSource;
 use sextant_drivers_sim::truth::TruthGenerator;
 use std::path::Path;
 
+/// The shipped scenario `name` on the matched world (the least-squares algebra against the
+/// receiver's exact covariance).
 fn load(name: &str) -> Scenario {
     let p = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../config/scenarios/{name}.toml"));
     match Scenario::load(&p) {
-        Ok(s) => s,
+        Ok(s) => sextant_drivers_sim::matched::scenario(s),
         Err(e) => panic!("{e}"),
     }
 }

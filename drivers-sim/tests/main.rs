@@ -11,6 +11,7 @@ mod filter_boresight;
 mod filter_modes;
 mod filter_tight;
 mod filter_vehicle;
+mod fixture;
 mod gap_reinit;
 mod gnss_ls;
 mod live;

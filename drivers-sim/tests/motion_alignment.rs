@@ -17,36 +17,17 @@ use msgs::{ImuSample, Record};
 use nalgebra::Matrix3;
 use sextant_drivers_sim::offline::{OfflineSim, RunPoint, compare, feed};
 use sextant_drivers_sim::scenario::Scenario;
-use std::path::Path;
 
 /// χ²(3) quantile 0.9999.
 const CHI2_3_9999: f64 = 21.108;
 
-fn root() -> &'static Path {
-    Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
-}
-
 fn default_config() -> NavigatorConfig {
-    let text = std::fs::read_to_string(root().join("config/filter.toml")).expect("filter.toml");
-    toml::from_str(&text).expect("filter.toml parses")
+    crate::fixture::matched_filter()
 }
 
-/// The default vehicle scenario with the trajectory and duration replaced.
+/// The default vehicle scenario (matched world) with the trajectory and duration replaced.
 fn vehicle_with(segments: &str, duration_s: f64) -> Scenario {
-    let path = root().join("config/scenarios/vehicle.toml");
-    let text = std::fs::read_to_string(&path).expect("vehicle.toml");
-    let start = text.find("segments = [").expect("segments");
-    let end = start + text[start..].find("\n]\n").expect("end of segments") + 3;
-    let text = format!(
-        "{}segments = [{segments}]\n{}",
-        &text[..start],
-        &text[end..]
-    )
-    .replace(
-        "duration_s = 600.0",
-        &format!("duration_s = {duration_s:.1}"),
-    );
-    Scenario::from_toml_str(&text, &path).unwrap_or_else(|e| panic!("{e}"))
+    crate::fixture::matched_vehicle_with(segments, duration_s)
 }
 
 /// 110 s standing (the static alignment of `alignment_s` = 100 s), then a drive with turns
@@ -512,21 +493,17 @@ fn a_restart_resumes_from_a_fresh_snapshot_and_refuses_a_stale_one() {
 fn calibration_memory_starts_the_next_run_from_the_saved_boresight_and_odometer_scale() {
     const KAPPA_DEG: [f64; 3] = [40.0 / 3600.0, -30.0 / 3600.0, 60.0 / 3600.0];
     let with_mount = |seed: u64| {
-        let path = root().join("config/scenarios/vehicle.toml");
-        let text = std::fs::read_to_string(&path).expect("vehicle.toml");
-        let start = text.find("segments = [").expect("segments");
-        let end = start + text[start..].find("\n]\n").expect("end of segments") + 3;
-        let text = format!("{}segments = [{DRIVE}]\n{}", &text[..start], &text[end..])
-            .replace("duration_s = 600.0", &format!("duration_s = {DRIVE_S:.1}"))
-            .replace("seed = 2\n", &format!("seed = {seed}\n"))
-            .replace(
-                "[star_tracker]\n",
-                &format!(
-                    "[star_tracker]\nmounting_kappa_deg = [{}, {}, {}]\n",
-                    KAPPA_DEG[0], KAPPA_DEG[1], KAPPA_DEG[2]
-                ),
-            );
-        Scenario::from_toml_str(&text, &path).unwrap_or_else(|e| panic!("{e}"))
+        crate::fixture::matched_vehicle_edited(|text| {
+            crate::fixture::with_segments(&text, DRIVE, DRIVE_S)
+                .replace("seed = 2\n", &format!("seed = {seed}\n"))
+                .replace(
+                    "[star_tracker]\n",
+                    &format!(
+                        "[star_tracker]\nmounting_kappa_deg = [{}, {}, {}]\n",
+                        KAPPA_DEG[0], KAPPA_DEG[1], KAPPA_DEG[2]
+                    ),
+                )
+        })
     };
     let mut cfg = default_config();
     cfg.states.boresight = true;

@@ -14,17 +14,15 @@ fn root() -> &'static Path {
 }
 
 fn default_config() -> NavigatorConfig {
-    let text = std::fs::read_to_string(root().join("config/filter.toml")).expect("filter.toml");
-    toml::from_str(&text).expect("filter.toml parses")
+    crate::fixture::matched_filter()
 }
 
-/// `config/filter.toml` told the car it drives: the default scenario's car (no
-/// `[world.vehicle]`) is rigid, its wheel at the IMU, without slip, ride or vibration, so the class
-/// noise of `[vehicle]` (a passenger car's) is zero for it and only the odometer's white noise
-/// is left to test.
+/// `config/filter.toml` told the car it drives: the default scenario's car on the matched
+/// world (no `[world.vehicle]`) is rigid, its wheel at the IMU, without slip, ride or
+/// vibration, so the class noise of `[vehicle]` (a passenger car's) is zero for it and only the
+/// odometer's white noise is left to test.
 fn matched_car_config() -> NavigatorConfig {
     let mut c = default_config();
-    c.vehicle.wheel_lever_arm_b_m = [0.0; 3];
     crate::world_accuracy::rigid(&mut c);
     c
 }
@@ -45,7 +43,9 @@ struct OdoRun {
 }
 
 fn run(cfg: NavigatorConfig, duration_s: f64) -> OdoRun {
-    let scn = Scenario::load(&root().join("config/scenarios/vehicle.toml")).expect("vehicle");
+    let scn = sextant_drivers_sim::matched::scenario(
+        Scenario::load(&root().join("config/scenarios/vehicle.toml")).expect("vehicle"),
+    );
     let sim = OfflineSim::new(&scn).with_duration_s(duration_s);
     let epoch = sim.epoch_ns();
     let mut nav = Navigator::new(cfg).expect("config");

@@ -9,6 +9,7 @@
 
 use fusion::navigator::{GnssMode, Navigator, NavigatorConfig};
 use nalgebra::Vector3;
+use sextant_drivers_sim::matched;
 use sextant_drivers_sim::offline::{OfflineSim, RunPoint, run_navigator};
 use sextant_drivers_sim::scenario::Scenario;
 use sextant_drivers_sim::sources::GnssSource;
@@ -28,9 +29,16 @@ fn root() -> &'static Path {
     Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
 }
 
-fn filter_config() -> NavigatorConfig {
+/// The shipped car's filter (`config/filter.toml`).
+fn car_filter() -> NavigatorConfig {
     let text = std::fs::read_to_string(root().join("config/filter.toml")).unwrap();
     toml::from_str(&text).unwrap()
+}
+
+/// The car's tuning with the matched installation (antenna and wheel at the IMU, white GNSS
+/// errors, no time tags); the reports add what their world has.
+fn filter_config() -> NavigatorConfig {
+    matched::filter(car_filter())
 }
 
 /// Which world the vehicle runs in.
@@ -125,14 +133,11 @@ fn world_accuracy_report() {
         let (fh, fv) = fix_rms(&scn, 150.0);
         for mode in [GnssMode::Loose, GnssMode::Tight] {
             for tau_s in [0.0, OPEN_SKY_CORRELATION_TIME_S] {
-                let mut cfg = filter_config();
+                // The car's installation of the effects this world has.
+                let mut cfg =
+                    matched::installed_for(scn.spec.world.as_ref(), car_filter(), &car_filter());
                 cfg.gnss_mode = mode;
                 cfg.gnss.error_correlation_time_s = tau_s;
-                if world != World::Matched {
-                    // The surveyed antenna of the vehicle (the scenario's).
-                    let w = scn.spec.world.unwrap();
-                    cfg.gnss.lever_arm_b_m = w.gnss_antenna.unwrap().lever_arm_b_m;
-                }
                 let (h, v, nees, nees_v) = solution_rms(&scn, cfg, 150.0);
                 let model = if tau_s > 0.0 { "GM" } else { "white" };
                 println!(
@@ -145,31 +150,11 @@ fn world_accuracy_report() {
     }
 }
 
-/// The default vehicle scenario with the motion world's example tables (commented out at the
-/// end of `vehicle.toml`) appended, the ones in `on` enabled.
+/// The default vehicle scenario with only the `on` tables of its world.
 fn vehicle_in_motion(on: &[&str]) -> Scenario {
-    let path = root().join("config/scenarios/vehicle.toml");
-    let text = std::fs::read_to_string(&path).unwrap();
-    let start = text
-        .find("# [world.vehicle]")
-        .expect("motion world example");
-    let mut out = text[..start].to_string();
-    let mut table = String::new();
-    for line in text[start..].lines() {
-        let l = line
-            .strip_prefix("# ")
-            .unwrap_or(line.trim_start_matches('#'));
-        if let Some(name) = l.strip_prefix("[world.") {
-            table = name.split(']').next().unwrap().to_string();
-        }
-        if l.starts_with("enabled") {
-            out.push_str(&format!("enabled = {}\n", on.contains(&table.as_str())));
-        } else {
-            out.push_str(l);
-            out.push('\n');
-        }
-    }
-    Scenario::from_toml_str(&out, &path).unwrap()
+    let mut scn = Scenario::load(&root().join("config/scenarios/vehicle.toml")).unwrap();
+    scn.spec.world = Some(scn.spec.world.unwrap().only(on).unwrap());
+    scn
 }
 
 #[test]
@@ -266,13 +251,9 @@ fn zero_vehicle(
 const WHEEL_TAPE_B_M: [f64; 3] = [-1.5, -0.8, 1.0];
 
 /// One line of the motion world's report: the shipped loose filter on `scn`, after 150 s,
-/// told the wheel's lever arm when the car is the one of `[world.vehicle]` (the matched car
-/// reads its odometer at the IMU).
+/// with the car's installation of the effects `scn` has (`matched::installed_for`).
 fn motion_report_line(label: &str, scn: &Scenario) {
-    let mut cfg = filter_config();
-    if scn.spec.world.as_ref().and_then(|w| w.vehicle()).is_some() {
-        cfg.vehicle.wheel_lever_arm_b_m = WHEEL_TAPE_B_M;
-    }
+    let cfg = matched::installed_for(scn.spec.world.as_ref(), car_filter(), &car_filter());
     motion_report_line_with(label, scn, cfg);
 }
 

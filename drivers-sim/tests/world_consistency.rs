@@ -28,30 +28,48 @@ fn root() -> &'static Path {
 /// source given in `config/filter.toml`'s comment on `[gnss] error_correlation_time_s`.
 const OPEN_SKY_CORRELATION_TIME_S: f64 = 2700.0;
 
-/// The default vehicle scenario with every `[world]` effect on and the given seed.
+/// The GNSS part of the car's world: every effect on the pseudoranges, the oscillator and
+/// the antenna.
+const GNSS_WORLD: [&str; 8] = [
+    "ionosphere",
+    "troposphere",
+    "multipath",
+    "satellite_clock",
+    "ephemeris",
+    "code_noise",
+    "receiver_clock",
+    "gnss_antenna",
+];
+
+/// The default vehicle scenario with the GNSS part of its world and the given seed.
 fn vehicle_world(seed: u64) -> Scenario {
     let path = root().join("config/scenarios/vehicle.toml");
     let mut doc: toml::Table = toml::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
-    for (_, effect) in doc["world"].as_table_mut().unwrap().iter_mut() {
-        effect
-            .as_table_mut()
-            .unwrap()
-            .insert("enabled".into(), true.into());
-    }
     doc["scenario"]
         .as_table_mut()
         .unwrap()
         .insert("seed".into(), (seed as i64).into());
-    Scenario::from_toml_str(&toml::to_string(&doc).unwrap(), &path).unwrap()
+    let mut scn = Scenario::from_toml_str(&toml::to_string(&doc).unwrap(), &path).unwrap();
+    scn.spec.world = Some(scn.spec.world.unwrap().only(&GNSS_WORLD).unwrap());
+    scn
 }
 
+/// The car's filter (`config/car_filter.toml` over `config/filter.toml`) installed for this
+/// world: the surveyed antenna, its time tag and the receiver class's error correlation time.
 fn filter_config(scn: &Scenario, mode: GnssMode) -> NavigatorConfig {
-    let text = std::fs::read_to_string(root().join("config/filter.toml")).unwrap();
-    let mut cfg: NavigatorConfig = toml::from_str(&text).unwrap();
+    let text = std::fs::read_to_string(crate::fixture::root().join("config/car_filter.toml"))
+        .expect("car_filter.toml");
+    let car: NavigatorConfig = toml::from_str(&text).expect("car_filter.toml parses");
+    assert_eq!(
+        car.gnss.error_correlation_time_s,
+        OPEN_SKY_CORRELATION_TIME_S
+    );
+    let mut cfg = sextant_drivers_sim::matched::installed_for(
+        scn.spec.world.as_ref(),
+        crate::fixture::car_filter(),
+        &car,
+    );
     cfg.gnss_mode = mode;
-    cfg.gnss.error_correlation_time_s = OPEN_SKY_CORRELATION_TIME_S;
-    // The surveyed antenna of the vehicle (the scenario's world).
-    cfg.gnss.lever_arm_b_m = scn.spec.world.unwrap().gnss_antenna.unwrap().lever_arm_b_m;
     cfg
 }
 

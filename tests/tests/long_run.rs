@@ -218,9 +218,26 @@ fn fusion_memory_stays_flat_over_a_simulated_day() {
         max - after_first_hour
     );
     let st = wait_exit(&mut child, "sextant run", Duration::from_secs(600));
-    assert!(st.success(), "sextant run: {st}");
     let s = summary_json(&dir);
-    assert_eq!(s["records_dropped"], 0, "{s}");
+    // At 100× on a 2-core machine the JSON recorder is at its throughput (about 100 000
+    // records/s beside the fusion and six drivers) and may drop records. That is an overload
+    // beyond real time, not a memory effect: it must be counted and reported, never silent —
+    // the run ends with exit status 3 ("completed, recording incomplete") exactly when records
+    // were dropped, and the summary's counters are the fusion's.
+    let dropped = s["records_dropped"].as_u64().expect("records_dropped");
+    let written = s["records_written"].as_u64().expect("records_written");
+    println!(
+        "recording: {written} records written, {dropped} dropped ({:.2} %)",
+        100.0 * dropped as f64 / (written + dropped) as f64
+    );
+    if dropped == 0 {
+        assert!(st.success(), "sextant run: {st}");
+        assert_eq!(s["recording_complete"], true, "{s}");
+    } else {
+        assert_eq!(st.code(), Some(3), "sextant run with drops: {st}");
+        assert_eq!(s["recording_complete"], false, "{s}");
+    }
+    assert_eq!(s["fusion_restarts"], 0, "{s}");
 
     // The report of the whole day, in bounded memory.
     let report = Command::new("/usr/bin/time")

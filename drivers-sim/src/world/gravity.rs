@@ -76,7 +76,7 @@ impl GravityField {
         for (k, p) in self.k.iter().zip(&self.phase) {
             let kk = k[0].hypot(k[1]);
             let decay = (-kk * up_m).exp();
-            let (s, c) = (k[0] * north_m + k[1] * east_m + p).sin_cos();
+            let (s, c) = super::spectral::sin_cos(k[0] * north_m + k[1] * east_m + p);
             g.x -= k[0] * s * decay;
             g.y -= k[1] * s * decay;
             g.z += kk * c * decay;

@@ -26,7 +26,7 @@
 //! ([`imu_unit`]: its noise and bias instability scattered about the data sheet, g-sensitive
 //! gyro drift, warm-up), the star tracker's thermal error, boresight bias and time-tag latency
 //! and the barometer's day of weather ([`aiding`]). Off unless a table is present and enabled;
-//! `config/scenarios/vehicle.toml` carries an example, commented out.
+//! every table is on in `config/scenarios/vehicle.toml`, the default scenario.
 //!
 //! These models are the world's own: none calls `fusion`'s ionosphere, troposphere or gravity
 //! models, nor its sensor error models (only its proven foundations: ellipsoid, time, frames;
@@ -124,6 +124,115 @@ pub struct WorldSection {
     /// The barometer's air (day's pressure, temperature, tendency) and its sensor's
     /// temperature coefficient.
     pub baro: Option<aiding::BaroWorldSpec>,
+}
+
+/// Every effect of `[world]`, by its table name.
+pub const EFFECTS: [&str; 14] = [
+    "ionosphere",
+    "troposphere",
+    "multipath",
+    "satellite_clock",
+    "ephemeris",
+    "code_noise",
+    "receiver_clock",
+    "gnss_antenna",
+    "vehicle",
+    "vibration",
+    "gravity",
+    "imu",
+    "star_tracker",
+    "baro",
+];
+
+impl WorldSection {
+    /// The effects whose tables are present (enabled or not), in the order of [`EFFECTS`].
+    pub fn effects_present(&self) -> Vec<&'static str> {
+        let present = [
+            self.ionosphere.is_some(),
+            self.troposphere.is_some(),
+            self.multipath.is_some(),
+            self.satellite_clock.is_some(),
+            self.ephemeris.is_some(),
+            self.code_noise.is_some(),
+            self.receiver_clock.is_some(),
+            self.gnss_antenna.is_some(),
+            self.vehicle.is_some(),
+            self.vibration.is_some(),
+            self.gravity.is_some(),
+            self.imu.is_some(),
+            self.star_tracker.is_some(),
+            self.baro.is_some(),
+        ];
+        EFFECTS
+            .iter()
+            .zip(present)
+            .filter_map(|(name, on)| on.then_some(*name))
+            .collect()
+    }
+
+    /// The effects whose tables are present and enabled, in the order of [`EFFECTS`].
+    pub fn effects_on(&self) -> Vec<&'static str> {
+        let on = [
+            on(self.ionosphere, |s| s.enabled).is_some(),
+            on(self.troposphere, |s| s.enabled).is_some(),
+            on(self.multipath, |s| s.enabled).is_some(),
+            on(self.satellite_clock, |s| s.enabled).is_some(),
+            on(self.ephemeris, |s| s.enabled).is_some(),
+            on(self.code_noise, |s| s.enabled).is_some(),
+            self.receiver_clock().is_some(),
+            self.antenna().is_some(),
+            self.vehicle().is_some(),
+            self.vibration().is_some(),
+            self.gravity().is_some(),
+            self.imu().is_some(),
+            self.star_tracker().is_some(),
+            self.baro().is_some(),
+        ];
+        EFFECTS
+            .iter()
+            .zip(on)
+            .filter_map(|(name, on)| on.then_some(*name))
+            .collect()
+    }
+
+    /// This world with only the effects named in `keep` (table names, [`EFFECTS`]), each of
+    /// them switched on (`enabled = true`); the others are removed, as if their tables were
+    /// left out. A name that is not an effect is an error naming it.
+    pub fn only(&self, keep: &[&str]) -> Result<Self, String> {
+        if let Some(bad) = keep.iter().find(|k| !EFFECTS.contains(k)) {
+            return Err(format!(
+                "`{bad}` is not a world effect (one of: {})",
+                EFFECTS.join(", ")
+            ));
+        }
+        let k = |name: &str| keep.contains(&name);
+        macro_rules! keep_on {
+            ($($field:ident),*) => {
+                Self {
+                    $($field: self.$field.filter(|_| k(stringify!($field))).map(|mut s| {
+                        s.enabled = true;
+                        s
+                    }),)*
+                }
+            };
+        }
+        Ok(keep_on!(
+            ionosphere,
+            troposphere,
+            multipath,
+            satellite_clock,
+            ephemeris,
+            code_noise,
+            receiver_clock,
+            gnss_antenna,
+            vehicle,
+            vibration,
+            gravity,
+            imu,
+            star_tracker,
+            baro
+        ))
+    }
 }
 
 fn on<T: Copy>(x: Option<T>, enabled: impl Fn(&T) -> bool) -> Option<T> {
@@ -549,6 +658,14 @@ impl GnssWorld {
             m.step(dt_s, &mut self.rng);
         }
         self.signal_in_space.step(dt_s, &mut self.rng);
+    }
+
+    /// Whether the world delays the signals in the ionosphere and in the troposphere. The
+    /// receiver's broadcast corrections are applied only for a delay the world has: without
+    /// it, they would be an error of their own (the world's effect is the delay *left* after
+    /// the receiver's correction, so a world without it is one whose correction is exact).
+    pub fn has_atmosphere(&self) -> (bool, bool) {
+        (self.ionosphere.is_some(), self.troposphere.is_some())
     }
 
     /// Error terms of satellite `i` seen from geodetic `(lat, lon)` rad and `height_m` at

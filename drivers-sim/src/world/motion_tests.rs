@@ -17,47 +17,29 @@ fn vehicle_path() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../config/scenarios/vehicle.toml")
 }
 
-/// The default vehicle scenario with the shipped (commented) motion-world example switched on
-/// for the `on` tables, `segments` in place of its trajectory and `duration_s`.
+/// The default vehicle scenario with only the `on` tables of its world, `segments` in place
+/// of its trajectory and `duration_s`.
 pub(crate) fn vehicle_in_motion_world(on: &[&str], segments: &str, duration_s: f64) -> Scenario {
     let text = std::fs::read_to_string(vehicle_path()).unwrap();
-    let start = text
-        .find("# [world.vehicle]")
-        .expect("motion world example");
-    let mut example = String::new();
-    let mut table = String::new();
-    for line in text[start..].lines() {
-        let l = line
-            .strip_prefix("# ")
-            .unwrap_or(line.trim_start_matches('#'));
-        if let Some(name) = l.strip_prefix("[world.") {
-            table = name.split(']').next().unwrap().to_string();
-        }
-        let l = if l.starts_with("enabled") {
-            format!("enabled = {}", on.contains(&table.as_str()))
-        } else {
-            l.to_string()
-        };
-        example.push_str(&l);
-        example.push('\n');
-    }
-    let head = &text[..start];
-    let seg_start = head.find("segments = [").unwrap();
-    let seg_end = seg_start + head[seg_start..].find("\n]\n").unwrap() + 3;
-    let head = format!(
+    let seg_start = text.find("segments = [").unwrap();
+    let seg_end = seg_start + text[seg_start..].find("\n]\n").unwrap() + 3;
+    let text = format!(
         "{}segments = [{segments}]\n{}",
-        &head[..seg_start],
-        &head[seg_end..]
+        &text[..seg_start],
+        &text[seg_end..]
     )
     .replace(
         "duration_s = 600.0",
         &format!("duration_s = {duration_s:.1}"),
     );
-    Scenario::from_toml_str(&format!("{head}\n{example}"), &vehicle_path()).unwrap()
+    let mut scn = Scenario::from_toml_str(&text, &vehicle_path()).unwrap();
+    scn.spec.world = Some(scn.spec.world.expect("the car's world").only(on).unwrap());
+    scn
 }
 
-fn spec_of(scn: &Scenario) -> (VehicleSpec, VibrationSpec) {
-    let w = scn.spec.world.unwrap();
+/// The car's road and vibration specs (the shipped world's, whichever tables `_scn` keeps).
+fn spec_of(_scn: &Scenario) -> (VehicleSpec, VibrationSpec) {
+    let w = Scenario::load(&vehicle_path()).unwrap().spec.world.unwrap();
     (w.vehicle.unwrap(), w.vibration.unwrap())
 }
 
@@ -425,20 +407,14 @@ fn baro_reads_the_air_of_the_day() {
 #[test]
 fn motion_world_is_validated() {
     let text = std::fs::read_to_string(vehicle_path()).unwrap();
-    let start = text.find("# [world.vehicle]").unwrap();
-    let example: String = text[start..]
-        .lines()
-        .map(|l| l.strip_prefix("# ").unwrap_or(l.trim_start_matches('#')))
-        .collect::<Vec<_>>()
-        .join("\n");
     let err = |base: &str, from: &str, to: &str| {
-        let body = example.replacen(from, to, 1);
-        match Scenario::from_toml_str(&format!("{base}\n{body}\n"), &vehicle_path()) {
+        assert!(base.contains(from), "{from}");
+        match Scenario::from_toml_str(&base.replacen(from, to, 1), &vehicle_path()) {
             Ok(_) => String::from("accepted"),
             Err(e) => e.to_string(),
         }
     };
-    let head = &text[..start];
+    let head = text.as_str();
     assert_eq!(err(head, "", ""), "accepted");
     let e = err(head, "grade_sigma_deg = 2.0", "grade_sigma_deg = -2.0");
     assert!(e.contains("world.vehicle.grade_sigma_deg"), "{e}");
@@ -454,6 +430,13 @@ fn motion_world_is_validated() {
     assert!(e.contains("world.imu.warmup_tau_s"), "{e}");
     // The road needs a car: a static trajectory with [world.vehicle] on is refused.
     let stat = std::fs::read_to_string(vehicle_path().with_file_name("static_site.toml")).unwrap();
-    let e = err(&stat, "enabled = false", "enabled = true");
+    let car_start = text.find("\n[world.vehicle]").unwrap() + 1;
+    let car_len = text[car_start + 1..].find("\n[world.").unwrap() + 1;
+    let car = &text[car_start..car_start + car_len];
+    let e = err(
+        &format!("{stat}\n{car}\n"),
+        "enabled = false",
+        "enabled = true",
+    );
     assert!(e.contains("world.vehicle"), "{e}");
 }

@@ -9,6 +9,14 @@
 //! noise, as after any first fix of an unknown offset. Why: the bias is the day's weather
 //! (≈ 8.5 m per hPa off the standard atmosphere, drifting ≈ 1 hPa/h), not an instrument
 //! constant a prior can bound.
+//!
+//! The day's air also scales heights: the standard atmosphere inverted on a day `ΔT` off its
+//! temperature reads a height change `Δh` as `Δh (1 + ΔT/T)` (hypsometric equation, the
+//! layer's mean temperature). The bias state is a constant offset, so the part of this error
+//! that grows with the height driven since the bias was acquired is added to the sample's
+//! noise: `σ² = σ_w² + (k (h − h_anchor))²`, `k` = `aiding.baro_scale_sigma`. The anchor
+//! stays where the bias was acquired although the other aiding keeps refining the bias, which
+//! makes the term conservative on long climbs; the day's tendency is the bias's random walk.
 
 use super::*;
 
@@ -24,17 +32,21 @@ impl Navigator {
         {
             return;
         }
+        let aid = &self.config.aiding;
+        let anchor = *self.core.baro_anchor_height_m.get_or_insert(height_m);
+        let scale_m = aid.baro_scale_sigma * (height_m - anchor);
         let m = ekf::baro_height(
             &self.core.nav,
             &self.ell,
             height_m,
             self.core.ekf.baro_bias_m,
-            self.config.aiding.baro_sigma_m,
+            aid.baro_sigma_m.hypot(scale_m),
         );
         self.core.last_baro_fused = Some(ts);
-        let after = self.config.aiding.baro_reacquire_after;
+        let after = aid.baro_reacquire_after;
         if after > 0 && self.core.baro_rejected_in_row >= after {
             self.reacquire_baro_bias(m.innovation[0], tally);
+            self.core.baro_anchor_height_m = Some(height_m);
         }
         let v = self.run_update(Counter::Sensor(id), &m, tally);
         if v.accepted() {

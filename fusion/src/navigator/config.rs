@@ -245,8 +245,13 @@ pub struct AidingNoise {
     pub baro_sigma_m: f64,
     /// Initial σ of the baro height bias state, m.
     pub baro_bias_sigma_m: f64,
-    /// Random walk of the baro height bias, m/√s.
+    /// Random walk of the baro height bias, m/√s: the day's pressure tendency, which moves
+    /// the standard-atmosphere height of a fixed point.
     pub baro_bias_rw_m_sqrt_s: f64,
+    /// 1-σ scale error of the standard-atmosphere height on the day's air (the day's
+    /// temperature off ISA over the ISA temperature), dimensionless: height changes since the
+    /// bias was acquired are read wrong by this fraction.
+    pub baro_scale_sigma: f64,
     /// Minimum time between two fused baro samples, s (the samples in between are not fused).
     pub baro_min_interval_s: f64,
     /// Baro samples rejected by the gate in a row after which the baro bias is acquired anew
@@ -265,6 +270,13 @@ pub struct AidingNoise {
     pub zupt_sigma_m_s: f64,
     /// 1-σ noise of each baseline carrier-phase difference, cycles (dual-baseline attitude).
     pub baseline_phase_sigma_cycles: f64,
+    /// 1-σ low-frequency error of the star tracker per axis, arcsec: its thermo-elastic
+    /// bending and field-of-view errors, which stay for minutes to hours and do not average
+    /// like its white noise (fused with the inflation of [`crate::ekf::correlated`] on top of
+    /// the sample's reported white σ). 0: the reported σ is all.
+    pub star_low_frequency_sigma_arcsec: f64,
+    /// Correlation time of the star tracker's low-frequency error, s.
+    pub star_low_frequency_correlation_time_s: f64,
     /// Initial σ of each star-tracker boresight angle κ1..κ3, deg.
     pub boresight_sigma_deg: f64,
     /// Receiver clock bias PSD (white frequency noise), m²/s (tight coupling).
@@ -290,6 +302,7 @@ impl Default for AidingNoise {
             baro_sigma_m: 0.5,
             baro_bias_sigma_m: 10.0,
             baro_bias_rw_m_sqrt_s: 0.005,
+            baro_scale_sigma: 0.0,
             baro_min_interval_s: 0.2,
             baro_reacquire_after: 10,
             odometer_sigma_m_s: 0.02,
@@ -297,6 +310,8 @@ impl Default for AidingNoise {
             nhc_sigma_m_s: 1e-5,
             zupt_sigma_m_s: 0.005,
             baseline_phase_sigma_cycles: 0.01,
+            star_low_frequency_sigma_arcsec: 0.0,
+            star_low_frequency_correlation_time_s: 3600.0,
             boresight_sigma_deg: 0.1,
             clock_bias_psd_m2_s: 0.1,
             clock_drift_psd_m2_s3: 0.01,
@@ -491,6 +506,38 @@ impl Default for Deadlines {
     }
 }
 
+/// Time-tag latency of each aiding sensor (`[latency]` in `config/filter.toml`), s: a sample
+/// stamped `t` was valid at `t − latency` (a receiver's fix computed and stamped after its
+/// measurement epoch, a star tracker's exposure before its read-out). Each sample is fused at
+/// its time of validity through the delayed-fusion buffer, so a latency must stay below
+/// `buffer_window_s`. From the sensor's documentation or a calibration; 0: stamped at validity.
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Latency {
+    /// GNSS receiver (fix, pseudoranges, Doppler), s.
+    pub gnss_s: f64,
+    /// Star tracker, s.
+    pub star_tracker_s: f64,
+    /// Odometer, s.
+    pub odometer_s: f64,
+    /// Barometer, s.
+    pub baro_s: f64,
+}
+
+impl Latency {
+    /// The latency of `sensor` as a duration (zero for the IMU, the filter's time base).
+    pub fn of(&self, sensor: SensorId) -> Duration {
+        let s = match sensor {
+            SensorId::Gnss => self.gnss_s,
+            SensorId::StarTracker => self.star_tracker_s,
+            SensorId::Odometer => self.odometer_s,
+            SensorId::Baro => self.baro_s,
+            _ => 0.0,
+        };
+        Duration::from_seconds_f64(s)
+    }
+}
+
 /// A configured initial position (used for alignment when no GNSS fix is wanted or available).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields)]
@@ -554,6 +601,8 @@ pub struct NavigatorConfig {
     pub vehicle: VehicleModel,
     /// Aiding deadlines for the navigation mode.
     pub deadlines: Deadlines,
+    /// Time-tag latency of each aiding sensor, compensated at fusion.
+    pub latency: Latency,
     /// Redundant-channel fault detection (paper 004; used when the IMU has channels).
     pub redundancy: crate::redundancy::RedundancyConfig,
     /// Alignment in motion from the star tracker and GNSS.
@@ -587,6 +636,7 @@ impl Default for NavigatorConfig {
             aiding: AidingNoise::default(),
             vehicle: VehicleModel::default(),
             deadlines: Deadlines::default(),
+            latency: Latency::default(),
             redundancy: crate::redundancy::RedundancyConfig::default(),
             motion_alignment: MotionAlignment::default(),
             warm_start: WarmStartConfig::default(),
@@ -612,6 +662,26 @@ pub(super) fn nonneg(x: f64) -> bool {
 }
 
 impl NavigatorConfig {
+    /// This tuning on the idealised vehicle of the built-in defaults: every sensor at the IMU
+    /// and stamped at its time of validity, GNSS and star-tracker errors white, a barometer in
+    /// the standard atmosphere (no weather to drift with, no height scale error). The rest
+    /// (IMU class, gates, switches, noise of the samples) is kept. A real vehicle's
+    /// configuration (`config/filter.toml` is the default car's) states each of these.
+    pub fn idealised(mut self) -> Self {
+        let d = Self::default();
+        self.gnss = d.gnss;
+        self.latency = d.latency;
+        self.vehicle.wheel_lever_arm_b_m = d.vehicle.wheel_lever_arm_b_m;
+        let a = &mut self.aiding;
+        a.baro_bias_rw_m_sqrt_s = d.aiding.baro_bias_rw_m_sqrt_s;
+        a.baro_scale_sigma = d.aiding.baro_scale_sigma;
+        a.star_low_frequency_sigma_arcsec = d.aiding.star_low_frequency_sigma_arcsec;
+        a.star_low_frequency_correlation_time_s = d.aiding.star_low_frequency_correlation_time_s;
+        self
+    }
+}
+
+impl NavigatorConfig {
     /// Check the meaning of the values (ranges, consistency); the error names the key.
     pub fn validate(&self) -> Result<(), ConfigError> {
         self.motion_alignment.validate()?;
@@ -634,6 +704,19 @@ impl NavigatorConfig {
             "buffer_window_s",
             "must be in [0, 2] s",
         )?;
+        for (v, k) in [
+            (self.latency.gnss_s, "latency.gnss_s"),
+            (self.latency.star_tracker_s, "latency.star_tracker_s"),
+            (self.latency.odometer_s, "latency.odometer_s"),
+            (self.latency.baro_s, "latency.baro_s"),
+        ] {
+            check(
+                nonneg(v) && v < self.buffer_window_s.max(f64::MIN_POSITIVE),
+                k,
+                "must be in [0, buffer_window_s) s: a sample is fused at its time of validity \
+                 through the delayed-fusion buffer",
+            )?;
+        }
         check(
             pos(self.max_imu_rate_hz) && self.max_imu_rate_hz <= 100_000.0,
             "max_imu_rate_hz",
@@ -729,6 +812,15 @@ impl NavigatorConfig {
             (
                 self.aiding.baro_bias_rw_m_sqrt_s,
                 "aiding.baro_bias_rw_m_sqrt_s",
+            ),
+            (self.aiding.baro_scale_sigma, "aiding.baro_scale_sigma"),
+            (
+                self.aiding.star_low_frequency_sigma_arcsec,
+                "aiding.star_low_frequency_sigma_arcsec",
+            ),
+            (
+                self.aiding.star_low_frequency_correlation_time_s,
+                "aiding.star_low_frequency_correlation_time_s",
             ),
             (
                 self.aiding.odometer_scale_sigma,

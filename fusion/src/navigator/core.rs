@@ -27,6 +27,12 @@ pub(super) struct Core {
     /// Baro samples rejected by the gate since the last accepted one
     /// (`aiding.baro_reacquire_after`).
     pub(super) baro_rejected_in_row: u32,
+    /// Time of validity of the last fused star-tracker sample (the lag of its low-frequency
+    /// error, `aiding.star_low_frequency_correlation_time_s`).
+    pub(super) last_star_fused: Option<GpsTime>,
+    /// Baro height at which its bias was acquired (the first fused sample, or the one after a
+    /// re-acquisition), m: the reference of the height-scale error (`aiding.baro_scale_sigma`).
+    pub(super) baro_anchor_height_m: Option<f64>,
     /// Time of validity and speed (m/s) of the last odometer sample (ZUPT veto).
     pub(super) last_odo: Option<(GpsTime, f64)>,
     /// Whether the receiver clock states have been started (tight coupling).
@@ -59,6 +65,8 @@ impl Core {
             last_zupt: None,
             last_baro_fused: None,
             baro_rejected_in_row: 0,
+            baro_anchor_height_m: None,
+            last_star_fused: None,
             last_odo: None,
             clock_initialized: false,
             last_gnss_ranging: None,

@@ -109,10 +109,11 @@ impl Navigator {
                 sigma_cross: s.sigma_cross_rad,
                 sigma_roll: s.sigma_roll_rad,
             };
-            if self.too_late(ts) || self.star_q.insert(ts, obs).is_some() {
+            let valid = ts - self.config.latency.of(SensorId::StarTracker);
+            if self.too_late(valid) || self.star_q.insert(valid, obs).is_some() {
                 self.health[id].dropped_late += 1;
             } else {
-                self.note_arrival(ts);
+                self.note_arrival(valid);
             }
         }
         Ok(())
@@ -146,7 +147,7 @@ impl Navigator {
             n_sats,
             sats,
         };
-        let ts = GpsTime::from_ns(s.header.time_ns);
+        let ts = GpsTime::from_ns(s.header.time_ns) - self.config.latency.of(SensorId::Gnss);
         if self.too_late(ts) || self.gnss_q.insert(ts, obs).is_some() {
             self.health[id].dropped_late += 1;
         } else {
@@ -180,10 +181,11 @@ impl Navigator {
             return Err(e);
         }
         self.accept_header(id, &s.header);
-        if self.too_late(ts) || self.odo_q.insert(ts, s.speed_m_s).is_some() {
+        let valid = ts - self.config.latency.of(SensorId::Odometer);
+        if self.too_late(valid) || self.odo_q.insert(valid, s.speed_m_s).is_some() {
             self.health[id].dropped_late += 1;
         } else {
-            self.note_arrival(ts);
+            self.note_arrival(valid);
         }
         Ok(())
     }
@@ -220,10 +222,11 @@ impl Navigator {
                 RejectReason::NoIsaAltitude,
             ));
         }
-        if self.too_late(ts) || self.baro_q.insert(ts, h).is_some() {
+        let valid = ts - self.config.latency.of(SensorId::Baro);
+        if self.too_late(valid) || self.baro_q.insert(valid, h).is_some() {
             self.health[id].dropped_late += 1;
         } else {
-            self.note_arrival(ts);
+            self.note_arrival(valid);
         }
         Ok(())
     }

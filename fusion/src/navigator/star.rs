@@ -1,5 +1,13 @@
 //! Star-tracker attitude updates (paper 000, [`crate::ekf::star_attitude`]) and the cached
 //! celestial transformation they need.
+//!
+//! A star tracker's error is not all white: its head bends with temperature and its
+//! field-of-view errors follow the stars in view, a few arcseconds that stay for minutes to
+//! hours. Fused as white, 5 samples a second would average the attitude far below them. The
+//! sample's reported σ is taken as its white part and the class's low-frequency error
+//! (`aiding.star_low_frequency_sigma_arcsec`, first-order Gauss–Markov with
+//! `aiding.star_low_frequency_correlation_time_s`) is added with the consistent inflation of
+//! [`crate::ekf::correlated`] for its correlation since the last fused sample.
 
 use super::*;
 
@@ -44,7 +52,7 @@ impl Navigator {
         }
         let c_e_i = self.celestial.c_e_i(ts, &self.config.eop);
         let q = quat_from_wire(&obs.q);
-        let m = ekf::star_attitude(
+        let mut m = ekf::star_attitude(
             &self.core.nav,
             &q,
             &crate::frames::Rotation::from_dcm_unchecked(c_e_i),
@@ -53,7 +61,25 @@ impl Navigator {
             obs.sigma_cross,
             obs.sigma_roll,
         );
+        let aid = &self.config.aiding;
+        let sigma_lf_rad = (aid.star_low_frequency_sigma_arcsec / 3600.0).to_radians();
+        if sigma_lf_rad > 0.0 {
+            let rho = match self.core.last_star_fused {
+                Some(prev) if ts > prev => ekf::correlated::lag_correlation(
+                    (ts - prev).seconds_f64(),
+                    aid.star_low_frequency_correlation_time_s,
+                ),
+                _ => 0.0,
+            };
+            self.core
+                .ekf
+                .propagate_covariance(&self.ell, &self.core.nav.r_e);
+            let hph = m.h * self.core.ekf.p * m.h.transpose();
+            let r_lf = Matrix3::identity() * (sigma_lf_rad * sigma_lf_rad);
+            m.r += ekf::correlated::inflate_covariance3(&hph, &r_lf, rho);
+        }
         if self.run_update(Counter::Sensor(id), &m, tally).accepted() {
+            self.core.last_star_fused = Some(ts);
             self.mark_fused(id, ts, tally);
         }
     }

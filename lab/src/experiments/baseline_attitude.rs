@@ -318,7 +318,10 @@ fn measure(
     out_dir: &Path,
     progress: bool,
 ) -> Result<Summary, ExperimentError> {
-    let base = Scenario::load(&scenario_path()).map_err(measurement)?;
+    // The car's drive on the matched world (`drivers_sim::matched`): this checks the σ law of
+    // the method against its own Monte Carlo, which needs the phases' errors to be the model's.
+    let base =
+        drivers_sim::matched::scenario(Scenario::load(&scenario_path()).map_err(measurement)?);
     let mut jobs: Vec<(bool, f64, f64)> = settings
         .lengths_m
         .iter()

@@ -197,8 +197,8 @@ fn one_run(
     };
     let sim = OfflineSim::with_channels(scn, channels);
     let epoch = sim.epoch_ns();
-    let mut nav =
-        Navigator::new(cfg).map_err(|e| ExperimentError::Measurement(format!("navigator: {e}")))?;
+    let mut nav = Navigator::new(super::consistency::installed(scn, cfg)?)
+        .map_err(|e| ExperimentError::Measurement(format!("navigator: {e}")))?;
     let mut out = Vec::new();
     let mut last_tick = 0.0;
     run_navigator(sim, epoch, &mut nav, |p| {

@@ -180,7 +180,7 @@ fn navigator_run(
         max_satellites: 0,
     });
     let epoch = sim.epoch_ns();
-    let mut nav = Navigator::new(cfg.clone())
+    let mut nav = Navigator::new(super::consistency::installed(&scn, cfg.clone())?)
         .map_err(|e| ExperimentError::Measurement(format!("navigator: {e}")))?;
     let mut snap = None;
     let mut m = Measured::default();

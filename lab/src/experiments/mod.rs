@@ -60,6 +60,7 @@ pub mod plot;
 pub mod redundancy;
 pub mod schuler;
 pub mod tight_coupling;
+pub mod world_budget;
 
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
@@ -239,6 +240,7 @@ registry! {
     inertial_budget::InertialBudget => InertialBudget,
     hybrid_esbc::HybridEsbc => HybridEsbc,
     hybrid_berlin::HybridBerlin => HybridBerlin,
+    world_budget::WorldBudget => WorldBudget,
 }
 
 fn unknown(name: &str) -> ExperimentError {

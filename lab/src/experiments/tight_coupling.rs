@@ -190,7 +190,7 @@ fn one_run(
         });
     }
     let epoch = sim.epoch_ns();
-    let mut nav = Navigator::new(cfg.clone())
+    let mut nav = Navigator::new(super::consistency::installed(&scn, cfg.clone())?)
         .map_err(|e| ExperimentError::Measurement(format!("navigator: {e}")))?;
     // Satellite positions of the last GNSS epoch (for the observed direction).
     let sats: RefCell<Vec<Vector3<f64>>> = RefCell::new(Vec::new());

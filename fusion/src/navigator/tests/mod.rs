@@ -158,7 +158,25 @@ fn filter_toml_is_the_default_and_validates() {
     let text = include_str!("../../../../config/filter.toml");
     let cfg: NavigatorConfig = toml::from_str(text).unwrap();
     assert_eq!(cfg, NavigatorConfig::default());
+    assert_eq!(
+        cfg.clone().idealised(),
+        cfg,
+        "the default vehicle is the idealised one"
+    );
     cfg.validate().unwrap();
+    // The car of the world (config/car_filter.toml, over these defaults): its installation
+    // and classes, which `idealised` takes back out.
+    let car: NavigatorConfig =
+        toml::from_str(include_str!("../../../../config/car_filter.toml")).unwrap();
+    car.validate().unwrap();
+    assert_eq!(car.gnss.lever_arm_b_m, [0.3, 0.0, -1.5]);
+    assert_eq!(car.latency.gnss_s, 0.05);
+    assert_eq!(car.aiding.baro_bias_rw_m_sqrt_s, 0.14);
+    assert_eq!(car.clone().idealised(), cfg);
+    let mut c = cfg.clone();
+    c.latency.gnss_s = cfg.buffer_window_s;
+    let e = c.validate().unwrap_err().to_string();
+    assert!(e.contains("latency.gnss_s"), "{e}");
     let bad: Result<NavigatorConfig, _> = toml::from_str("alignment_s = 1.0\nbogus = 3\n");
     assert!(bad.unwrap_err().to_string().contains("bogus"));
     let mut c = NavigatorConfig::default();
@@ -473,6 +491,74 @@ fn late_gnss_sample_gives_the_in_time_update() {
         c.push_imu(&imu).unwrap();
     }
     assert!((c.nav_state().r_e - na.r_e).norm() > 1e-4);
+}
+
+/// A receiver that stamps its fix 50 ms after the epoch it measured, declared in
+/// `[latency] gnss_s`: each fix is fused at its time of validity, so the navigator that gets
+/// the late-stamped fixes (after the IMU has passed their epoch, as from a real receiver) ends
+/// where the one that gets every fix in time at its epoch does, to rounding. Undeclared, the
+/// same late stamps are fused 50 ms late and the states differ.
+#[test]
+fn declared_time_tag_latency_fuses_each_sample_at_its_time_of_validity() {
+    const LATENCY_NS: i64 = 50_000_000;
+    let run = |latency_s: f64, stamp_late: bool| {
+        // A surveyed start and the end of the alignment between two fixes: a fix of the last
+        // alignment epoch would otherwise go to the alignment in time and to the filter when
+        // stamped late.
+        let mut cfg = quick_config();
+        cfg.alignment_s = 60.5;
+        cfg.initial_position = Some(InitialPosition {
+            lat_deg: 55.655,
+            lon_deg: 37.534,
+            height_m: 180.0,
+        });
+        cfg.latency.gnss_s = latency_s;
+        let mut nav = Navigator::new(cfg).unwrap();
+        let mut sim = StaticSim::new(32, 100.0);
+        let mut held: Option<GnssSample> = None;
+        for k in 1..=(80 * 100) {
+            let imu = sim.next_imu();
+            let t = imu.header.time_ns;
+            if k % 10 == 0 {
+                nav.push_baro(&baro_at(t, k as u64, 181.0)).unwrap();
+            }
+            // The last fix at 79 s: stamped late, it too arrives before the end.
+            if k % 100 == 0 && k < 80 * 100 {
+                let mut g = sim.gnss();
+                if stamp_late {
+                    g.header.time_ns += LATENCY_NS;
+                    held = Some(g);
+                } else {
+                    nav.push_gnss(&g).unwrap();
+                }
+            }
+            if let Some(g) = held
+                && t >= g.header.time_ns
+            {
+                nav.push_gnss(&g).unwrap();
+                held = None;
+            }
+            nav.push_imu(&imu).unwrap();
+        }
+        nav
+    };
+    let in_time = run(0.0, false);
+    let declared = run(LATENCY_NS as f64 * 1e-9, true);
+    let undeclared = run(0.0, true);
+    let (a, b, c) = (
+        in_time.nav_state(),
+        declared.nav_state(),
+        undeclared.nav_state(),
+    );
+    assert!((a.r_e - b.r_e).norm() < 1e-9, "{}", (a.r_e - b.r_e).norm());
+    assert!((a.v_e - b.v_e).norm() < 1e-12);
+    let dp = (in_time.covariance() - declared.covariance()).abs().max()
+        / in_time.covariance().abs().max();
+    assert!(dp < 1e-9, "covariance differs by {dp}");
+    let g = SensorId::Gnss as usize;
+    assert_eq!(in_time.health()[g].fused, declared.health()[g].fused);
+    assert_eq!(declared.health()[g].dropped_late, 0);
+    assert!((a.r_e - c.r_e).norm() > 1e-6, "the stamps matter");
 }
 
 /// Two navigators on the same 1 kHz static-site stream (baro 10 Hz, GNSS 1 Hz); B gets the
