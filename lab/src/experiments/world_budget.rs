@@ -36,6 +36,8 @@ pub struct Settings {
     pub from_s: f64,
     /// Scenario duration override, s (None: the file's).
     pub duration_s: Option<f64>,
+    /// The effects to budget (None: every effect the scenario's `[world]` describes).
+    pub effects: Option<Vec<&'static str>>,
 }
 
 impl Default for Settings {
@@ -44,6 +46,7 @@ impl Default for Settings {
             scenario: "vehicle.toml".into(),
             from_s: 150.0,
             duration_s: None,
+            effects: None,
         }
     }
 }
@@ -147,7 +150,10 @@ fn measure(
     })?;
     // The matched run, each effect the scenario has alone, the whole world.
     let mut worlds: Vec<(String, Option<WorldSection>)> = vec![("matched".into(), None)];
-    let present = world.effects_present();
+    let present = settings
+        .effects
+        .clone()
+        .unwrap_or_else(|| world.effects_present());
     for name in &present {
         let alone = world.only(&[name]).map_err(measurement)?;
         worlds.push((name.to_string(), Some(alone)));
@@ -270,21 +276,23 @@ mod tests {
     use super::*;
     use drivers_sim::world::EFFECTS;
 
-    /// A short budget: every effect of the shipped car's world has its row between the
-    /// matched run and the whole world, the matched run's shares are zero by definition, the
-    /// summary and the plot are written.
+    /// A short budget of two effects: each has its row between the matched run and the whole
+    /// world, the matched run's shares are zero by definition, the summary and the plot are
+    /// written; the shipped car's world describes every effect.
     #[test]
     fn short_budget_has_a_row_per_effect() {
         let dir = super::super::test_dir("world-budget");
+        let on = vec!["gnss_antenna", "baro"];
         let settings = Settings {
             from_s: 125.0,
             duration_s: Some(135.0),
+            effects: Some(on.clone()),
             ..Settings::default()
         };
         let s = WorldBudget::run_with(&settings, &dir, false).unwrap();
         let car = Scenario::load(&scenario_file("vehicle.toml")).unwrap();
-        let on = car.spec.world.unwrap().effects_present();
-        assert_eq!(on, EFFECTS, "the car's world describes every effect");
+        let all = car.spec.world.unwrap().effects_present();
+        assert_eq!(all, EFFECTS, "the car's world describes every effect");
         assert_eq!(s.rows.len(), on.len() + 2, "{}", table(&s));
         assert_eq!(s.rows[0].world, "matched");
         assert_eq!(s.rows.last().unwrap().world, "whole world");
