@@ -512,19 +512,7 @@ fn mems_outputs_are_quantised() {
 fn static_site_in_the_world() -> Scenario {
     let mut scn = load("static_site");
     let car = load("vehicle").spec.world.expect("the car's world");
-    scn.spec.world = Some(
-        car.only(&[
-            "ionosphere",
-            "troposphere",
-            "multipath",
-            "satellite_clock",
-            "ephemeris",
-            "code_noise",
-            "receiver_clock",
-            "gnss_antenna",
-        ])
-        .unwrap(),
-    );
+    scn.spec.world = Some(car.only(&crate::world::GNSS_EFFECTS).unwrap());
     scn
 }
 

@@ -28,19 +28,6 @@ fn root() -> &'static Path {
 /// source given in `config/filter.toml`'s comment on `[gnss] error_correlation_time_s`.
 const OPEN_SKY_CORRELATION_TIME_S: f64 = 2700.0;
 
-/// The GNSS part of the car's world: every effect on the pseudoranges, the oscillator and
-/// the antenna.
-const GNSS_WORLD: [&str; 8] = [
-    "ionosphere",
-    "troposphere",
-    "multipath",
-    "satellite_clock",
-    "ephemeris",
-    "code_noise",
-    "receiver_clock",
-    "gnss_antenna",
-];
-
 /// The default vehicle scenario with the GNSS part of its world and the given seed.
 fn vehicle_world(seed: u64) -> Scenario {
     let path = root().join("config/scenarios/vehicle.toml");
@@ -50,7 +37,13 @@ fn vehicle_world(seed: u64) -> Scenario {
         .unwrap()
         .insert("seed".into(), (seed as i64).into());
     let mut scn = Scenario::from_toml_str(&toml::to_string(&doc).unwrap(), &path).unwrap();
-    scn.spec.world = Some(scn.spec.world.unwrap().only(&GNSS_WORLD).unwrap());
+    scn.spec.world = Some(
+        scn.spec
+            .world
+            .unwrap()
+            .only(&sextant_drivers_sim::world::GNSS_EFFECTS)
+            .unwrap(),
+    );
     scn
 }
 

@@ -126,8 +126,9 @@ pub struct WorldSection {
     pub baro: Option<aiding::BaroWorldSpec>,
 }
 
-/// Every effect of `[world]`, by its table name.
-pub const EFFECTS: [&str; 14] = [
+/// The GNSS part of `[world]`: every effect on the pseudoranges, the receiver's oscillator and
+/// the antenna, by table name (the first entries of [`EFFECTS`]).
+pub const GNSS_EFFECTS: [&str; 8] = [
     "ionosphere",
     "troposphere",
     "multipath",
@@ -136,6 +137,18 @@ pub const EFFECTS: [&str; 14] = [
     "code_noise",
     "receiver_clock",
     "gnss_antenna",
+];
+
+/// Every effect of `[world]`, by its table name.
+pub const EFFECTS: [&str; 14] = [
+    GNSS_EFFECTS[0],
+    GNSS_EFFECTS[1],
+    GNSS_EFFECTS[2],
+    GNSS_EFFECTS[3],
+    GNSS_EFFECTS[4],
+    GNSS_EFFECTS[5],
+    GNSS_EFFECTS[6],
+    GNSS_EFFECTS[7],
     "vehicle",
     "vibration",
     "gravity",
@@ -166,31 +179,6 @@ impl WorldSection {
         EFFECTS
             .iter()
             .zip(present)
-            .filter_map(|(name, on)| on.then_some(*name))
-            .collect()
-    }
-
-    /// The effects whose tables are present and enabled, in the order of [`EFFECTS`].
-    pub fn effects_on(&self) -> Vec<&'static str> {
-        let on = [
-            on(self.ionosphere, |s| s.enabled).is_some(),
-            on(self.troposphere, |s| s.enabled).is_some(),
-            on(self.multipath, |s| s.enabled).is_some(),
-            on(self.satellite_clock, |s| s.enabled).is_some(),
-            on(self.ephemeris, |s| s.enabled).is_some(),
-            on(self.code_noise, |s| s.enabled).is_some(),
-            self.receiver_clock().is_some(),
-            self.antenna().is_some(),
-            self.vehicle().is_some(),
-            self.vibration().is_some(),
-            self.gravity().is_some(),
-            self.imu().is_some(),
-            self.star_tracker().is_some(),
-            self.baro().is_some(),
-        ];
-        EFFECTS
-            .iter()
-            .zip(on)
             .filter_map(|(name, on)| on.then_some(*name))
             .collect()
     }
