@@ -13,18 +13,31 @@ fn scenario_path(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../config/scenarios/{name}.toml"))
 }
 
-fn load(name: &str) -> Scenario {
+/// A shipped scenario as it is, with its world.
+fn load_shipped(name: &str) -> Scenario {
     match Scenario::load(&scenario_path(name)) {
         Ok(s) => s,
         Err(e) => panic!("{e}"),
     }
 }
 
+/// A shipped scenario on the matched world (the sensor models' own errors only).
+fn load(name: &str) -> Scenario {
+    crate::matched::scenario(load_shipped(name))
+}
+
+/// A shipped scenario's text without its `[world]` (the tables a test appends its own to).
+fn text_without_world(name: &str) -> String {
+    let text = std::fs::read_to_string(scenario_path(name)).unwrap();
+    let end = text.find("\n[world.").map_or(text.len(), |i| i + 1);
+    text[..end].to_string()
+}
+
 /// Both shipped scenarios load and validate.
 #[test]
 fn shipped_scenarios_validate() {
     for name in ["static_site", "vehicle"] {
-        let s = load(name);
+        let s = load_shipped(name);
         assert_eq!(s.spec.scenario.duration_s, 600.0);
     }
 }
@@ -511,7 +524,7 @@ fn mems_outputs_are_quantised() {
 /// pseudoranges, the oscillator and the antenna; a road needs a car).
 fn static_site_in_the_world() -> Scenario {
     let mut scn = load("static_site");
-    let car = load("vehicle").spec.world.expect("the car's world");
+    let car = load_shipped("vehicle").spec.world.expect("the car's world");
     scn.spec.world = Some(car.only(&crate::world::GNSS_EFFECTS).unwrap());
     scn
 }
@@ -567,7 +580,7 @@ fn real_receiver_fix_is_its_own_least_squares_and_correlated() {
 #[test]
 fn world_section_is_validated() {
     let path = scenario_path("static_site");
-    let base = std::fs::read_to_string(&path).unwrap();
+    let base = text_without_world("static_site");
     let err = |extra: &str| match Scenario::from_toml_str(&format!("{base}\n{extra}"), &path) {
         Ok(_) => String::from("accepted"),
         Err(e) => e.to_string(),
@@ -596,3 +609,4 @@ fn world_section_is_validated() {
         "accepted"
     );
 }
+

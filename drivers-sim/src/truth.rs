@@ -12,7 +12,7 @@
 
 use crate::scenario::{FlightSegment, Scenario, Segment, TRUTH_GRID_NS, Trajectory};
 use crate::world::MotionWorld;
-use crate::world::vehicle::{Intent, VehicleState};
+use crate::world::vehicle::{Intent, VehicleFollower, VehicleState, VibrationFollower};
 use fusion::earth::{self, Ellipsoid, Geodetic, GravityModel, WGS84};
 use nalgebra::{Matrix3, Vector3};
 use std::f64::consts::{PI, TAU};
@@ -519,6 +519,16 @@ pub struct TruthGenerator {
     acc: Increments,
     /// The profile at the current grid point's time (the next step's first RK4 stage).
     profile_now: ProfileAt,
+    /// The world's road, body and vibration processes at the current grid point.
+    followers: Followers,
+}
+
+/// The motion world's processes followed along the grid (`world::spectral::Follower`): the
+/// world's sums cost a rotation per term and step instead of a sine and a cosine.
+#[derive(Debug, Clone, Copy, Default)]
+struct Followers {
+    vehicle: Option<VehicleFollower>,
+    vibration: Option<VibrationFollower>,
 }
 
 /// The profile's kinematics at one time with its horizontal velocity, evaluated once per
@@ -578,6 +588,16 @@ impl TruthGenerator {
             height_m: s.height_m,
         };
         let profile_now = ProfileAt::of(&profile, 0.0);
+        let followers = Followers {
+            vehicle: world
+                .vehicle
+                .as_ref()
+                .map(|v| v.follower(0.0, 0.0, Some(GRID_STEP_S))),
+            vibration: world
+                .vibration
+                .as_ref()
+                .map(|v| v.follower(0.0, Some(GRID_STEP_S))),
+        };
         let mut g = Self {
             profile,
             ell,
@@ -606,6 +626,7 @@ impl TruthGenerator {
             },
             acc: Increments::default(),
             profile_now,
+            followers,
         };
         g.point = g.point_at(0, &g.profile_now.kin, lat, lon, s.height_m, 0.0);
         g
@@ -634,13 +655,13 @@ impl TruthGenerator {
     /// driven `s_m`, rad/s, rad/s, m/s, m/s.
     fn pos_rate(&self, p: &ProfileAt, lat: f64, h: f64, s_m: f64) -> [f64; 4] {
         let kin = &p.kin;
-        let v = match &self.world.vehicle {
-            Some(veh) => {
+        let v = match (&self.world.vehicle, &self.followers.vehicle) {
+            (Some(veh), Some(f)) => {
                 let (sn, cs) = p.heading_sin_cos;
                 let vh = kin.speed_m_s;
-                Vector3::new(vh * cs, vh * sn, -vh * veh.slope(s_m))
+                Vector3::new(vh * cs, vh * sn, -vh * veh.slope_near(f, s_m))
             }
-            None => p.v_ned_m_s,
+            _ => p.v_ned_m_s,
         };
         let (r_n, r_e) = earth::radii_of_curvature(&self.ell, lat);
         [
@@ -651,11 +672,12 @@ impl TruthGenerator {
         ]
     }
 
-    /// The vehicle's state at `t_s` (the driver's intent with its second derivatives by
-    /// central differences of the analytic profile).
+    /// The vehicle's state at `t_s`, where `f` stands (the driver's intent with its second
+    /// derivatives by central differences of the analytic profile).
     fn vehicle_state(
         &self,
         veh: &crate::world::vehicle::VehicleWorld,
+        f: &VehicleFollower,
         t_s: f64,
         kin: &Kinematics,
         s_m: f64,
@@ -675,10 +697,11 @@ impl TruthGenerator {
                 (kp.heading_rate_rad_s - km.heading_rate_rad_s) / (2.0 * e),
             ],
         };
-        veh.state(t_s, &intent)
+        veh.state_followed(f, &intent)
     }
 
-    /// The truth at grid point `k`, whose profile kinematics are `kin`.
+    /// The truth at grid point `k`, whose profile kinematics are `kin` (the followers stand
+    /// at its time and distance `s_m`).
     fn point_at(
         &self,
         k: i64,
@@ -706,8 +729,8 @@ impl TruthGenerator {
             // mount vibration; the offset's own rate and acceleration join the velocity and
             // acceleration (the body's rotation of the µm-sized vibration offset is neglected).
             let mut off = [Vector3::zeros(); 3];
-            if let Some(veh) = &w.vehicle {
-                let st = self.vehicle_state(veh, t, &kin, s_m);
+            if let (Some(veh), Some(f)) = (&w.vehicle, &self.followers.vehicle) {
+                let st = self.vehicle_state(veh, f, t, &kin, s_m);
                 kin = st.kinematics;
                 v = st.v_road_ned_m_s;
                 a = st.a_road_ned_m_s2;
@@ -716,9 +739,9 @@ impl TruthGenerator {
                 }
                 odometer_speed = Some(st.odometer_speed_m_s);
             }
-            if let Some(vibration) = &w.vibration {
+            if let (Some(vibration), Some(f)) = (&w.vibration, &self.followers.vibration) {
                 let c_n_b = c_n_b_from_rph(kin.roll_rad, kin.pitch_rad, kin.heading_rad);
-                vib = vibration.at(t);
+                vib = vibration.at_followed(f);
                 for (o, x) in off.iter_mut().zip(&vib) {
                     *o += c_n_b * x;
                 }
@@ -810,6 +833,12 @@ impl TruthGenerator {
         self.height_m = hh + d(2);
         self.distance_m = s + d(3);
         self.k += 1;
+        if let (Some(veh), Some(f)) = (&self.world.vehicle, &mut self.followers.vehicle) {
+            veh.move_to(f, t1, self.distance_m);
+        }
+        if let (Some(vib), Some(f)) = (&self.world.vibration, &mut self.followers.vibration) {
+            vib.move_to(f, t1);
+        }
         let next = self.point_at(
             self.k,
             &p1.kin,

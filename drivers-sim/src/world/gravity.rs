@@ -45,8 +45,10 @@ pub struct GravitySpec {
 #[derive(Debug, Clone, PartialEq)]
 pub struct GravityField {
     amplitude: f64,
-    k: Vec<[f64; 2]>,
-    phase: Vec<f64>,
+    k: [[f64; 2]; TERMS],
+    /// `|kᵢ|`, rad/m.
+    k_norm: [f64; TERMS],
+    phase: [f64; TERMS],
 }
 
 impl GravityField {
@@ -54,16 +56,16 @@ impl GravityField {
     pub fn new(spec: &GravitySpec, rng: &mut ChaCha20Rng) -> Self {
         let l_m = spec.correlation_length_km * 1e3;
         let sigma = spec.anomaly_sigma_mgal * MGAL_M_S2;
-        let mut k = Vec::with_capacity(TERMS);
-        let mut phase = Vec::with_capacity(TERMS);
-        for _ in 0..TERMS {
+        let (mut k, mut phase) = ([[0.0; 2]; TERMS], [0.0; TERMS]);
+        for i in 0..TERMS {
             let kn: f64 = rng.sample(StandardNormal);
             let ke: f64 = rng.sample(StandardNormal);
-            k.push([kn / l_m, ke / l_m]);
-            phase.push(rng.random::<f64>() * TAU);
+            k[i] = [kn / l_m, ke / l_m];
+            phase[i] = rng.random::<f64>() * TAU;
         }
         Self {
             amplitude: sigma * l_m / std::f64::consts::SQRT_2 * (2.0 / TERMS as f64).sqrt(),
+            k_norm: k.map(|k| k[0].hypot(k[1])),
             k,
             phase,
         }
@@ -73,8 +75,7 @@ impl GravityField {
     /// above it.
     pub fn disturbance_ned_m_s2(&self, north_m: f64, east_m: f64, up_m: f64) -> Vector3<f64> {
         let mut g = Vector3::zeros();
-        for (k, p) in self.k.iter().zip(&self.phase) {
-            let kk = k[0].hypot(k[1]);
+        for ((k, p), kk) in self.k.iter().zip(&self.phase).zip(self.k_norm) {
             let decay = (-kk * up_m).exp();
             let (s, c) = super::spectral::sin_cos(k[0] * north_m + k[1] * east_m + p);
             g.x -= k[0] * s * decay;

@@ -116,31 +116,195 @@ impl SpectralProcess {
         Self::from_omegas(sigma, omega, rng)
     }
 
-    /// Value and first and second derivatives at `u`.
-    pub fn eval(&self, u: f64) -> [f64; 3] {
+    /// The terms' unit phasors `(cos θᵢ, sin θᵢ)`, `θᵢ = ωᵢ u + φᵢ`, in closed form.
+    fn phasors(&self, u: f64) -> ([f64; TERMS], [f64; TERMS]) {
+        let (mut cos, mut sin) = ([0.0; TERMS], [0.0; TERMS]);
+        for k in 0..TERMS {
+            (sin[k], cos[k]) = sin_cos(self.omega[k] * u + self.phase[k]);
+        }
+        (cos, sin)
+    }
+
+    /// Value and first and second derivatives from the terms' phasors.
+    fn derivatives(&self, cos: &[f64; TERMS], sin: &[f64; TERMS]) -> [f64; 3] {
         let mut out = [0.0; 3];
         for k in 0..TERMS {
             let w = self.omega[k];
-            let (s, c) = sin_cos(w * u + self.phase[k]);
-            out[0] += c;
-            out[1] -= w * s;
-            out[2] -= w * w * c;
+            out[0] += cos[k];
+            out[1] -= w * sin[k];
+            out[2] -= w * w * cos[k];
         }
         out.map(|v| v * self.amplitude)
+    }
+
+    /// Displacement, velocity and acceleration of the double integral from the phasors.
+    fn double_integral(&self, cos: &[f64; TERMS], sin: &[f64; TERMS]) -> [f64; 3] {
+        let mut out = [0.0; 3];
+        for k in 0..TERMS {
+            out[0] -= cos[k] * self.inv_omega2[k];
+            out[1] += sin[k] * self.inv_omega[k];
+            out[2] += cos[k];
+        }
+        out.map(|v| v * self.amplitude)
+    }
+
+    /// Value and first and second derivatives at `u`.
+    pub fn eval(&self, u: f64) -> [f64; 3] {
+        let (cos, sin) = self.phasors(u);
+        self.derivatives(&cos, &sin)
     }
 
     /// Displacement, velocity and acceleration of a process whose *second derivative* is this
     /// one (a vibration given as an acceleration): `x = −Σ a cos/ω²`, each term integrated
     /// exactly twice, so the velocity and position it implies carry no drift.
     pub fn eval_double_integral(&self, u: f64) -> [f64; 3] {
-        let mut out = [0.0; 3];
-        for k in 0..TERMS {
-            let (s, c) = sin_cos(self.omega[k] * u + self.phase[k]);
-            out[0] -= c * self.inv_omega2[k];
-            out[1] += s * self.inv_omega[k];
-            out[2] += c;
+        let (cos, sin) = self.phasors(u);
+        self.double_integral(&cos, &sin)
+    }
+
+    /// A [`Follower`] of this process at `u`; `grid_step` (argument units), when given, is the
+    /// step of the grid it will mostly move on, whose rotation is then computed once.
+    pub fn follower(&self, u: f64, grid_step: Option<f64>) -> Follower {
+        let (cos, sin) = self.phasors(u);
+        let omega_max = self.omega.iter().fold(0.0f64, |m, w| m.max(w.abs()));
+        Follower {
+            u,
+            cos,
+            sin,
+            moves: 0,
+            omega_max,
+            grid: grid_step.map(|h| {
+                let (mut c, mut s) = ([0.0; TERMS], [0.0; TERMS]);
+                for k in 0..TERMS {
+                    (s[k], c[k]) = (self.omega[k] * h).sin_cos();
+                }
+                (h, c, s)
+            }),
         }
-        out.map(|v| v * self.amplitude)
+    }
+
+    /// Move `f` (a follower of this process) to `u`: by the grid's rotation when `u` is one
+    /// grid step on, by the small-angle rotation when every term turns by less than
+    /// [`SMALL_TURN_RAD`], else (and every [`RESYNC_MOVES`] moves) in closed form.
+    pub fn move_to(&self, f: &mut Follower, u: f64) {
+        let du = u - f.u;
+        f.moves += 1;
+        if f.moves >= RESYNC_MOVES {
+            *f = Follower {
+                u,
+                moves: 0,
+                ..self.closed_form_follower(f, u)
+            };
+            return;
+        }
+        if let Some((h, c, s)) = &f.grid
+            && (du - h).abs() <= GRID_MATCH * h
+        {
+            rotate(&mut f.cos, &mut f.sin, c, s);
+        } else if du.abs() * f.omega_max <= SMALL_TURN_RAD {
+            let (c, s) = self.small_turns(du);
+            rotate(&mut f.cos, &mut f.sin, &c, &s);
+        } else {
+            let (cos, sin) = self.phasors(u);
+            (f.cos, f.sin) = (cos, sin);
+        }
+        f.u = u;
+    }
+
+    fn closed_form_follower(&self, f: &Follower, u: f64) -> Follower {
+        let (cos, sin) = self.phasors(u);
+        Follower {
+            cos,
+            sin,
+            grid: f.grid,
+            ..*f
+        }
+    }
+
+    /// `(cos ωᵢδ, sin ωᵢδ)` by their Taylor series for `|ωᵢδ| ≤` [`SMALL_TURN_RAD`]
+    /// (truncation below `x⁹/9! < 10⁻¹⁷`).
+    fn small_turns(&self, du: f64) -> ([f64; TERMS], [f64; TERMS]) {
+        let (mut c, mut s) = ([0.0; TERMS], [0.0; TERMS]);
+        for k in 0..TERMS {
+            let x = self.omega[k] * du;
+            let x2 = x * x;
+            c[k] = 1.0 + x2 * (-0.5 + x2 * (1.0 / 24.0 + x2 * (-1.0 / 720.0 + x2 / 40_320.0)));
+            s[k] = x * (1.0 + x2 * (-1.0 / 6.0 + x2 * (1.0 / 120.0 - x2 / 5_040.0)));
+        }
+        (c, s)
+    }
+
+    /// Value and first and second derivatives at the follower's argument.
+    pub fn eval_followed(&self, f: &Follower) -> [f64; 3] {
+        self.derivatives(&f.cos, &f.sin)
+    }
+
+    /// [`Self::eval_double_integral`] at the follower's argument.
+    pub fn eval_double_integral_followed(&self, f: &Follower) -> [f64; 3] {
+        self.double_integral(&f.cos, &f.sin)
+    }
+
+    /// The value at `u` near the follower's argument, without moving it (the stages of an
+    /// integration step).
+    pub fn value_near(&self, f: &Follower, u: f64) -> f64 {
+        let du = u - f.u;
+        if du.abs() * f.omega_max > SMALL_TURN_RAD {
+            return self.eval(u)[0];
+        }
+        let (c, s) = self.small_turns(du);
+        let mut sum = 0.0;
+        for k in 0..TERMS {
+            sum += f.cos[k] * c[k] - f.sin[k] * s[k];
+        }
+        sum * self.amplitude
+    }
+}
+
+/// Largest turn of a term that a [`Follower`] takes by the small-angle series, rad.
+pub const SMALL_TURN_RAD: f64 = 0.05;
+
+/// A [`Follower`] is re-anchored in closed form after this many moves, so that the rounding of
+/// its rotations (about 10⁻¹⁶ each) stays below 10⁻¹³ and the phasors remain the process's.
+pub const RESYNC_MOVES: u32 = 1_000;
+
+/// Relative tolerance on a move's length to count as one grid step (the grid's times are
+/// `k·h` rounded, so consecutive differences vary in their last bits).
+const GRID_MATCH: f64 = 1e-9;
+
+/// `(c, s) ← (c, s)·e^{iδ}` per term.
+#[inline(always)]
+fn rotate(
+    cos: &mut [f64; TERMS],
+    sin: &mut [f64; TERMS],
+    turn_cos: &[f64; TERMS],
+    turn_sin: &[f64; TERMS],
+) {
+    for k in 0..TERMS {
+        let (c, s) = (cos[k], sin[k]);
+        cos[k] = c * turn_cos[k] - s * turn_sin[k];
+        sin[k] = s * turn_cos[k] + c * turn_sin[k];
+    }
+}
+
+/// A [`SpectralProcess`] followed along a sequence of nearby arguments (the truth's time grid,
+/// the distance driven): its terms' phasors are rotated forward instead of evaluated, a
+/// complex product per term in place of a sine and a cosine. A process moved the same way
+/// from the same start holds the same bits in every driver process.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Follower {
+    u: f64,
+    cos: [f64; TERMS],
+    sin: [f64; TERMS],
+    moves: u32,
+    omega_max: f64,
+    /// The grid's step and its rotation per term.
+    grid: Option<(f64, [f64; TERMS], [f64; TERMS])>,
+}
+
+impl Follower {
+    /// The argument the follower stands at.
+    pub fn at(&self) -> f64 {
+        self.u
     }
 }
 
@@ -165,7 +329,23 @@ impl Harmonic {
 
     /// Displacement, velocity and acceleration at `t_s`.
     pub fn eval(&self, t_s: f64) -> [f64; 3] {
+        self.eval_phasor(self.phasor(t_s))
+    }
+
+    /// `(cos θ, sin θ)` of the phase `θ = ωt + φ` at `t_s`.
+    pub fn phasor(&self, t_s: f64) -> (f64, f64) {
         let (s, c) = (self.omega * t_s + self.phase).sin_cos();
+        (c, s)
+    }
+
+    /// `(cos ωh, sin ωh)`: the phasor's turn over a step `h_s`.
+    pub fn turn(&self, h_s: f64) -> (f64, f64) {
+        let (s, c) = (self.omega * h_s).sin_cos();
+        (c, s)
+    }
+
+    /// Displacement, velocity and acceleration from the phasor `(cos θ, sin θ)`.
+    pub fn eval_phasor(&self, (c, s): (f64, f64)) -> [f64; 3] {
         let a = self.amplitude;
         [
             -a * c / (self.omega * self.omega),
@@ -173,6 +353,11 @@ impl Harmonic {
             a * c,
         ]
     }
+}
+
+/// `z·w` for phasors `(cos, sin)`.
+pub fn turn_phasor((c, s): (f64, f64), (tc, ts): (f64, f64)) -> (f64, f64) {
+    (c * tc - s * ts, s * tc + c * ts)
 }
 
 #[cfg(test)]
@@ -233,6 +418,44 @@ mod tests {
         check("flat", 3000, tau, 0.3, rho, |r| {
             SpectralProcess::flat_band(0.3, 20.0, 120.0, r)
         });
+    }
+
+    /// A follower moved along a 1 ms grid for 2 500 steps (past its re-anchoring) and along a
+    /// distance with uneven small steps, with a jump beyond the small-angle series, agrees
+    /// with the closed form to the rounding of its rotations.
+    #[test]
+    fn a_follower_holds_the_closed_form() {
+        let mut rng = ChaCha20Rng::seed_from_u64(5);
+        let vib = SpectralProcess::flat_band(0.2, 20.0, 200.0, &mut rng);
+        let h = 1e-3;
+        let mut f = vib.follower(0.0, Some(h));
+        let mut worst = 0.0f64;
+        for k in 1..=2_500 {
+            let t = k as f64 * h;
+            vib.move_to(&mut f, t);
+            let (a, b) = (vib.eval_double_integral_followed(&f), vib.eval_double_integral(t));
+            let rel = [1e-5, 1e-3, 1.0];
+            for i in 0..3 {
+                worst = worst.max((a[i] - b[i]).abs() / rel[i]);
+            }
+        }
+        assert!(worst < 1e-12, "grid: {worst}");
+        let road = SpectralProcess::gaussian(0.03, 300.0, &mut rng);
+        let mut g = road.follower(0.0, None);
+        let (mut s, mut worst) = (0.0, 0.0f64);
+        for k in 0..3_000 {
+            // 0 to 40 m/s over 1 ms, and once a 500 m jump (closed form).
+            s += if k == 1_500 { 500.0 } else { 0.04 * rng.random::<f64>() };
+            road.move_to(&mut g, s);
+            let (a, b) = (road.eval_followed(&g), road.eval(s));
+            for i in 0..3 {
+                worst = worst.max((a[i] - b[i]).abs());
+            }
+            let ahead = s + 0.02;
+            worst = worst.max((road.value_near(&g, ahead) - road.eval(ahead)[0]).abs());
+        }
+        assert!(worst < 1e-15, "distance: {worst}");
+        assert_eq!(g.at(), s);
     }
 
     /// The branch-free `sin_cos` against the library's over every quadrant and the arguments

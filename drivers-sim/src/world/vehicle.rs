@@ -33,7 +33,7 @@
 //! each with its analytic rate; the truth generator turns them into `ω_ib^b` and the
 //! velocity and acceleration into `f^b`, so a perfect strapdown INS follows the truth.
 
-use super::spectral::{Harmonic, SpectralProcess};
+use super::spectral::{Follower, Harmonic, RESYNC_MOVES, SpectralProcess, turn_phasor};
 use crate::truth::Kinematics;
 use nalgebra::Vector3;
 use rand_chacha::ChaCha20Rng;
@@ -168,13 +168,44 @@ impl VehicleWorld {
         (self.slope.eval(s_m)[0], self.bank.eval(s_m)[0])
     }
 
+    /// A [`VehicleFollower`] at time `t_s` and distance `s_m`; `grid_step_s` is the step of
+    /// the time grid it will move on.
+    pub fn follower(&self, t_s: f64, s_m: f64, grid_step_s: Option<f64>) -> VehicleFollower {
+        VehicleFollower {
+            slope: self.slope.follower(s_m, None),
+            bank: self.bank.follower(s_m, None),
+            ride: [0, 1, 2].map(|k| self.ride[k].follower(t_s, grid_step_s)),
+        }
+    }
+
+    /// Move `f` to time `t_s` and distance `s_m`.
+    pub fn move_to(&self, f: &mut VehicleFollower, t_s: f64, s_m: f64) {
+        self.slope.move_to(&mut f.slope, s_m);
+        self.bank.move_to(&mut f.bank, s_m);
+        for (p, r) in self.ride.iter().zip(&mut f.ride) {
+            p.move_to(r, t_s);
+        }
+    }
+
+    /// Road slope dz/ds at distance `s_m` near the follower's (an integration stage).
+    pub fn slope_near(&self, f: &VehicleFollower, s_m: f64) -> f64 {
+        self.slope.value_near(&f.slope, s_m)
+    }
+
     /// The state at time `t_s` for the driver's intent `i`.
     pub fn state(&self, t_s: f64, i: &Intent) -> VehicleState {
+        self.state_followed(&self.follower(t_s, i.distance_m, None), i)
+    }
+
+    /// The state for the driver's intent `i` at the follower's time and distance (which must
+    /// be `i.distance_m`).
+    pub fn state_followed(&self, f: &VehicleFollower, i: &Intent) -> VehicleState {
         let sp = &self.spec;
         let [v, vd, vdd] = i.speed;
         let [psi, psid, psidd] = i.course;
-        let g = self.slope.eval(i.distance_m);
-        let b = self.bank.eval(i.distance_m);
+        debug_assert_eq!(f.slope.at(), i.distance_m);
+        let g = self.slope.eval_followed(&f.slope);
+        let b = self.bank.eval_followed(&f.bank);
         // Road point.
         let (sn, cs) = psi.sin_cos();
         let v_road = Vector3::new(v * cs, v * sn, -v * g[0]);
@@ -194,7 +225,7 @@ impl VehicleWorld {
         let m = v * v / q;
         let md = 2.0 * v * vd * vh2 / (q * q);
         let mdd = 2.0 * vh2 * ((vd * vd + v * vdd) * q - 4.0 * v * v * vd * vd) / (q * q * q);
-        let [h, p, r] = [0, 1, 2].map(|k| self.ride[k].eval(t_s));
+        let [h, p, r] = [0, 1, 2].map(|k| self.ride[k].eval_followed(&f.ride[k]));
         let heave = [
             m * h[0],
             md * h[0] + m * h[1],
@@ -236,6 +267,31 @@ impl VehicleWorld {
     }
 }
 
+/// The road's and the body's processes of a [`VehicleWorld`] followed along the truth's time
+/// grid and the distance driven ([`Follower`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct VehicleFollower {
+    slope: Follower,
+    bank: Follower,
+    ride: [Follower; 3],
+}
+
+/// Engine orders a [`VibrationSpec`] has.
+const ENGINE_ORDERS: usize = 4;
+
+/// A [`Vibration`] followed along the truth's time grid: the broadband processes'
+/// [`Follower`]s and the engine orders' phasors `(cos, sin)` per order and axis, turned by the
+/// grid step (re-anchored like a [`Follower`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct VibrationFollower {
+    broadband: [Follower; 3],
+    t_s: f64,
+    moves: u32,
+    grid_step_s: Option<f64>,
+    engine: [[(f64, f64); 3]; ENGINE_ORDERS],
+    engine_turn: [[(f64, f64); 3]; ENGINE_ORDERS],
+}
+
 /// One realisation of the IMU's mount vibration.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Vibration {
@@ -262,14 +318,61 @@ impl Vibration {
         Self { engine, broadband }
     }
 
+    /// A [`VibrationFollower`] at `t_s` on a time grid of step `grid_step_s`.
+    pub fn follower(&self, t_s: f64, grid_step_s: Option<f64>) -> VibrationFollower {
+        let mut f = VibrationFollower {
+            broadband: [0, 1, 2].map(|k| self.broadband[k].follower(t_s, grid_step_s)),
+            t_s,
+            moves: 0,
+            grid_step_s,
+            engine: [[(1.0, 0.0); 3]; ENGINE_ORDERS],
+            engine_turn: [[(1.0, 0.0); 3]; ENGINE_ORDERS],
+        };
+        for (k, order) in self.engine.iter().enumerate() {
+            f.engine[k] = order.map(|h| h.phasor(t_s));
+            f.engine_turn[k] = order.map(|h| h.turn(grid_step_s.unwrap_or(0.0)));
+        }
+        f
+    }
+
+    /// Move `f` to `t_s`: one grid step by the phasors' turns, otherwise (and every
+    /// [`RESYNC_MOVES`] moves) in closed form.
+    pub fn move_to(&self, f: &mut VibrationFollower, t_s: f64) {
+        for (p, b) in self.broadband.iter().zip(&mut f.broadband) {
+            p.move_to(b, t_s);
+        }
+        f.moves += 1;
+        let one_step = f
+            .grid_step_s
+            .is_some_and(|h| ((t_s - f.t_s) - h).abs() <= 1e-9 * h);
+        for (k, order) in self.engine.iter().enumerate() {
+            for axis in 0..3 {
+                f.engine[k][axis] = if one_step && f.moves < RESYNC_MOVES {
+                    turn_phasor(f.engine[k][axis], f.engine_turn[k][axis])
+                } else {
+                    order[axis].phasor(t_s)
+                };
+            }
+        }
+        if f.moves >= RESYNC_MOVES {
+            f.moves = 0;
+        }
+        f.t_s = t_s;
+    }
+
     /// Displacement (m), velocity (m/s) and acceleration (m/s²) of the IMU on its mount, body
     /// axes, at `t_s`.
     pub fn at(&self, t_s: f64) -> [Vector3<f64>; 3] {
+        self.at_followed(&self.follower(t_s, None))
+    }
+
+    /// [`Self::at`] at the follower's time.
+    pub fn at_followed(&self, f: &VibrationFollower) -> [Vector3<f64>; 3] {
         let mut out = [Vector3::zeros(); 3];
         for axis in 0..3 {
-            let mut x = self.broadband[axis].eval_double_integral(t_s);
-            for h in &self.engine {
-                let e = h[axis].eval(t_s);
+            let mut x = self.broadband[axis].eval_double_integral_followed(&f.broadband[axis]);
+            for (k, h) in self.engine.iter().enumerate() {
+                let e = h[axis].eval_phasor(f.engine[k][axis]);
                 for k in 0..3 {
                     x[k] += e[k];
                 }
