@@ -73,7 +73,7 @@ mod tests {
         let shipped = Scenario::load(&root.join("scenarios/vehicle.toml")).unwrap();
         let world = shipped.spec.world.expect("the car's world is described");
         assert!(scenario(shipped).spec.world.is_none());
-        let text = std::fs::read_to_string(root.join("car_filter.toml")).unwrap();
+        let text = std::fs::read_to_string(root.join("filter.toml")).unwrap();
         let car: NavigatorConfig = toml::from_str(&text).unwrap();
         assert_ne!(
             car.gnss.lever_arm_b_m, [0.0; 3],

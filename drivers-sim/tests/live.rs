@@ -126,7 +126,9 @@ fn drivers_publish_paced_samples_and_exit_cleanly() {
     }
     assert!(gnss.iter().all(|g| g.fix_valid == 1 && g.n_satellites >= 4));
     let h = truth[0].height_m;
-    assert!((h - 200.0).abs() < 1e-6, "{h}");
+    // The site's height, with the IMU mount's vibration (the parked car's engine runs:
+    // displacements of micrometres).
+    assert!((h - 200.0).abs() < 1e-4, "{h}");
     eprintln!(
         "max IMU send→receive delay seen by a 2 ms poller: {} µs",
         late_ns / 1000

@@ -47,12 +47,10 @@ fn vehicle_world(seed: u64) -> Scenario {
     scn
 }
 
-/// The car's filter (`config/car_filter.toml` over `config/filter.toml`) installed for this
-/// world: the surveyed antenna, its time tag and the receiver class's error correlation time.
+/// The car's filter (`config/filter.toml`) installed for this world: the surveyed antenna,
+/// its time tag and the receiver class's error correlation time.
 fn filter_config(scn: &Scenario, mode: GnssMode) -> NavigatorConfig {
-    let text = std::fs::read_to_string(crate::fixture::root().join("config/car_filter.toml"))
-        .expect("car_filter.toml");
-    let car: NavigatorConfig = toml::from_str(&text).expect("car_filter.toml parses");
+    let car = crate::fixture::car_filter();
     assert_eq!(
         car.gnss.error_correlation_time_s,
         OPEN_SKY_CORRELATION_TIME_S

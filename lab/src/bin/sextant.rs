@@ -1210,7 +1210,9 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
     }
     Ok(match end {
         End::Completed | End::Interrupted(_) if fusion_ok => {
-            if complete && summary_written && analysis.is_some() {
+            // Skipping the analysis on request leaves a complete recording; an analysis that
+            // failed or found no recording does not.
+            if complete && summary_written && (analysis.is_some() || args.no_analysis) {
                 0
             } else {
                 EXIT_RECORDING_INCOMPLETE

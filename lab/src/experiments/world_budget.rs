@@ -4,7 +4,7 @@
 //! The default scenario (`config/scenarios/vehicle.toml`) is run once on the matched world (no
 //! `[world]`: every error is one the filter models, the filter installed at the IMU), once
 //! with each effect its `[world]` describes switched on alone, and once with all of them; the
-//! filter is the shipped tuning told the car of that world (`config/car_filter.toml`) for the
+//! filter is the shipped tuning told the car of that world (`config/filter.toml`) for the
 //! effects present
 //! (`drivers_sim::matched::installed_for`: the antenna's lever arm and time tag only where the
 //! world has the antenna, and so on). For each run: the solution's horizontal, vertical and
@@ -14,14 +14,13 @@
 //! One seed: the world's draws (weather, the unit's scatter, the satellites' errors) are the
 //! scenario's, so a share is one draw of that effect, not its expectation.
 
-use super::consistency::filter_config;
+use super::consistency::{filter_config, installed};
 use super::plot::{Chart, Line, color, line_chart};
 use super::{Experiment, ExperimentError, fmt_f64, measurement, progress_bar, scenario_file};
-use drivers_sim::matched;
 use drivers_sim::offline::{OfflineSim, RunPoint, run_navigator};
 use drivers_sim::scenario::Scenario;
 use drivers_sim::world::WorldSection;
-use fusion::navigator::{Navigator, NavigatorConfig};
+use fusion::navigator::Navigator;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -100,9 +99,7 @@ experiment!(
 
 /// (horizontal RMS m, vertical RMS m, attitude RMS arcsec, mean position NEES) after `from_s`.
 fn one_run(scn: &Scenario, from_s: f64) -> Result<(f64, f64, f64, f64), ExperimentError> {
-    let car: NavigatorConfig =
-        toml::from_str(include_str!("../../../config/car_filter.toml")).map_err(measurement)?;
-    let cfg = matched::installed_for(scn.spec.world.as_ref(), filter_config(&[])?, &car);
+    let cfg = installed(scn, filter_config(&[])?)?;
     let sim = OfflineSim::new(scn);
     let epoch = sim.epoch_ns();
     let mut nav = Navigator::new(cfg).map_err(measurement)?;

@@ -154,9 +154,16 @@ fn pos_error_and_nees(nav: &Navigator, sim: &StaticSim) -> (Vector3<f64>, f64) {
 }
 
 #[test]
-fn filter_toml_is_the_default_and_validates() {
-    let text = include_str!("../../../../config/filter.toml");
-    let cfg: NavigatorConfig = toml::from_str(text).unwrap();
+fn filter_toml_is_the_car_and_its_idealised_vehicle_the_default() {
+    // The shipped filter is the default scenario's car: its installation and sensor classes,
+    // which `idealised` takes back out to the built-in defaults.
+    let car: NavigatorConfig = toml::from_str(include_str!("../../../../config/filter.toml")).unwrap();
+    car.validate().unwrap();
+    assert_eq!(car.gnss.lever_arm_b_m, [0.3, 0.0, -1.5]);
+    assert_eq!(car.latency.gnss_s, 0.05);
+    assert_eq!(car.aiding.baro_bias_rw_m_sqrt_s, 0.14);
+    assert_eq!(car.vehicle.wheel_lever_arm_b_m, [-1.5, -0.8, 1.0]);
+    let cfg = car.clone().idealised();
     assert_eq!(cfg, NavigatorConfig::default());
     assert_eq!(
         cfg.clone().idealised(),
@@ -164,15 +171,6 @@ fn filter_toml_is_the_default_and_validates() {
         "the default vehicle is the idealised one"
     );
     cfg.validate().unwrap();
-    // The car of the world (config/car_filter.toml, over these defaults): its installation
-    // and classes, which `idealised` takes back out.
-    let car: NavigatorConfig =
-        toml::from_str(include_str!("../../../../config/car_filter.toml")).unwrap();
-    car.validate().unwrap();
-    assert_eq!(car.gnss.lever_arm_b_m, [0.3, 0.0, -1.5]);
-    assert_eq!(car.latency.gnss_s, 0.05);
-    assert_eq!(car.aiding.baro_bias_rw_m_sqrt_s, 0.14);
-    assert_eq!(car.clone().idealised(), cfg);
     let mut c = cfg.clone();
     c.latency.gnss_s = cfg.buffer_window_s;
     let e = c.validate().unwrap_err().to_string();
