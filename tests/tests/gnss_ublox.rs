@@ -30,6 +30,27 @@ use std::time::{Duration, Instant};
 const LAT_DEG: f64 = 55.655;
 const LON_DEG: f64 = 37.534;
 const HEIGHT_M: f64 = 200.0;
+/// The parked car's heading there, deg.
+const HEADING_DEG: f64 = 30.0;
+
+/// The receiver's antenna on the parked car: the site (the IMU) plus the antenna's lever arm
+/// of the car's filter (`config/filter.toml` [gnss]) turned by the car's heading. The receiver
+/// reports where its antenna is.
+fn antenna() -> Geodetic {
+    let text = std::fs::read_to_string(repo_root().join("config/filter.toml")).unwrap();
+    let car: fusion::navigator::NavigatorConfig = toml::from_str(&text).unwrap();
+    let [x, y, z] = car.gnss.lever_arm_b_m;
+    let (s, c) = HEADING_DEG.to_radians().sin_cos();
+    let (north, east, down) = (c * x - s * y, s * x + c * y, z);
+    let lat = LAT_DEG.to_radians();
+    let (r_n, r_e) = fusion::earth::radii_of_curvature(&WGS84, lat);
+    Geodetic {
+        lat_rad: lat + north / (r_n + HEIGHT_M),
+        lon_rad: LON_DEG.to_radians() + east / ((r_e + HEIGHT_M) * lat.cos()),
+        height_m: HEIGHT_M - down,
+    }
+}
+
 /// Its start, 2025-03-20T21:00:00 UTC: a Thursday, so GPS time of week = 4 days + 21 h + 18 s.
 const TOW0_MS: u32 = (4 * 86_400 + 21 * 3600 + 18) * 1000;
 const TOD0_MS: u32 = 21 * 3600 * 1000;
@@ -42,6 +63,7 @@ const SPEED: f64 = 10.0;
 
 fn ubx_epoch(k: u32) -> Vec<u8> {
     let tow = TOW0_MS + 1000 * k;
+    let a = antenna();
     let pvt = NavPvt {
         itow_ms: tow,
         utc: (2025, 3, 20, 21, (k / 60) as u8, (k % 60) as u8),
@@ -49,9 +71,9 @@ fn ubx_epoch(k: u32) -> Vec<u8> {
         fix_type: 3,
         flags: 1,
         num_sv: 8,
-        lat_rad: LAT_DEG.to_radians(),
-        lon_rad: LON_DEG.to_radians(),
-        height_m: HEIGHT_M,
+        lat_rad: a.lat_rad,
+        lon_rad: a.lon_rad,
+        height_m: a.height_m,
         h_acc_m: 2.0,
         v_acc_m: 3.0,
         s_acc_m_s: 0.1,
@@ -99,16 +121,19 @@ fn ubx_epoch(k: u32) -> Vec<u8> {
 
 fn gga(k: u32) -> String {
     let t = format_time(TimeOfDay(TOD0_MS + 1000 * k));
-    let lat = format_angle(LAT_DEG.to_radians(), true);
-    let lon = format_angle(LON_DEG.to_radians(), false);
-    // MSL altitude + geoid separation = the ellipsoidal height of the site.
-    format!("GNGGA,{t},{lat},{lon},1,08,1.00,185.0,M,15.0,M,,")
+    let a = antenna();
+    let lat = format_angle(a.lat_rad, true);
+    let lon = format_angle(a.lon_rad, false);
+    // MSL altitude + geoid separation = the ellipsoidal height of the antenna.
+    let msl = a.height_m - 15.0;
+    format!("GNGGA,{t},{lat},{lon},1,08,1.00,{msl:.3},M,15.0,M,,")
 }
 
 fn nmea_epoch(k: u32) -> Vec<u8> {
     let t = format_time(TimeOfDay(TOD0_MS + 1000 * k));
-    let lat = format_angle(LAT_DEG.to_radians(), true);
-    let lon = format_angle(LON_DEG.to_radians(), false);
+    let a = antenna();
+    let lat = format_angle(a.lat_rad, true);
+    let lon = format_angle(a.lon_rad, false);
     [
         nmea_sentence(&format!("GNRMC,{t},A,{lat},{lon},0.000,,200325,,,A,V")),
         nmea_sentence(&gga(k)),
@@ -117,6 +142,32 @@ fn nmea_epoch(k: u32) -> Vec<u8> {
     ]
     .concat()
     .into_bytes()
+}
+
+/// The system configuration with the car's filter told that this receiver's samples carry
+/// its measurement epoch (the u-blox driver stamps each with the receiver's own time of week,
+/// where the car's simulated receiver stamps its fix 50 ms late), written into `dir`.
+fn config_for_the_ublox_driver(dir: &std::path::Path) -> std::path::PathBuf {
+    let root = repo_root();
+    let filter = std::fs::read_to_string(root.join("config/filter.toml")).unwrap();
+    let at_epoch = filter.replacen("gnss_s = 0.05", "gnss_s = 0.0", 1);
+    assert_ne!(at_epoch, filter, "config/filter.toml changed its [latency] layout");
+    std::fs::write(dir.join("filter.toml"), at_epoch).unwrap();
+    let system = std::fs::read_to_string(root.join("config/sextant.toml")).unwrap();
+    let scenario = root.join("config/scenarios/static_site.toml");
+    let edited = system
+        .replace(
+            "filter = \"filter.toml\"",
+            &format!("filter = {:?}", dir.join("filter.toml").display().to_string()),
+        )
+        .replace(
+            "scenario = \"scenarios/vehicle.toml\"",
+            &format!("scenario = {:?}", scenario.display().to_string()),
+        );
+    assert!(edited.contains(&*dir.to_string_lossy()), "config/sextant.toml changed its layout");
+    let path = dir.join("sextant.toml");
+    std::fs::write(&path, edited).unwrap();
+    path
 }
 
 /// Faults put in front of some epochs, and what the driver must count for them.
@@ -231,9 +282,12 @@ fn ublox_and_nmea_bytes_through_a_pty_are_fused_and_the_faults_counted() {
         std::fs::read_link(format!("/proc/self/fd/{}", pty.slave.as_raw_fd())).unwrap();
 
     let start_mono = msgs::monotonic_ns() + 2_000_000_000;
+    let config = config_for_the_ublox_driver(&dir);
     let mut fusion = Command::new(bin("sextant-fusion").unwrap())
         .current_dir(&root)
-        .args(["--config", "config/sextant.toml", "--prefix", &prefix])
+        .arg("--config")
+        .arg(&config)
+        .args(["--prefix", &prefix])
         .args(["--speed", &SPEED.to_string(), "--out"])
         .arg(&rec_path)
         .stdin(Stdio::null())
