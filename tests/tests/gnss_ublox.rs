@@ -151,20 +151,29 @@ fn config_for_the_ublox_driver(dir: &std::path::Path) -> std::path::PathBuf {
     let root = repo_root();
     let filter = std::fs::read_to_string(root.join("config/filter.toml")).unwrap();
     let at_epoch = filter.replacen("gnss_s = 0.05", "gnss_s = 0.0", 1);
-    assert_ne!(at_epoch, filter, "config/filter.toml changed its [latency] layout");
+    assert_ne!(
+        at_epoch, filter,
+        "config/filter.toml changed its [latency] layout"
+    );
     std::fs::write(dir.join("filter.toml"), at_epoch).unwrap();
     let system = std::fs::read_to_string(root.join("config/sextant.toml")).unwrap();
     let scenario = root.join("config/scenarios/static_site.toml");
     let edited = system
         .replace(
             "filter = \"filter.toml\"",
-            &format!("filter = {:?}", dir.join("filter.toml").display().to_string()),
+            &format!(
+                "filter = {:?}",
+                dir.join("filter.toml").display().to_string()
+            ),
         )
         .replace(
             "scenario = \"scenarios/vehicle.toml\"",
             &format!("scenario = {:?}", scenario.display().to_string()),
         );
-    assert!(edited.contains(&*dir.to_string_lossy()), "config/sextant.toml changed its layout");
+    assert!(
+        edited.contains(&*dir.to_string_lossy()),
+        "config/sextant.toml changed its layout"
+    );
     let path = dir.join("sextant.toml");
     std::fs::write(&path, edited).unwrap();
     path

@@ -157,7 +157,11 @@ fn vibration_magnitude_and_correlation() {
 /// off the grid) is the closed form's to the rounding of its turns.
 #[test]
 fn followed_vibration_is_the_closed_form() {
-    let scn = vehicle_in_motion_world(&["vibration"], r#"{ type = "hold", duration_s = 1.0 }"#, 1.0);
+    let scn = vehicle_in_motion_world(
+        &["vibration"],
+        r#"{ type = "hold", duration_s = 1.0 }"#,
+        1.0,
+    );
     let (_, spec) = spec_of(&scn);
     let v = Vibration::new(&spec, &mut ChaCha20Rng::seed_from_u64(23));
     let h = 1e-3;
@@ -166,7 +170,11 @@ fn followed_vibration_is_the_closed_form() {
     let scale = [1e-5, 1e-3, 1.0];
     let mut worst = 0.0f64;
     for k in 1..=2_500 {
-        let t = if k > 2_000 { 7.0 + k as f64 * h } else { k as f64 * h };
+        let t = if k > 2_000 {
+            7.0 + k as f64 * h
+        } else {
+            k as f64 * h
+        };
         v.move_to(&mut f, t);
         let (a, b) = (v.at_followed(&f), v.at(t));
         for i in 0..3 {
@@ -458,7 +466,10 @@ fn motion_world_is_validated() {
     let car_start = text.find("\n[world.vehicle]").unwrap() + 1;
     let car_len = text[car_start + 1..].find("\n[world.").unwrap() + 1;
     let car = &text[car_start..car_start + car_len];
-    assert!(!stat.contains("[world.vehicle]"), "the parked car has no road");
+    assert!(
+        !stat.contains("[world.vehicle]"),
+        "the parked car has no road"
+    );
     let e = err(&format!("{stat}\n{car}\n"), "", "");
     assert!(e.contains("world.vehicle"), "{e}");
 }

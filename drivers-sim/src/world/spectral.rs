@@ -433,7 +433,10 @@ mod tests {
         for k in 1..=2_500 {
             let t = k as f64 * h;
             vib.move_to(&mut f, t);
-            let (a, b) = (vib.eval_double_integral_followed(&f), vib.eval_double_integral(t));
+            let (a, b) = (
+                vib.eval_double_integral_followed(&f),
+                vib.eval_double_integral(t),
+            );
             let rel = [1e-5, 1e-3, 1.0];
             for i in 0..3 {
                 worst = worst.max((a[i] - b[i]).abs() / rel[i]);
@@ -445,7 +448,11 @@ mod tests {
         let (mut s, mut worst) = (0.0, 0.0f64);
         for k in 0..3_000 {
             // 0 to 40 m/s over 1 ms, and once a 500 m jump (closed form).
-            s += if k == 1_500 { 500.0 } else { 0.04 * rng.random::<f64>() };
+            s += if k == 1_500 {
+                500.0
+            } else {
+                0.04 * rng.random::<f64>()
+            };
             road.move_to(&mut g, s);
             let (a, b) = (road.eval_followed(&g), road.eval(s));
             for i in 0..3 {

@@ -346,11 +346,11 @@ impl Vibration {
             .grid_step_s
             .is_some_and(|h| ((t_s - f.t_s) - h).abs() <= 1e-9 * h);
         for (k, order) in self.engine.iter().enumerate() {
-            for axis in 0..3 {
+            for (axis, h) in order.iter().enumerate() {
                 f.engine[k][axis] = if one_step && f.moves < RESYNC_MOVES {
                     turn_phasor(f.engine[k][axis], f.engine_turn[k][axis])
                 } else {
-                    order[axis].phasor(t_s)
+                    h.phasor(t_s)
                 };
             }
         }

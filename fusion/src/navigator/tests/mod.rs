@@ -157,7 +157,8 @@ fn pos_error_and_nees(nav: &Navigator, sim: &StaticSim) -> (Vector3<f64>, f64) {
 fn filter_toml_is_the_car_and_its_idealised_vehicle_the_default() {
     // The shipped filter is the default scenario's car: its installation and sensor classes,
     // which `idealised` takes back out to the built-in defaults.
-    let car: NavigatorConfig = toml::from_str(include_str!("../../../../config/filter.toml")).unwrap();
+    let car: NavigatorConfig =
+        toml::from_str(include_str!("../../../../config/filter.toml")).unwrap();
     car.validate().unwrap();
     assert_eq!(car.gnss.lever_arm_b_m, [0.3, 0.0, -1.5]);
     assert_eq!(car.latency.gnss_s, 0.05);
