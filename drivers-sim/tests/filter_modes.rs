@@ -58,7 +58,8 @@ fn run(stars: bool, mode: NavMode) -> Outcome {
         .replace("rate_hz = 20.0", "rate_hz = 2.0")
         .replace("rate_hz = 50.0", "rate_hz = 1.0")
         .replace("duration_s = 600.0", &format!("duration_s = {DURATION_S}"));
-    let scn = Scenario::from_toml_str(&text, path).unwrap();
+    // The matched world: the floors below are the filter's own model's.
+    let scn = sextant_drivers_sim::matched::scenario(Scenario::from_toml_str(&text, path).unwrap());
     let mut channels = vec![Channel::Imu, Channel::Baro, Channel::Truth];
     if stars {
         channels.push(Channel::StarTracker);
