@@ -610,25 +610,3 @@ fn world_section_is_validated() {
     );
 }
 
-#[test]
-#[ignore]
-fn tmp_gnss_cost() {
-    let scn = load_shipped("vehicle");
-    let epoch = scn.epoch_gps().ns;
-    let mut src = GnssSource::new(&scn, epoch);
-    let t0 = std::time::Instant::now();
-    for k in 0..220 {
-        let _ = src.sample_with_truth(k * 1_000_000_000);
-    }
-    println!(
-        "gnss: {:.2} ms per epoch",
-        t0.elapsed().as_secs_f64() * 1e3 / 220.0
-    );
-    let mut truth = TruthGenerator::new(&scn);
-    let t0 = std::time::Instant::now();
-    truth.advance_to(220_000_000_000);
-    println!(
-        "truth: {:.2} ms per s",
-        t0.elapsed().as_secs_f64() * 1e3 / 220.0
-    );
-}
