@@ -609,4 +609,3 @@ fn world_section_is_validated() {
         "accepted"
     );
 }
-
