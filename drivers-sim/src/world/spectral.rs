@@ -188,37 +188,23 @@ impl SpectralProcess {
     /// [`SMALL_TURN_RAD`], else (and every [`RESYNC_MOVES`] moves) in closed form.
     pub fn move_to(&self, f: &mut Follower, u: f64) {
         let du = u - f.u;
-        f.moves += 1;
-        if f.moves >= RESYNC_MOVES {
-            *f = Follower {
-                u,
-                moves: 0,
-                ..self.closed_form_follower(f, u)
-            };
-            return;
-        }
-        if let Some((h, c, s)) = &f.grid
-            && (du - h).abs() <= GRID_MATCH * h
-        {
-            rotate(&mut f.cos, &mut f.sin, c, s);
-        } else if du.abs() * f.omega_max <= SMALL_TURN_RAD {
-            let (c, s) = self.small_turns(du);
-            rotate(&mut f.cos, &mut f.sin, &c, &s);
-        } else {
-            let (cos, sin) = self.phasors(u);
-            (f.cos, f.sin) = (cos, sin);
-        }
         f.u = u;
-    }
-
-    fn closed_form_follower(&self, f: &Follower, u: f64) -> Follower {
-        let (cos, sin) = self.phasors(u);
-        Follower {
-            cos,
-            sin,
-            grid: f.grid,
-            ..*f
+        f.moves += 1;
+        if f.moves < RESYNC_MOVES {
+            if let Some((h, c, s)) = &f.grid
+                && (du - h).abs() <= GRID_MATCH * h
+            {
+                rotate(&mut f.cos, &mut f.sin, c, s);
+                return;
+            }
+            if du.abs() * f.omega_max <= SMALL_TURN_RAD {
+                let (c, s) = self.small_turns(du);
+                rotate(&mut f.cos, &mut f.sin, &c, &s);
+                return;
+            }
         }
+        (f.cos, f.sin) = self.phasors(u);
+        f.moves = 0;
     }
 
     /// `(cos ωᵢδ, sin ωᵢδ)` by their Taylor series for `|ωᵢδ| ≤` [`SMALL_TURN_RAD`]
