@@ -13,17 +13,12 @@ use sextant_drivers_sim::matched;
 use sextant_drivers_sim::offline::{OfflineSim, RunPoint, run_navigator};
 use sextant_drivers_sim::scenario::Scenario;
 use sextant_drivers_sim::sources::GnssSource;
+use sextant_drivers_sim::world::{EFFECTS, GNSS_EFFECTS};
 use std::path::Path;
 
-/// Every `[world.*]` table of the scenario's example, each switched on by its name.
-const ALL_WORLD_TABLES: [&str; 6] = [
-    "vehicle",
-    "vibration",
-    "gravity",
-    "imu",
-    "star_tracker",
-    "baro",
-];
+/// The world's effects beyond the GNSS ones (motion, gravity and the sensors' own), each
+/// switched on by its name.
+const NON_GNSS_EFFECTS: &[&str] = EFFECTS.split_at(GNSS_EFFECTS.len()).1;
 
 fn root() -> &'static Path {
     Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
@@ -168,7 +163,7 @@ fn world_motion_report() {
         &["imu"],
         &["star_tracker"],
         &["baro"],
-        &ALL_WORLD_TABLES,
+        NON_GNSS_EFFECTS,
     ] {
         motion_report_line(&format!("{on:?}"), &vehicle_in_motion(on));
     }
@@ -276,8 +271,7 @@ fn world_motion_vehicle_model() {
         }),
         ("lever arm and class noise", |_| {}),
     ];
-    let all = ALL_WORLD_TABLES;
-    for on in [&["vehicle"][..], &["vehicle", "baro"], &all] {
+    for on in [&["vehicle"][..], &["vehicle", "baro"], NON_GNSS_EFFECTS] {
         let scn = vehicle_in_motion(on);
         for (label, model) in models {
             let mut cfg = filter_config();
@@ -360,8 +354,7 @@ fn motion_report_line_with(label: &str, scn: &Scenario, cfg: NavigatorConfig) {
 #[test]
 #[ignore = "600 s of 200 Hz simulation per line: minutes in release; a report, not a CI test"]
 fn world_motion_interaction() {
-    let all = ALL_WORLD_TABLES;
-    let scn = vehicle_in_motion(&all);
+    let scn = vehicle_in_motion(NON_GNSS_EFFECTS);
     type Model = fn(&mut NavigatorConfig);
     let models: [(&str, Model); 2] = [
         ("rigid at the IMU", |c| {
