@@ -35,8 +35,13 @@ const HEADING_DEG: f64 = 30.0;
 
 /// The receiver's antenna on the parked car: the site (the IMU) plus the antenna's lever arm
 /// of the car's filter (`config/filter.toml` [gnss]) turned by the car's heading. The receiver
-/// reports where its antenna is.
+/// reports where its antenna is. Computed once (every epoch's message uses it).
 fn antenna() -> Geodetic {
+    static ANTENNA: std::sync::OnceLock<Geodetic> = std::sync::OnceLock::new();
+    *ANTENNA.get_or_init(antenna_from_the_filter)
+}
+
+fn antenna_from_the_filter() -> Geodetic {
     let text = std::fs::read_to_string(repo_root().join("config/filter.toml")).unwrap();
     let car: fusion::navigator::NavigatorConfig = toml::from_str(&text).unwrap();
     let [x, y, z] = car.gnss.lever_arm_b_m;
