@@ -29,7 +29,8 @@ pub fn filter(cfg: NavigatorConfig) -> NavigatorConfig {
 /// only some of the car's effects: the antenna's lever arm and time tag where the world has the
 /// antenna, the receiver's error correlation where it has pseudorange errors, the wheel's lever
 /// arm where it has the car, the star tracker's time tag and low-frequency error where it has
-/// the star tracker's world, the weather's drift where it has the barometer's air; the matched
+/// the star tracker's world, the weather's drift where it has the barometer's air, the
+/// region's gravity class where it has a gravity disturbance; the matched
 /// filter ([`filter`]) for the rest. What the filter is told is always the
 /// car's file, never the world's values.
 pub fn installed_for(
@@ -59,6 +60,9 @@ pub fn installed_for(
         cfg.aiding.baro_bias_rw_m_sqrt_s = car.aiding.baro_bias_rw_m_sqrt_s;
         cfg.aiding.baro_scale_sigma = car.aiding.baro_scale_sigma;
     }
+    if w.gravity().is_some() {
+        cfg.gravity_disturbance = car.gravity_disturbance;
+    }
     cfg
 }
 
@@ -84,6 +88,7 @@ mod tests {
         assert_eq!(m.latency, Latency::default());
         assert_eq!(m.vehicle.wheel_lever_arm_b_m, [0.0; 3]);
         assert_eq!(m.aiding.star_low_frequency_sigma_arcsec, 0.0);
+        assert_eq!(m.gravity_disturbance, Default::default());
         m.validate().unwrap();
         let all = world.only(&crate::world::EFFECTS).unwrap();
         assert_eq!(
@@ -101,5 +106,14 @@ mod tests {
             "white without pseudorange errors"
         );
         assert_eq!(a.vehicle.wheel_lever_arm_b_m, [0.0; 3]);
+        assert_eq!(a.gravity_disturbance, Default::default());
+        let gravity = world.only(&["gravity"]).unwrap();
+        let g = installed_for(Some(&gravity), m.clone(), &car);
+        assert_eq!(g.gravity_disturbance, car.gravity_disturbance);
+        assert_ne!(
+            g.gravity_disturbance,
+            Default::default(),
+            "the car's region has a class"
+        );
     }
 }

@@ -66,8 +66,8 @@ pub mod update;
 
 pub use chi2::{GateTable, chi2_cdf, chi2_quantile};
 pub use dynamics::{
-    MISALIGNMENT_COHERENCE_RAD, ProcessNoise, TransitionAccumulator, error_dynamics,
-    gravity_gradient, nonorthogonality_jacobian, nonorthogonality_matrix,
+    GravityDisturbance, MISALIGNMENT_COHERENCE_RAD, ProcessNoise, TransitionAccumulator,
+    error_dynamics, gravity_gradient, nonorthogonality_jacobian, nonorthogonality_matrix,
 };
 pub use measurements::{
     GnssAntenna, WheelContact, baro_height, gnss_baseline_attitude, gnss_position,

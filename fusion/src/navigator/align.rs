@@ -90,7 +90,10 @@ impl Navigator {
         let (gyro_bias_rad_s, accel_bias_m_s2) = if self.calibration.is_some() {
             (axis_sigma(idx::BG), axis_sigma(idx::BA))
         } else {
-            (imu.gyro_bias_rad_s(), imu.accel_bias_m_s2())
+            (
+                imu.gyro_bias_rad_s(),
+                self.config.leveling_accel_error_m_s2(),
+            )
         };
         let spec = alignment::AlignmentErrorSpec {
             gyro_bias_rad_s,

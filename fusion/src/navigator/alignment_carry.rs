@@ -198,7 +198,7 @@ impl Navigator {
         let imu = &self.config.imu;
         let vrw2 = imu.process_noise().vrw_m_s_sqrt_s.powi(2);
         let sigma_psi2 = (0..3).map(|k| p_psi[(k, k)]).fold(0.0, f64::max);
-        let qa = f_max * f_max * sigma_psi2 + imu.accel_bias_m_s2().powi(2);
+        let qa = f_max * f_max * sigma_psi2 + self.config.leveling_accel_error_m_s2().powi(2);
         let mut p0 = Matrix6::zeros();
         p0.fixed_view_mut::<3, 3>(0, 0).copy_from(&fix.pos_cov);
         p0.fixed_view_mut::<3, 3>(3, 3).copy_from(&fix.vel_cov);

@@ -290,7 +290,9 @@ impl Navigator {
     /// for a body sensing the specific force `f_b` (m/s²): the accelerometer misalignment (σ_m
     /// per off-diagonal, not a state) turns it into the error `M f_b`, whose axis-k part
     /// `Σ_{j≠k} M_kj f_j` has variance `σ_m² (|f|² − f_k²)`, a bias while `f_b` is gravity.
-    /// The gyro non-orthogonality's prior is left to the filter (`ErrorStateEkf::new`).
+    /// The gyro non-orthogonality's prior is left to the filter (`ErrorStateEkf::new`). The
+    /// region's gravity disturbance (`[gravity_disturbance]`) widens the accelerometer-bias
+    /// block by its covariance in body axes, the vertical being along `f_b`.
     pub(super) fn data_sheet_prior(&self, f_b: &Vector3<f64>) -> Covariance {
         let imu = &self.config.imu;
         let mut p0 = Covariance::zeros();
@@ -308,6 +310,12 @@ impl Navigator {
             p0[(idx::SA + k, idx::SA + k)] = sa * sa;
             p0[(idx::KAPPA + k, idx::KAPPA + k)] = sk * sk;
         }
+        let mut ba = p0.fixed_view_mut::<3, 3>(idx::BA, idx::BA);
+        ba += self
+            .config
+            .gravity_disturbance
+            .disturbance()
+            .body_covariance(f_b);
         p0[(idx::BARO, idx::BARO)] = self.config.aiding.baro_bias_sigma_m.powi(2);
         p0[(idx::ODO, idx::ODO)] = self.config.aiding.odometer_scale_sigma.powi(2);
         p0

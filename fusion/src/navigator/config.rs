@@ -96,6 +96,7 @@ impl ImuSpec {
             clock_bias_psd_m2_s: 0.0,
             clock_drift_psd_m2_s3: 0.0,
             gyro_misalignment_rad: self.misalignment_arcsec / 3600.0 * DEG,
+            gravity: crate::ekf::GravityDisturbance::default(),
         }
     }
 }
@@ -538,6 +539,50 @@ impl Latency {
     }
 }
 
+/// The gravity disturbance of the region (`[gravity_disturbance]` in `config/filter.toml`):
+/// what the real field departs from the mechanization's normal / J2 gravity by, as the class
+/// of the terrain (1-σ values over the region, not a map). Absorbed by the accelerometer-bias
+/// states ([`crate::ekf::GravityDisturbance`]). Zero (the default): the mechanization's model
+/// is taken as the field.
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct GravityDisturbanceSpec {
+    /// Deflection of the vertical, each component (ξ north–south, η east–west), arcsec.
+    pub deflection_sigma_arcsec: f64,
+    /// Gravity anomaly (the vertical component), mGal.
+    pub anomaly_sigma_mgal: f64,
+    /// Correlation distance of the field along the track, km (used when a σ is non-zero).
+    pub correlation_distance_km: f64,
+}
+
+impl GravityDisturbanceSpec {
+    /// The statistics in SI units, horizontal `γ·ξ` with the standard gravity.
+    pub fn disturbance(&self) -> crate::ekf::GravityDisturbance {
+        crate::ekf::GravityDisturbance {
+            horizontal_sigma_m_s2: self.deflection_sigma_arcsec / 3600.0 * DEG * G0,
+            vertical_sigma_m_s2: self.anomaly_sigma_mgal * 1e-5,
+            correlation_distance_m: self.correlation_distance_km * 1e3,
+        }
+    }
+
+    fn validate(&self) -> Result<(), ConfigError> {
+        let key = |k: &str| format!("gravity_disturbance.{k}");
+        for (v, k) in [
+            (self.deflection_sigma_arcsec, "deflection_sigma_arcsec"),
+            (self.anomaly_sigma_mgal, "anomaly_sigma_mgal"),
+            (self.correlation_distance_km, "correlation_distance_km"),
+        ] {
+            check(nonneg(v), &key(k), "must be >= 0")?;
+        }
+        let modelled = self.deflection_sigma_arcsec > 0.0 || self.anomaly_sigma_mgal > 0.0;
+        check(
+            !modelled || pos(self.correlation_distance_km),
+            &key("correlation_distance_km"),
+            "must be > 0 when a disturbance sigma is",
+        )
+    }
+}
+
 /// A configured initial position (used for alignment when no GNSS fix is wanted or available).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields)]
@@ -603,6 +648,8 @@ pub struct NavigatorConfig {
     pub deadlines: Deadlines,
     /// Time-tag latency of each aiding sensor, compensated at fusion.
     pub latency: Latency,
+    /// The region's gravity disturbance, absorbed by the accelerometer-bias states.
+    pub gravity_disturbance: GravityDisturbanceSpec,
     /// Redundant-channel fault detection (paper 004; used when the IMU has channels).
     pub redundancy: crate::redundancy::RedundancyConfig,
     /// Alignment in motion from the star tracker and GNSS.
@@ -637,6 +684,7 @@ impl Default for NavigatorConfig {
             vehicle: VehicleModel::default(),
             deadlines: Deadlines::default(),
             latency: Latency::default(),
+            gravity_disturbance: GravityDisturbanceSpec::default(),
             redundancy: crate::redundancy::RedundancyConfig::default(),
             motion_alignment: MotionAlignment::default(),
             warm_start: WarmStartConfig::default(),
@@ -671,6 +719,7 @@ impl NavigatorConfig {
         let d = Self::default();
         self.gnss = d.gnss;
         self.latency = d.latency;
+        self.gravity_disturbance = d.gravity_disturbance;
         self.vehicle.wheel_lever_arm_b_m = d.vehicle.wheel_lever_arm_b_m;
         let a = &mut self.aiding;
         a.baro_bias_rw_m_sqrt_s = d.aiding.baro_bias_rw_m_sqrt_s;
@@ -682,11 +731,20 @@ impl NavigatorConfig {
 }
 
 impl NavigatorConfig {
+    /// 1-σ of the horizontal specific-force error a levelling sees per axis, m/s²: the
+    /// accelerometer bias and the deflection of the vertical (`[gravity_disturbance]`), which
+    /// a level cannot tell apart.
+    pub fn leveling_accel_error_m_s2(&self) -> f64 {
+        let dg = self.gravity_disturbance.disturbance().horizontal_sigma_m_s2;
+        self.imu.accel_bias_m_s2().hypot(dg)
+    }
+
     /// Check the meaning of the values (ranges, consistency); the error names the key.
     pub fn validate(&self) -> Result<(), ConfigError> {
         self.motion_alignment.validate()?;
         self.warm_start.validate()?;
         self.calibration_memory.validate()?;
+        self.gravity_disturbance.validate()?;
         check(
             nonneg(self.alignment_s) && self.alignment_s <= 3600.0,
             "alignment_s",

@@ -103,8 +103,10 @@ impl Navigator {
         let moving = self.moving(&fix);
         let imu = self.config.imu;
         let noise = imu.process_noise();
+        // The bias and the deflection of the vertical alike move the apparent level.
+        let accel_error = self.config.leveling_accel_error_m_s2();
         // The velocity random walk and accelerometer bias over the time since the fix epoch.
-        let carried = noise.vrw_m_s_sqrt_s.powi(2) * tau + (imu.accel_bias_m_s2() * tau).powi(2);
+        let carried = noise.vrw_m_s_sqrt_s.powi(2) * tau + (accel_error * tau).powi(2);
         let Some(bank) = &mut self.gsf.bank else {
             // The window between the last GNSS velocity and this one: its specific force in
             // the body axes of now, from the IMU log (none across a gap, or from before the
@@ -124,8 +126,7 @@ impl Navigator {
             let dt_window = (ts - t_prev).seconds_f64();
             let gravity = earth::normal_gravity(&self.ell, geo.lat_rad, geo.height_m);
             let sigma_v = r_ne[(0, 0)].max(r_ne[(1, 1)]).max(0.0).sqrt();
-            let tilt_sigma_rad =
-                leveling_tilt_sigma_rad(dt_window, sigma_v, imu.accel_bias_m_s2(), gravity);
+            let tilt_sigma_rad = leveling_tilt_sigma_rad(dt_window, sigma_v, accel_error, gravity);
             let start = YawGsfStart {
                 f_b_m_s2: dv_window_b / dt_window,
                 a_ne_m_s2: (v_ne - v_prev) / dt_window,
@@ -141,7 +142,7 @@ impl Navigator {
                 arw_rad_sqrt_s: noise.arw_rad_sqrt_s,
                 vrw_m_s_sqrt_s: noise.vrw_m_s_sqrt_s,
                 gyro_bias_rad_s: imu.gyro_bias_rad_s(),
-                accel_bias_m_s2: imu.accel_bias_m_s2(),
+                accel_bias_m_s2: accel_error,
             };
             // A refusal (a window sensing no gravity, or accelerating beyond half a g) waits
             // for the next window; so does one whose velocities are too noisy to level with.

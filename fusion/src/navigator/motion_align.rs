@@ -247,6 +247,7 @@ impl Navigator {
         noise.baro_bias_rw_m_sqrt_s = self.config.aiding.baro_bias_rw_m_sqrt_s;
         noise.clock_bias_psd_m2_s = self.config.aiding.clock_bias_psd_m2_s;
         noise.clock_drift_psd_m2_s3 = self.config.aiding.clock_drift_psd_m2_s3;
+        noise.gravity = self.config.gravity_disturbance.disturbance();
         noise
     }
 
