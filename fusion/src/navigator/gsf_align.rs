@@ -168,8 +168,23 @@ impl Navigator {
         let Some(at_t) = self.carry_fix(&fix, ts, q_e_b, &p_psi) else {
             return false;
         };
+        // The bank's tilt is a levelling: it carries the accelerometer error over g, added to
+        // its covariance as `(σ/g)²` per tilt axis (`YawGsf::estimate`). The filter gets that
+        // part as the joint tilt–bias block instead of an independent tilt (counted twice, the
+        // tilt would look known once the velocities pin their sum down). Levelling nulls the
+        // horizontal specific force: `ψ_N = δb_a,E/g`, `ψ_E = −δb_a,N/g` (NED, rows of C_n_b).
+        let c_n_b = *est.c_n_b.dcm();
+        let g = earth::normal_gravity(&self.ell, geo.lat_rad, geo.height_m);
+        let mut level_n = Matrix3::zeros();
+        level_n.set_row(0, &(c_n_b.row(1) / g));
+        level_n.set_row(1, &(-c_n_b.row(0) / g));
+        let tilt_part = (accel_error / g).powi(2);
+        let mut p_other_n = est.p_att_n_rad2;
+        p_other_n[(0, 0)] -= tilt_part;
+        p_other_n[(1, 1)] -= tilt_part;
+        let p_other = c_e_n * p_other_n * c_e_n.transpose();
         // No star attitude: the boresight has nothing to correlate with.
-        self.start_in_motion(&at_t, t, q_e_b, &p_psi, None);
+        self.start_in_motion(&at_t, t, q_e_b, &p_other, None, Some(c_e_n * level_n));
         self.diagnostics.gnss_heading_alignments += 1;
         true
     }

@@ -188,7 +188,7 @@ impl Navigator {
             .active_states(false)
             .boresight
             .then_some(att.p_psi_kappa);
-        self.start_in_motion(&at_t, t, att.q_e_b, &p_psi, kappa);
+        self.start_in_motion(&at_t, t, att.q_e_b, &p_psi, kappa, None);
         true
     }
 
@@ -207,6 +207,10 @@ impl Navigator {
     /// carried from a GNSS fix (`alignment_carry::CarriedFix`, with the antenna's lever arm
     /// taken off), and an attitude `q_e_b` whose ECEF error ψ has the covariance `p_psi`
     /// (rad²) and, with the boresight estimated, the cross-covariance `p_psi_kappa` with it.
+    /// A levelled attitude (`leveled_e`, the ECEF map from the body accelerometer error to the
+    /// tilt the levelling left, `ψ_e = L·δb_a`) shares its tilt error with the
+    /// accelerometer-bias states: `p_psi` is then the attitude covariance without that part,
+    /// and the joint block is built from the bias prior (as the static alignment does).
     pub(super) fn start_in_motion(
         &mut self,
         at_t: &CarriedFix,
@@ -214,6 +218,7 @@ impl Navigator {
         q_e_b: UnitQuaternion<f64>,
         p_psi: &Matrix3<f64>,
         p_psi_kappa: Option<Matrix3<f64>>,
+        leveled_e: Option<Matrix3<f64>>,
     ) {
         let r_e = at_t.r_e;
         let v_e = at_t.v_e;
@@ -230,6 +235,17 @@ impl Navigator {
             .copy_from(&at_t.p_rv);
         p0.fixed_view_mut::<3, 3>(idx::ATT, idx::ATT)
             .copy_from(p_psi);
+        if let Some(l) = leveled_e {
+            // ψ = ψ_other + L δb_a: Cov(ψ) = P_other + L P_ba Lᵀ, Cov(ψ, δb_a) = L P_ba.
+            let p_ba = p0.fixed_view::<3, 3>(idx::BA, idx::BA).into_owned();
+            let cross = l * p_ba;
+            let mut att = p0.fixed_view_mut::<3, 3>(idx::ATT, idx::ATT);
+            att += cross * l.transpose();
+            p0.fixed_view_mut::<3, 3>(idx::ATT, idx::BA)
+                .copy_from(&cross);
+            p0.fixed_view_mut::<3, 3>(idx::BA, idx::ATT)
+                .copy_from(&cross.transpose());
+        }
         if let Some(p_pk) = p_psi_kappa {
             p0.fixed_view_mut::<3, 3>(idx::ATT, idx::KAPPA)
                 .copy_from(&p_pk);
