@@ -105,7 +105,7 @@ impl GravityDisturbance {
     /// expressed in body axes (any length; its sign does not matter).
     pub fn body_covariance(&self, up_b: &Vector3<f64>) -> Matrix3<f64> {
         let n = up_b.norm();
-        if !(n > 0.0) {
+        if !n.is_normal() {
             return Matrix3::identity() * self.horizontal_sigma_m_s2.powi(2);
         }
         let u = up_b / n;
