@@ -30,7 +30,8 @@ pub fn filter(cfg: NavigatorConfig) -> NavigatorConfig {
 /// antenna, the receiver's error correlation where it has pseudorange errors, the wheel's lever
 /// arm where it has the car, the star tracker's time tag and low-frequency error where it has
 /// the star tracker's world, the weather's drift where it has the barometer's air, the
-/// region's gravity class where it has a gravity disturbance; the matched
+/// region's gravity class where it has a gravity disturbance, the oscillator's class where it
+/// has a real receiver clock; the matched
 /// filter ([`filter`]) for the rest. What the filter is told is always the
 /// car's file, never the world's values.
 pub fn installed_for(
@@ -62,6 +63,10 @@ pub fn installed_for(
     }
     if w.gravity().is_some() {
         cfg.gravity_disturbance = car.gravity_disturbance;
+    }
+    if w.receiver_clock().is_some() {
+        cfg.aiding.clock_bias_psd_m2_s = car.aiding.clock_bias_psd_m2_s;
+        cfg.aiding.clock_drift_psd_m2_s3 = car.aiding.clock_drift_psd_m2_s3;
     }
     cfg
 }

@@ -712,7 +712,8 @@ pub(super) fn nonneg(x: f64) -> bool {
 impl NavigatorConfig {
     /// This tuning on the idealised vehicle of the built-in defaults: every sensor at the IMU
     /// and stamped at its time of validity, GNSS and star-tracker errors white, a barometer in
-    /// the standard atmosphere (no weather to drift with, no height scale error). The rest
+    /// the standard atmosphere (no weather to drift with, no height scale error), gravity as
+    /// the mechanization's model, the simulator's nominal receiver clock. The rest
     /// (IMU class, gates, switches, noise of the samples) is kept. A real vehicle's
     /// configuration (`config/filter.toml` is the default car's) states each of these.
     pub fn idealised(mut self) -> Self {
@@ -726,6 +727,8 @@ impl NavigatorConfig {
         a.baro_scale_sigma = d.aiding.baro_scale_sigma;
         a.star_low_frequency_sigma_arcsec = d.aiding.star_low_frequency_sigma_arcsec;
         a.star_low_frequency_correlation_time_s = d.aiding.star_low_frequency_correlation_time_s;
+        a.clock_bias_psd_m2_s = d.aiding.clock_bias_psd_m2_s;
+        a.clock_drift_psd_m2_s3 = d.aiding.clock_drift_psd_m2_s3;
         self
     }
 }
