@@ -33,6 +33,7 @@ pub mod frames;
 pub mod gnss_corrections;
 pub mod gnss_ls;
 pub mod navigator;
+pub mod phase_ambiguity;
 pub mod point_positioning;
 pub mod redundancy;
 pub mod strapdown;
