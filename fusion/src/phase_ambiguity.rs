@@ -237,7 +237,8 @@ pub struct Resolution {
     pub searched: bool,
     /// The search's ratio `χ²_second / χ²_best` (searched epochs).
     pub ratio: Option<f64>,
-    /// Held satellites dropped because the receiver flagged a slip (lock time restart).
+    /// Held satellites dropped because their lock time restarted (a slip the receiver
+    /// flagged, or a reacquisition since the last epoch given).
     pub slips_flagged: usize,
     /// Held satellites dropped by the residual test (a slip the receiver did not flag).
     pub slips_detected: usize,
@@ -268,7 +269,8 @@ pub struct AmbiguityResolver {
 pub struct EpochOutcome {
     /// The fixed attitude, or why there is none.
     pub result: Result<Resolution, AmbiguityError>,
-    /// Held satellites dropped because the receiver flagged a slip.
+    /// Held satellites dropped because their lock time restarted (a slip the receiver
+    /// flagged, or a reacquisition since the last epoch given).
     pub slips_flagged: usize,
     /// Held satellites dropped by the residual test.
     pub slips_detected: usize,

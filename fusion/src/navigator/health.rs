@@ -149,7 +149,8 @@ pub struct NavigatorDiagnostics {
     /// Epochs rejected for another reason (too few satellites, χ² test, solver); nothing
     /// fused.
     pub baseline_rejected: u64,
-    /// Held satellites dropped because the receiver flagged a slip (lock time restarted).
+    /// Held satellites dropped because the receiver's lock time restarted: a slip it
+    /// flagged, or a reacquisition since the last epoch given (after an outage).
     pub baseline_slips_flagged: u64,
     /// Held satellites dropped by the residual test: slips the receiver did not flag.
     pub baseline_slips_detected: u64,
