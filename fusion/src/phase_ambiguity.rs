@@ -1139,7 +1139,7 @@ mod tests {
         fn never_holds_a_wrong_set(
             roll in -0.5f64..0.5,
             pitch in -0.5f64..0.5,
-            heading in -3.14f64..3.14,
+            heading in -std::f64::consts::PI..std::f64::consts::PI,
             seed in 0u64..1_000_000,
             n in 4usize..=7,
         ) {

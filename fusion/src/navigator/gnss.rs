@@ -32,9 +32,8 @@ impl Navigator {
     ) -> Option<(Matrix3<f64>, Matrix3<f64>)> {
         use crate::baseline_attitude as ba;
         use crate::phase_ambiguity as pa;
-        if !self.config.updates.baseline_attitude
-            || !(s.baseline_length_m.iter().all(|d| pos(*d)) && pos(s.wavelength_m))
-        {
+        let has_baselines = s.baseline_length_m.iter().all(|d| pos(*d)) && pos(s.wavelength_m);
+        if !(self.config.updates.baseline_attitude && has_baselines) {
             return None;
         }
         let navigating = self.phase == Phase::Navigating;
