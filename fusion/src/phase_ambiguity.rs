@@ -11,7 +11,8 @@
 //! `|det[u_a u_b u_c]|`, fix the baseline through `U b = λ(φ − N)`. For a baseline of length
 //! `d` every primary integer lies in `φ − N ∈ [−d/λ, d/λ]` (±5.3 cycles for 1 m at L1), so
 //! each baseline has about `(2d/λ + 1)³` candidate triples (≈ 1500). A candidate is kept when
-//! its length is within `k σ_len` of `d` (`σ_len² = λ²σ_φ² b̂ᵀ(UᵀU)⁻¹b̂`), a pair of AB and CD
+//! its length is within `k σ_len` of `d` (`σ_len² = λ²σ_φ² b̂ᵀ(UᵀU)⁻¹b̂`) and every other
+//! satellite's phase lies within `k σ` of an integer (`σ² = σ_φ²(1 + uᵀ(UᵀU)⁻¹u)`), a pair of AB and CD
 //! candidates when `|b_AB·b_CD| ≤ k σ_dot` (perpendicular baselines;
 //! `σ_dot² = λ²σ_φ²(b_CDᵀ(UᵀU)⁻¹b_CD + b_ABᵀ(UᵀU)⁻¹b_AB)`). Each surviving pair gives an
 //! attitude (Gram–Schmidt), the integers of every satellite by rounding `φ − b·u/λ`, and the
@@ -20,9 +21,10 @@
 //!
 //! **Validation**: the best set is accepted when (1) its χ² passes the chi-square test at the
 //! configured probability and (2) the ratio test holds, `χ²_second / χ²_best ≥ ratio`, the
-//! second-best being the best *different* integer set (none left: infinite ratio, the length
-//! and perpendicularity gates having excluded every other). Otherwise the epoch is
-//! *float only*: no attitude is given.
+//! second-best being the best *different* integer set (none left: infinite ratio, the length,
+//! secondary-satellite and perpendicularity gates having excluded every other — the usual
+//! case at σ_φ = 0.01 cycle with 5 or more satellites). Otherwise the epoch is *float only*:
+//! no attitude is given.
 //!
 //! **Hold and re-fix**: accepted integers are held per satellite (by PRN) while the receiver
 //! keeps lock. A held satellite is dropped when it disappears, or when its lock time shows a
@@ -44,9 +46,11 @@
 //!
 //! Limits: the line bias between the antennas' receiver channels is taken as zero (as the
 //! simulator's receiver has it; a real pair of receivers needs between-satellite differences);
-//! candidates are kept in fixed arrays of [`CANDIDATE_CAPACITY`] per baseline, which holds the
-//! ≈ 50 of a 1 m baseline and the ≈ 500 of ~3 m at L1; longer baselines report
-//! [`AmbiguityError::TooManyCandidates`]. Pure, allocation-free (stack arrays, at most
+//! candidates are kept in fixed arrays of [`CANDIDATE_CAPACITY`] per baseline; with the
+//! secondary satellites' check a handful survive even for 5 m at L1 (the length gate alone
+//! leaves ≈ 50 for 1 m and ≈ 1000 for 5 m), more only with few satellites and long baselines
+//! ([`AmbiguityError::TooManyCandidates`]). The enumeration itself grows as `(2d/λ + 1)³`:
+//! ≈ 1500 triples for 1 m, ≈ 150 000 for 5 m (about a millisecond). Pure, allocation-free (stack arrays, at most
 //! [`MAX_SATELLITES`] satellites).
 
 use crate::baseline_attitude::{
@@ -709,6 +713,19 @@ impl AmbiguityResolver {
                         if (len - d).abs() > GATE_SIGMAS * s_len {
                             continue;
                         }
+                        // Every other satellite's phase must sit near an integer of this
+                        // baseline: residual to the nearest integer within k σ, σ² = σ_φ²(1 +
+                        // uᵀ(UᵀU)⁻¹u). A wrong candidate passes each with probability ≈ 2kσ,
+                        // so the few secondaries leave few of them.
+                        let consistent = (0..n).filter(|i| !prim.contains(i)).all(|i| {
+                            let u = &all[i].los_e;
+                            let x = all[i].phase_cycles[j] - b.dot(u) / lam;
+                            let sigma = bl.sigma_phase_cycles * (1.0 + u.dot(&(g * u))).sqrt();
+                            (x - x.round()).abs() <= GATE_SIGMAS * sigma
+                        });
+                        if !consistent {
+                            continue;
+                        }
                         if n_c[j] == CANDIDATE_CAPACITY {
                             return Err(AmbiguityError::TooManyCandidates {
                                 baseline: j,
@@ -1066,18 +1083,26 @@ mod tests {
         }
     }
 
-    /// An unreachable ratio threshold leaves every epoch float only: no attitude, nothing
-    /// held. Bad configurations are refused.
+    /// A resolver told σ_φ = 0.09 cycle (the widest its rounding allows) keeps runner-up
+    /// candidates through its gates; with an unreachable ratio threshold the epoch is float
+    /// only: no attitude, nothing held. With the true σ_φ no runner-up survives the gates
+    /// (infinite ratio). Bad configurations are refused.
     #[test]
     fn ratio_test_failure_is_float_only() {
         let (r, _) = site();
         let mut rx = Receiver::new(8, (0.0, 0.0, 2.0));
+        let raw = rx.epoch(&ALL, true);
+        let mut res = AmbiguityResolver::new(config()).unwrap();
+        let fix = res.resolve(0.0, &raw, &r, None).result.unwrap();
+        assert_eq!(fix.ratio, Some(f64::INFINITY));
+        let mut wide = config();
+        wide.baseline.sigma_phase_cycles = 0.09;
         let mut res = AmbiguityResolver::new(AmbiguityConfig {
             ratio_threshold: 1e300,
-            ..config()
+            ..wide
         })
         .unwrap();
-        let o = res.resolve(0.0, &rx.epoch(&ALL, true), &r, None);
+        let o = res.resolve(0.0, &raw, &r, None);
         let e = o.result.unwrap_err();
         assert!(matches!(e, AmbiguityError::RatioTest { .. }) && e.is_float_only());
         assert_eq!(res.n_held(), 0);

@@ -57,8 +57,6 @@ pub struct Settings {
 
 impl Default for Settings {
     /// d = 0.25…5 m at σ_φ = 0.01 cycle; σ_φ = 0.002…0.05 cycle at d = 1 m; 600 epochs.
-    /// (The unaided integer search holds up to 512 candidates per baseline: enough for ~3 m
-    /// at L1, so the 5 m row shows what happens beyond — no fix.)
     fn default() -> Self {
         Self {
             lengths_m: vec![0.25, 0.5, 1.0, 2.0, 5.0],
@@ -623,7 +621,7 @@ pub fn table(summary: &Summary) -> String {
     out.push_str(
         "TTFF: first epoch with phases to first fix; wrong: fixed epochs holding an integer\n\
          other than the simulator's; search: fixes by a new search; float: ratio test or no\n\
-         candidate; rej: other rejections (the 5 m row: beyond 512 candidates per baseline);\n\
+         candidate; rej: other rejections (too few satellites, χ², too many candidates);\n\
          w.slip/unflag: the world's slips, and of those not flagged by the receiver; lock: held\n\
          satellites dropped on a lock-time restart (flagged slips, reacquisitions after the\n\
          outage); resid: dropped by the residual test (unflagged slips and the test's 0.1 %\n\
