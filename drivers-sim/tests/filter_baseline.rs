@@ -22,7 +22,8 @@
 //!   the solution does not depend on the inertial prior it starts from (differences
 //!   < 6e-15 rad: Gauss–Newton converges to the same minimum), so fusing it does not
 //!   double-count the state; the simulator's phase noise is white per epoch with the
-//!   ambiguity resolved (drivers-sim/src/gnss.rs), and the residual model `y = ψ + ε`
+//!   integers resolved (drivers-sim/src/gnss.rs; measured before the receiver's phases
+//!   carried integers — a correct fix gives the same phases), and the residual model `y = ψ + ε`
 //!   (ECEF, `fusion::ekf::gnss_baseline_attitude`) is right — with an IMU that has only white
 //!   noise the heading NEES is 1.03 over 24 seeds (test below);
 //! - seed 2 is a tail draw: its phase noise averages −0.151σ over the run (3.1 standard
