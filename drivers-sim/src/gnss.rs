@@ -2,6 +2,11 @@
 //! (two-state clock, pseudorange and Doppler noise, C/N0 from elevation, dual-baseline carrier
 //! phase differences).
 //!
+//! Baseline carrier phases: the phase difference across each baseline is `b·u/λ + ε` plus, with
+//! `[world.carrier_phase]`, the receiver's unknown integer of the satellite and baseline (new
+//! at each acquisition, changed by cycle slips) with its lock time ([`crate::world::carrier_phase`]);
+//! without it the integer is already resolved (zero), as the matched fixture needs.
+//!
 //! Two receivers:
 //! * **Matched** (no `[world]` in the scenario): white pseudorange noise of the grade's σ and
 //!   a fix consistent with it, `(HᵀH)⁻¹Hᵀε` with covariance exactly `σ²(HᵀH)⁻¹` — a fixture
@@ -24,6 +29,7 @@
 use crate::scenario::{ConstellationSpec, GnssGrade, Scenario, UereModel, Window};
 use crate::truth::TruthPoint;
 use crate::world::GnssWorld;
+use crate::world::carrier_phase::{PhaseTracking, TrackedPhase};
 use crate::world::receiver_clock::TwoStateClock;
 use fusion::earth::WGS84;
 use fusion::gnss_corrections as corr;
@@ -152,6 +158,18 @@ pub struct GnssEpochTruth {
     pub geometric_range_m: [f64; MAX_SATELLITES],
     /// Antenna position at the measurement instant, ECEF, m.
     pub antenna_r_e_m: Vector3<f64>,
+    /// The integer each published satellite's baseline phases (AB, CD) carry, cycles (0
+    /// without `[world.carrier_phase]`).
+    pub phase_ambiguity_cycles: [[i64; 2]; MAX_SATELLITES],
+}
+
+/// The lock time published with the phases (0 without them).
+fn lock_time(phase_flag: u32, tracked: &TrackedPhase) -> [f64; 2] {
+    if phase_flag & FLAG_PHASE != 0 {
+        tracked.lock_time_s
+    } else {
+        [0.0; 2]
+    }
 }
 
 /// The GNSS receiver simulator.
@@ -168,6 +186,8 @@ pub struct GnssSim {
     /// The world and the receiver's error budget (real receiver), or None (matched).
     world: Option<(GnssWorld, UereModel)>,
     last_fix: Option<(Vector3<f64>, f64)>,
+    /// Carrier-phase tracking of the baselines (integers, slips, lock time).
+    phase_tracking: PhaseTracking,
 }
 
 impl GnssSim {
@@ -193,7 +213,14 @@ impl GnssSim {
                 let rng_w = crate::sensor_rng(scn.spec.scenario.seed, "world");
                 (GnssWorld::new(w, constellation.len(), rng_w), u)
             });
+        // Its own stream: switching the effect changes no other realisation.
+        let phase_tracking = PhaseTracking::new(
+            scn.spec.world.and_then(|w| w.carrier_phase()),
+            constellation.len(),
+            crate::sensor_rng(scn.spec.scenario.seed, "world_carrier_phase"),
+        );
         Self {
+            phase_tracking,
             constellation,
             grade: g,
             outages: scn.spec.gnss.outages.clone(),
@@ -219,6 +246,11 @@ impl GnssSim {
         &self.constellation
     }
 
+    /// Slip and acquisition counts of the carrier-phase tracking so far (truth).
+    pub fn phase_slip_counts(&self) -> crate::world::carrier_phase::SlipCounts {
+        self.phase_tracking.counts()
+    }
+
     /// The world of a real receiver (None for the matched one).
     pub fn world(&self) -> Option<&GnssWorld> {
         self.world.as_ref().map(|(w, _)| w)
@@ -240,6 +272,7 @@ impl GnssSim {
             }
         }
         self.last_t_s = Some(t_s);
+        self.phase_tracking.begin_epoch(t_s);
         if self.world.is_some() {
             self.sample_real(t_s, t_gps_ns, truth)
         } else {
@@ -260,12 +293,14 @@ impl GnssSim {
         (out, outage)
     }
 
-    /// Carrier-phase differences of the two body baselines for line of sight `u` (cycles).
+    /// Carrier-phase differences of the two body baselines for line of sight `u` (cycles), as
+    /// the receiver publishes them: with the integer `tracked` carries.
     fn baseline_phases(
         &self,
         c_e_b: &nalgebra::Matrix3<f64>,
         u: &Vector3<f64>,
         draws: &[f64; 4],
+        tracked: &TrackedPhase,
     ) -> (u32, [f64; 2]) {
         let g = self.grade;
         let wavelength = SPEED_OF_LIGHT_M_S / g.carrier_frequency_hz;
@@ -276,7 +311,9 @@ impl GnssSim {
                 c_e_b * Vector3::new(0.0, g.baseline_length_m[1], 0.0),
             ];
             for (k, b) in baselines_e.iter().enumerate() {
-                phase[k] = b.dot(u) / wavelength + g.phase_sigma_cycles * draws[2 + k];
+                phase[k] = b.dot(u) / wavelength
+                    + g.phase_sigma_cycles * draws[2 + k]
+                    + tracked.ambiguity_cycles[k] as f64;
             }
             return (FLAG_PHASE, phase);
         }
@@ -325,6 +362,7 @@ impl GnssSim {
             clock_drift_m_s: self.clock.drift_m_s,
             geometric_range_m: [0.0; MAX_SATELLITES],
             antenna_r_e_m: r_rx,
+            phase_ambiguity_cycles: [[0; 2]; MAX_SATELLITES],
         };
         let mut hth = Matrix4::<f64>::zeros();
         let mut ht_pr = Vector4::<f64>::zeros();
@@ -345,20 +383,24 @@ impl GnssSim {
             let e_pr = g.pseudorange_sigma_m * draws[0];
             let e_rr = g.range_rate_sigma_m_s * draws[1];
             let rate = (v_s - v_rx).dot(&u);
-            let (phase_flag, phase) = self.baseline_phases(&c_e_b, &u, &draws);
+            let cn0 = g.cn0_horizon_dbhz + (g.cn0_zenith_dbhz - g.cn0_horizon_dbhz) * el.sin();
+            let tracked = self.phase_tracking.track(i, cn0);
+            let (phase_flag, phase) = self.baseline_phases(&c_e_b, &u, &draws, &tracked);
             out.satellites[n] = GnssSatellite {
                 prn: i as u32 + 1,
                 flags: FLAG_PSEUDORANGE | FLAG_DOPPLER | phase_flag,
                 pseudorange_m: range + self.clock.bias_m + e_pr,
                 range_rate_m_s: rate + self.clock.drift_m_s + e_rr,
-                cn0_dbhz: g.cn0_horizon_dbhz + (g.cn0_zenith_dbhz - g.cn0_horizon_dbhz) * el.sin(),
+                cn0_dbhz: cn0,
                 sigma_pseudorange_m: g.pseudorange_sigma_m,
                 sigma_range_rate_m_s: g.range_rate_sigma_m_s,
                 sat_pos_ecef_m: [r_s.x, r_s.y, r_s.z],
                 sat_vel_ecef_m_s: [v_s.x, v_s.y, v_s.z],
                 baseline_phase_cycles: phase,
+                phase_lock_time_s: lock_time(phase_flag, &tracked),
             };
             hidden.geometric_range_m[n] = range;
+            hidden.phase_ambiguity_cycles[n] = tracked.ambiguity_cycles;
             let h = Vector4::new(-u.x, -u.y, -u.z, 1.0);
             hth += h * h.transpose();
             ht_pr += h * e_pr;
@@ -424,6 +466,7 @@ impl GnssSim {
             clock_drift_m_s: self.clock.drift_m_s,
             geometric_range_m: [0.0; MAX_SATELLITES],
             antenna_r_e_m: r_rx,
+            phase_ambiguity_cycles: [[0; 2]; MAX_SATELLITES],
         };
         let mut obs = fusion::gnss_ls::Observations::default();
         let mut n = 0usize;
@@ -466,7 +509,8 @@ impl GnssSim {
                 - if tropo_on { tropo } else { 0.0 };
             let e_rr = g.range_rate_sigma_m_s * draws[1];
             let rate = (v_s - v_rx).dot(&u);
-            let (phase_flag, phase) = self.baseline_phases(&c_e_b, &u, &draws);
+            let tracked = self.phase_tracking.track(i, cn0);
+            let (phase_flag, phase) = self.baseline_phases(&c_e_b, &u, &draws, &tracked);
             let sigma_pr = uere.sigma_m(el, cn0, klobuchar);
             let sat = GnssSatellite {
                 prn: i as u32 + 1,
@@ -479,9 +523,11 @@ impl GnssSim {
                 sat_pos_ecef_m: r_s_broadcast.into(),
                 sat_vel_ecef_m_s: v_s.into(),
                 baseline_phase_cycles: phase,
+                phase_lock_time_s: lock_time(phase_flag, &tracked),
             };
             out.satellites[n] = sat;
             hidden.geometric_range_m[n] = range;
+            hidden.phase_ambiguity_cycles[n] = tracked.ambiguity_cycles;
             // Every value is finite and the satellite at orbital distance: push cannot fail.
             let _ = obs.push(fusion::gnss_ls::SatelliteObservation {
                 prn: sat.prn,

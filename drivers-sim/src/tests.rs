@@ -575,6 +575,74 @@ fn real_receiver_fix_is_its_own_least_squares_and_correlated() {
     );
 }
 
+/// `[world.carrier_phase]` through the receiver: each published baseline phase is the true
+/// `b·u/λ` plus the hidden integer plus white noise (residual within 5σ_φ), the integers are
+/// arbitrary (not 0), and the lock time runs with the epochs except where the integer changed
+/// (a flagged slip) or the satellite was (re)acquired; some integers change without a restart
+/// (the unflagged slips), and the source's slip counts agree with what is seen. Static site
+/// with the car's GNSS world, 1200 s at 1 Hz.
+#[test]
+fn published_baseline_phases_carry_the_tracked_integer_and_lock_time() {
+    let scn = static_site_in_the_world();
+    assert!(scn.spec.world.unwrap().carrier_phase().is_some());
+    let epoch = scn.epoch_gps().ns;
+    let mut src = GnssSource::new(&scn, epoch);
+    let mut truth = TruthGenerator::new(&scn);
+    let g = scn.gnss;
+    let lambda = msgs::SPEED_OF_LIGHT_M_S / g.carrier_frequency_hz;
+    let mut prev: std::collections::HashMap<u32, ([i64; 2], [f64; 2])> = Default::default();
+    let (mut nonzero, mut total, mut flagged, mut unflagged) = (0, 0, 0u64, 0u64);
+    for k in 0..1200i64 {
+        let (m, hidden) = src.sample_with_truth(k * 1_000_000_000);
+        truth.advance_to(k * 1_000_000_000);
+        let tp = truth.current();
+        let c_e_b = tp.c_e_n * tp.c_n_b;
+        let b = [
+            c_e_b * Vector3::new(g.baseline_length_m[0], 0.0, 0.0),
+            c_e_b * Vector3::new(0.0, g.baseline_length_m[1], 0.0),
+        ];
+        let mut now = std::collections::HashMap::new();
+        for (i, s) in m.satellites[..m.n_satellites as usize].iter().enumerate() {
+            let u = (Vector3::from(s.sat_pos_ecef_m) - hidden.antenna_r_e_m).normalize();
+            let n_int = hidden.phase_ambiguity_cycles[i];
+            for j in 0..2 {
+                // The broadcast orbit error moves u by < 1e-7 rad: ≪ σ_φ on 1 m.
+                let r = s.baseline_phase_cycles[j] - b[j].dot(&u) / lambda - n_int[j] as f64;
+                assert!(r.abs() < 5.0 * g.phase_sigma_cycles, "residual {r} cycles");
+                total += 1;
+                nonzero += usize::from(n_int[j] != 0);
+            }
+            if let Some((n0, l0)) = prev.get(&s.prn) {
+                for j in 0..2 {
+                    // The first interval is 0.95 s (the 50 ms latency at t = 0), the
+                    // others 1 s: a restart leaves less than one interval.
+                    let restarted = s.phase_lock_time_s[j] < l0[j] + 0.9;
+                    if n0[j] != n_int[j] {
+                        if restarted {
+                            flagged += 1;
+                        } else {
+                            unflagged += 1;
+                        }
+                    } else {
+                        assert!(!restarted, "lock restarted without a slip");
+                        let d = s.phase_lock_time_s[j] - l0[j];
+                        assert!((0.95 - 1e-9..=1.0 + 1e-9).contains(&d), "lock time +{d} s");
+                    }
+                }
+            } else {
+                assert!(s.phase_lock_time_s.iter().all(|l| (0.0..1.0).contains(l)));
+            }
+            now.insert(s.prn, (n_int, s.phase_lock_time_s));
+        }
+        prev = now;
+    }
+    let c = src.sim.phase_slip_counts();
+    eprintln!("{total} phases, {nonzero} with a non-zero integer; slips {c:?}");
+    assert!(nonzero as f64 > 0.99 * total as f64);
+    assert_eq!((c.flagged, c.unflagged), (flagged, unflagged));
+    assert!(c.flagged > 0, "{c:?}");
+}
+
 /// A `[world]` with pseudorange errors needs the receiver's own error budget in its grade,
 /// and every world value is range-checked with its dotted key.
 #[test]
@@ -592,6 +660,11 @@ fn world_section_is_validated() {
     assert!(e.contains("world.multipath.sigma_horizon_m"), "{e}");
     let e = err("[world.gnss_antenna]\nlever_arm_b_m = [0.0, 0.0, -1.5]\nlatency_s = 0.0505\n");
     assert!(e.contains("world.gnss_antenna.latency_s"), "{e}");
+    let e = err(
+        "[world.carrier_phase]\nslips_per_hour_at_45_dbhz = 1.0\nunflagged_fraction = 1.5\n\
+         max_slip_cycles = 3\ninitial_ambiguity_cycles = 10\n",
+    );
+    assert!(e.contains("world.carrier_phase.unflagged_fraction"), "{e}");
     let e = err("[world.code_noise]\nsigma_at_45_dbhz_m = 0.3\nbogus = 1\n");
     assert!(e.contains("bogus"), "{e}");
     // The receiver's budget: the static site's grade has one; overriding it away is an error.

@@ -2,6 +2,13 @@
 //! measurement, on the vehicle scenario with the star tracker off (stars would dominate the
 //! attitude).
 //!
+//! The receiver's phases are ambiguous: the scenario keeps its `[world.carrier_phase]` (an
+//! unknown integer per satellite and baseline, cycle slips by C/N0, one in ten not flagged by
+//! the lock time) on the otherwise matched world, and the navigator resolves the integers
+//! (`fusion::phase_ambiguity`) before the attitude is solved. A correct fix gives exactly the
+//! phases of the resolved model, so every bound below is the one of the resolved phases; a
+//! wrong fix or an undetected slip (1 cycle = 100σ_φ) would break them by orders of magnitude.
+//!
 //! Expected size: one epoch gives the attitude to ≈ λσ_φ/d = 0.19 m · 0.01 / 1 m ≈ 1.9 mrad
 //! (0.11°) per axis divided by a geometry factor (heading ≈ 0.048° for this sky); fused at
 //! 1 Hz for ~480 s of navigation it bounds the heading error to a few thousandths of a degree
@@ -15,7 +22,8 @@
 //!   the solution does not depend on the inertial prior it starts from (differences
 //!   < 6e-15 rad: Gauss–Newton converges to the same minimum), so fusing it does not
 //!   double-count the state; the simulator's phase noise is white per epoch with the
-//!   ambiguity resolved (drivers-sim/src/gnss.rs), and the residual model `y = ψ + ε`
+//!   integers resolved (drivers-sim/src/gnss.rs; measured before the receiver's phases
+//!   carried integers — a correct fix gives the same phases), and the residual model `y = ψ + ε`
 //!   (ECEF, `fusion::ekf::gnss_baseline_attitude`) is right — with an IMU that has only white
 //!   noise the heading NEES is 1.03 over 24 seeds (test below);
 //! - seed 2 is a tail draw: its phase noise averages −0.151σ over the run (3.1 standard
@@ -41,6 +49,7 @@ struct HeadingRun {
     s2: f64,
     z: Vec<f64>,
     gnss_nis_per_dof: f64,
+    diagnostics: fusion::navigator::NavigatorDiagnostics,
 }
 
 impl HeadingRun {
@@ -53,8 +62,9 @@ impl HeadingRun {
     }
 }
 
-/// The vehicle scenario on the matched world with `seed`; with `white_imu` the IMU keeps only its white noise
-/// (ARW, VRW): every bias, scale factor, misalignment and temperature term zero.
+/// The vehicle scenario on the matched world with `seed`, but the receiver's carrier phases as
+/// the car's world has them (`[world.carrier_phase]`); with `white_imu` the IMU keeps only its
+/// white noise (ARW, VRW): every bias, scale factor, misalignment and temperature term zero.
 fn scenario(seed: u64, white_imu: bool) -> Scenario {
     let path = Path::new(concat!(
         env!("CARGO_MANIFEST_DIR"),
@@ -74,7 +84,15 @@ fn scenario(seed: u64, white_imu: bool) -> Scenario {
             ),
         );
     }
-    let scn = sextant_drivers_sim::matched::scenario(Scenario::from_toml_str(&text, path).unwrap());
+    let shipped = Scenario::from_toml_str(&text, path).unwrap();
+    let phases = shipped
+        .spec
+        .world
+        .map(|w| w.only(&["carrier_phase"]).unwrap());
+    let mut scn = sextant_drivers_sim::matched::scenario(shipped);
+    scn.spec.world = phases;
+    assert!(scn.spec.world.and_then(|w| w.carrier_phase()).is_some());
+    assert!(!scn.spec.world.unwrap().gnss_errors_on());
     assert_eq!(scn.spec.scenario.seed, seed);
     if white_imu {
         assert_eq!(scn.imu.gyro.scale_factor_ppm, 0.0);
@@ -95,6 +113,7 @@ fn run(scn: &Scenario, baseline: bool) -> HeadingRun {
         s2: 0.0,
         z: Vec::new(),
         gnss_nis_per_dof: 0.0,
+        diagnostics: Default::default(),
     };
     run_navigator(sim, epoch, &mut nav, |p: &RunPoint| {
         if p.t_s < 130.0 {
@@ -109,6 +128,7 @@ fn run(scn: &Scenario, baseline: bool) -> HeadingRun {
     .unwrap();
     let g = nav.health()[SensorId::Gnss as usize];
     r.gnss_nis_per_dof = g.nis_sum / g.nis_dof_sum.max(1) as f64;
+    r.diagnostics = nav.diagnostics();
     r
 }
 
@@ -122,10 +142,38 @@ fn baseline_attitude_is_fused_consistently_without_stars() {
     });
     let (w, ws) = with.rms_deg();
     let (wo, wos) = without.rms_deg();
+    let d = with.diagnostics;
     eprintln!(
         "seed 2 heading error RMS: with baseline attitude {w:.4}° (σ {ws:.4}°, GNSS NIS/dof \
-         {:.2}), without {wo:.4}° (σ {wos:.4}°)",
-        with.gnss_nis_per_dof
+         {:.2}), without {wo:.4}° (σ {wos:.4}°); integers: {} epochs, {} fixed ({} by a \
+         search), {} float only, {} rejected, slips {} flagged / {} found by residuals, {} \
+         held sets rejected",
+        with.gnss_nis_per_dof,
+        d.baseline_epochs,
+        d.baseline_fixed,
+        d.baseline_search_fixes,
+        d.baseline_float_only,
+        d.baseline_rejected,
+        d.baseline_slips_flagged,
+        d.baseline_slips_detected,
+        d.baseline_held_sets_rejected
+    );
+    // The integers: fixed at (nearly) every epoch — the search needs 4 satellites with phases
+    // and the vehicle scenario has 7–10 — with a search only at the start and after each
+    // outage (every satellite reacquired with new integers): with ≥ 3 held satellites a slip
+    // costs a re-fix from the held attitude, not a search.
+    assert!(d.baseline_epochs > 400, "{d:?}");
+    assert!(
+        d.baseline_fixed as f64 >= 0.99 * d.baseline_epochs as f64,
+        "fix rate {d:?}"
+    );
+    assert!(
+        d.baseline_search_fixes as usize <= 1 + scn.spec.gnss.outages.len(),
+        "{d:?}"
+    );
+    assert!(
+        d.baseline_slips_flagged > 0,
+        "the world's slips reach the navigator"
     );
     // The measurement is consistent with its covariance (mean NIS per dof ≈ 1; thousands of
     // GNSS updates, standard error < 0.05) …
@@ -227,19 +275,26 @@ fn heading_error_over_seeds_is_inside_the_chi2_band_of_its_sigma() {
     }
 }
 
-/// The measurement itself: the single-epoch dual-baseline solution from the simulator's
-/// phases (lines of sight from the true position) against the true attitude, over 4 seeds ×
-/// the whole run. Its error ε (NED) normalised by the solver's covariance gives
-/// εᵀ P⁻¹ ε ~ χ²(3) per epoch, independent between epochs (white phase noise), so the mean
-/// over N epochs is inside χ²_{0.005, 0.995}(3N)/(3N) (≈ ±6 % for N ≈ 1700), and the mean
-/// heading ε/σ is within ±3/√N of 0. And the solution does not depend on the inertial prior
-/// the navigator starts it from (the same least-squares minimum to 1e-12 rad).
+/// The measurement itself: the dual-baseline solution from the simulator's ambiguous phases,
+/// integers resolved by `fusion::phase_ambiguity` (lines of sight from the true position),
+/// against the true attitude, over 4 seeds × the whole run. Every fixed epoch's integers are
+/// checked against the truth (`round(φ − b·u/λ)` with the true `b`: the noise is 0.01 cycle):
+/// no wrong fix. Its error ε (NED) normalised by the solver's covariance gives
+/// εᵀ P⁻¹ ε ~ χ²(3) per epoch, independent between epochs (white phase noise; the χ² test on
+/// the residuals selects on the residuals, which are independent of the estimate), so the
+/// mean over N epochs is inside χ²_{0.005, 0.995}(3N)/(3N) (≈ ±6 % for N ≈ 1700), and the
+/// mean heading ε/σ is within ±3/√N of 0. And the solution does not depend on the inertial
+/// prior it is started from (the same least-squares minimum to 1e-12 rad). Prints the
+/// time to first fix, the fix rate and the slips.
 #[test]
-fn single_epoch_baseline_solution_is_white_unbiased_and_prior_free() {
+fn resolved_baseline_solution_is_never_wrong_white_unbiased_and_prior_free() {
     use fusion::baseline_attitude as ba;
+    use fusion::phase_ambiguity as pa;
     use msgs::{Channel, Record};
     use std::collections::HashMap;
     let (mut nees, mut zh, mut n) = (0.0, 0.0, 0usize);
+    let (mut epochs, mut wrong, mut flagged, mut detected) = (0usize, 0usize, 0usize, 0usize);
+    let mut ttff_s: Vec<f64> = Vec::new();
     let mut prior_diff: f64 = 0.0;
     for seed in 1..=4 {
         let scn = scenario(seed, false);
@@ -255,6 +310,8 @@ fn single_epoch_baseline_solution_is_white_unbiased_and_prior_free() {
                 _ => {}
             }
         }
+        let mut resolver: Option<pa::AmbiguityResolver> = None;
+        let mut first: Option<i64> = None;
         for g in &gnss {
             let Some(t) = truth.get(&g.header.time_ns) else {
                 continue;
@@ -264,17 +321,58 @@ fn single_epoch_baseline_solution_is_white_unbiased_and_prior_free() {
             let c_n_b = fusion::attitude::quat_from_wire(&t.q_ned_body)
                 .to_rotation_matrix()
                 .into_inner();
-            let obs = ba::PhaseObservations::from_sample(g, &r).unwrap();
+            let c_e_b = c_e_n * c_n_b;
             let cfg = ba::BaselineConfig {
                 baseline_length_m: g.baseline_length_m,
                 wavelength_m: g.wavelength_m,
                 sigma_phase_cycles: scn.gnss.phase_sigma_cycles,
             };
-            let Ok(sol) = ba::solve(&obs, &cfg, &r, None) else {
+            let res = resolver.get_or_insert_with(|| {
+                pa::AmbiguityResolver::new(pa::AmbiguityConfig {
+                    baseline: cfg,
+                    ratio_threshold: 3.0,
+                    chi2_probability: 0.999,
+                })
+                .unwrap()
+            });
+            let raw = pa::RawPhases::from_sample(g, &r).unwrap();
+            if raw.as_slice().is_empty() {
                 continue; // outage
+            }
+            epochs += 1;
+            first.get_or_insert(g.header.time_ns);
+            let out = res.resolve(g.header.time_ns as f64 * 1e-9, &raw, &r, None);
+            flagged += out.slips_flagged;
+            detected += out.slips_detected;
+            let Ok(fix) = out.result else {
+                continue;
             };
-            let eps_n =
-                c_e_n.transpose() * ba::small_rotation_between(&sol.c_e_b, &(c_e_n * c_n_b));
+            if ttff_s.len() < seed as usize {
+                ttff_s.push((g.header.time_ns - first.unwrap()) as f64 * 1e-9);
+            }
+            // Every held integer against the truth.
+            let b = [
+                c_e_b.column(0) * g.baseline_length_m[0],
+                c_e_b.column(1) * g.baseline_length_m[1],
+            ];
+            let mut resolved = ba::PhaseObservations::default();
+            for s in raw.as_slice() {
+                let Some(held) = res.held(s.prn) else {
+                    continue;
+                };
+                let true_int = [0, 1].map(|j| {
+                    (s.phase_cycles[j] - b[j].dot(&s.los_e) / g.wavelength_m).round() as i64
+                });
+                wrong += usize::from(held != true_int);
+                resolved
+                    .push(ba::PhaseObservation {
+                        los_e: s.los_e,
+                        phase_cycles: [0, 1].map(|j| s.phase_cycles[j] - held[j] as f64),
+                    })
+                    .unwrap();
+            }
+            let sol = fix.attitude;
+            let eps_n = c_e_n.transpose() * ba::small_rotation_between(&sol.c_e_b, &c_e_b);
             nees += eps_n.dot(&(sol.cov_n_rad2.try_inverse().unwrap() * eps_n));
             zh += eps_n.z / sol.cov_n_rad2[(2, 2)].sqrt();
             n += 1;
@@ -284,9 +382,11 @@ fn single_epoch_baseline_solution_is_white_unbiased_and_prior_free() {
             .to_rotation_matrix()
             .into_inner()
                 * sol.c_e_b;
-            let with_prior = ba::solve(&obs, &cfg, &r, Some(&prior)).unwrap();
-            prior_diff =
-                prior_diff.max(ba::small_rotation_between(&with_prior.c_e_b, &sol.c_e_b).norm());
+            let with_prior = ba::solve(&resolved, &cfg, &r, Some(&prior)).unwrap();
+            let without = ba::solve(&resolved, &cfg, &r, None).unwrap();
+            prior_diff = prior_diff
+                .max(ba::small_rotation_between(&with_prior.c_e_b, &without.c_e_b).norm())
+                .max(ba::small_rotation_between(&without.c_e_b, &sol.c_e_b).norm());
         }
     }
     let nf = n as f64;
@@ -296,11 +396,20 @@ fn single_epoch_baseline_solution_is_white_unbiased_and_prior_free() {
     let mean_nees = nees / nf / 3.0;
     let mean_z = zh / nf;
     eprintln!(
-        "{n} epochs: NEES/3 {mean_nees:.3} (99 % band [{lo:.3}, {hi:.3}]), mean heading ε/σ \
-         {mean_z:.3} (±{:.3}), prior effect {prior_diff:.1e} rad",
+        "{epochs} epochs with phases, {n} fixed ({:.2} %), {wrong} wrong integers, time to \
+         first fix {ttff_s:?} s, slips: {flagged} flagged, {detected} found by residuals; \
+         NEES/3 {mean_nees:.3} (99 % band [{lo:.3}, {hi:.3}]), mean heading ε/σ {mean_z:.3} \
+         (±{:.3}), prior effect {prior_diff:.1e} rad",
+        100.0 * nf / epochs as f64,
         3.0 / nf.sqrt()
     );
+    assert_eq!(wrong, 0, "wrong integers held");
     assert!(n > 1500, "{n} epochs");
+    assert!(nf >= 0.99 * epochs as f64, "fix rate {n}/{epochs}");
+    assert!(
+        ttff_s.iter().all(|t| *t == 0.0),
+        "time to first fix {ttff_s:?}"
+    );
     assert!((lo..=hi).contains(&mean_nees), "NEES/3 {mean_nees}");
     assert!(mean_z.abs() < 3.0 / nf.sqrt(), "mean heading ε/σ {mean_z}");
     assert!(

@@ -12,9 +12,10 @@
 //! phase to satellite k is `Δφ_k = b·u_k/λ + ε`, `u_k` the unit line of sight from the
 //! receiver to the satellite in ECEF, ε white with σ_φ cycles.
 //!
-//! **Integer ambiguity**: the simulator publishes the full (unwrapped) phase difference, i.e.
-//! an ambiguity already resolved; this module assumes the same (a receiver would fix the
-//! integers first, e.g. by a search constrained by the known baseline lengths).
+//! **Integer ambiguity**: this module takes phases whose integers are resolved. A receiver's
+//! phases carry an unknown integer per satellite and baseline (and cycle slips): resolve them
+//! first with [`crate::phase_ambiguity`] (a search constrained by the known baseline lengths,
+//! held across epochs), which calls this solver on `φ − N`.
 //!
 //! Solution:
 //! 1. unconstrained linear least squares for each baseline, `U b = λ Δφ` (needs ≥ 3 lines of
@@ -38,7 +39,7 @@ use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 pub const FLAG_PHASE: u32 = 4;
 
 /// Why no baseline attitude could be computed.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
 pub enum BaselineAttitudeError {
     /// Not enough satellites with phases (3 without a prior, 2 with one).
     #[error("{have} satellites with baseline phases, need at least {need}")]
@@ -240,7 +241,10 @@ fn unconstrained(
 }
 
 /// Gram–Schmidt: the DCM whose x column is along `a`, y along the part of `c` ⊥ `a`.
-fn triad(a: &Vector3<f64>, c: &Vector3<f64>) -> Result<Matrix3<f64>, BaselineAttitudeError> {
+pub(crate) fn triad(
+    a: &Vector3<f64>,
+    c: &Vector3<f64>,
+) -> Result<Matrix3<f64>, BaselineAttitudeError> {
     let x = a
         .try_normalize(1e-12)
         .ok_or(BaselineAttitudeError::SingularGeometry("zero baseline AB"))?;

@@ -12,6 +12,8 @@
 //! - [`ekf`]: the error-state Kalman filter and its measurement models.
 //! - [`alignment`]: static coarse alignment (levelling and gyrocompassing, paper 003).
 //! - [`baseline_attitude`]: dual-baseline GNSS attitude from carrier phase (paper 003 eq. 14–21).
+//! - [`phase_ambiguity`]: integer ambiguities of the baseline carrier phases (constrained search,
+//!   ratio and χ² tests, hold across epochs, slip and wrong-fix detection).
 //! - [`gnss_ls`]: receiver-style least-squares GNSS fix with DOPs (paper 003 eq. 12–13).
 //! - [`broadcast_ephemeris`]: GPS broadcast orbits and clocks (IS-GPS-200).
 //! - [`gnss_corrections`]: Klobuchar ionosphere, Saastamoinen troposphere, iono-free code.
@@ -33,6 +35,7 @@ pub mod frames;
 pub mod gnss_corrections;
 pub mod gnss_ls;
 pub mod navigator;
+pub mod phase_ambiguity;
 pub mod point_positioning;
 pub mod redundancy;
 pub mod strapdown;

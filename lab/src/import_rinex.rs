@@ -154,6 +154,7 @@ pub fn sample_of(sol: &PointSolution, t_rx: fusion::time::GpsTime, seq: u64) -> 
             sat_pos_ecef_m: u.state.pos_ecef_m.into(),
             sat_vel_ecef_m_s: u.state.vel_ecef_m_s.into(),
             baseline_phase_cycles: [0.0; 2],
+            phase_lock_time_s: [0.0; 2],
         };
     }
     s

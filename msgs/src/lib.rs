@@ -134,8 +134,17 @@ pub struct GnssSatellite {
     pub sat_pos_ecef_m: [f64; 3],
     /// Satellite ECEF velocity, m/s.
     pub sat_vel_ecef_m_s: [f64; 3],
-    /// Carrier phase difference across the two antenna baselines (AB, CD), cycles.
+    /// Carrier phase difference across the two antenna baselines (AB, CD), cycles, as a
+    /// receiver measures it: the fractional phase plus an unknown integer number of cycles,
+    /// constant while the phase is tracked continuously (a cycle slip changes it).
     pub baseline_phase_cycles: [f64; 2],
+    /// Continuous carrier-phase lock time of each baseline phase difference (AB, CD), s, as
+    /// receivers report it (RINEX loss-of-lock indicator, u-blox `locktime`): it restarts from
+    /// zero when tracking restarts or the receiver detects a cycle slip, so a value below the
+    /// epoch interval, or one that decreased, means the integer may have changed. A slip the
+    /// receiver misses leaves it running. 0 without baseline phases.
+    #[serde(default)]
+    pub phase_lock_time_s: [f64; 2],
 }
 
 /// GNSS receiver output: position/velocity fix with covariance, and raw per-satellite data.

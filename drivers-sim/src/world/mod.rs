@@ -9,7 +9,8 @@
 //! ([`ionosphere`]), the troposphere ([`troposphere`]), multipath ([`multipath`]), broadcast
 //! clock and orbit errors ([`satellite`]), code tracking noise by C/N0 ([`CodeNoiseSpec`]),
 //! its own oscillator ([`receiver_clock`]) and the antenna's lever arm and time-tag latency
-//! ([`antenna`]); it corrects the pseudoranges with its own broadcast models and reports a
+//! ([`antenna`]); its baseline carrier-phase differences carry an unknown integer per
+//! satellite and baseline, cycle slips and a lock indicator ([`carrier_phase`]); it corrects the pseudoranges with its own broadcast models and reports a
 //! least-squares fix with the covariance of its own noise model, as a receiver does.
 //!
 //! The motion world ([`MotionWorld`], built by every driver's [`crate::truth::TruthGenerator`]
@@ -34,6 +35,7 @@
 
 pub mod aiding;
 pub mod antenna;
+pub mod carrier_phase;
 pub mod gauss_markov;
 pub mod gravity;
 pub mod imu_unit;
@@ -50,6 +52,7 @@ mod motion_tests;
 
 use crate::SimError;
 use antenna::GnssAntennaSpec;
+use carrier_phase::CarrierPhaseSpec;
 use gravity::{GravityField, GravitySpec};
 use ionosphere::{Ionosphere, IonosphereSpec};
 use multipath::{Multipath, MultipathSpec};
@@ -110,6 +113,8 @@ pub struct WorldSection {
     pub receiver_clock: Option<ReceiverClockSpec>,
     /// Antenna lever arm and time-tag latency.
     pub gnss_antenna: Option<GnssAntennaSpec>,
+    /// Integer ambiguity, cycle slips and lock indicator of the baseline carrier phases.
+    pub carrier_phase: Option<CarrierPhaseSpec>,
     /// Ground vehicle on a real road: terrain, suspension, sideslip, wheel slip, odometer
     /// lever arm (ground-vehicle trajectories only).
     pub vehicle: Option<VehicleSpec>,
@@ -126,9 +131,9 @@ pub struct WorldSection {
     pub baro: Option<aiding::BaroWorldSpec>,
 }
 
-/// The GNSS part of `[world]`: every effect on the pseudoranges, the receiver's oscillator and
-/// the antenna, by table name (the first entries of [`EFFECTS`]).
-pub const GNSS_EFFECTS: [&str; 8] = [
+/// The GNSS part of `[world]`: every effect on the pseudoranges, the receiver's oscillator,
+/// the antenna and the carrier phases, by table name (the first entries of [`EFFECTS`]).
+pub const GNSS_EFFECTS: [&str; 9] = [
     "ionosphere",
     "troposphere",
     "multipath",
@@ -137,10 +142,11 @@ pub const GNSS_EFFECTS: [&str; 8] = [
     "code_noise",
     "receiver_clock",
     "gnss_antenna",
+    "carrier_phase",
 ];
 
 /// Every effect of `[world]`, by its table name.
-pub const EFFECTS: [&str; 14] = [
+pub const EFFECTS: [&str; 15] = [
     GNSS_EFFECTS[0],
     GNSS_EFFECTS[1],
     GNSS_EFFECTS[2],
@@ -149,6 +155,7 @@ pub const EFFECTS: [&str; 14] = [
     GNSS_EFFECTS[5],
     GNSS_EFFECTS[6],
     GNSS_EFFECTS[7],
+    GNSS_EFFECTS[8],
     "vehicle",
     "vibration",
     "gravity",
@@ -169,6 +176,7 @@ impl WorldSection {
             self.code_noise.is_some(),
             self.receiver_clock.is_some(),
             self.gnss_antenna.is_some(),
+            self.carrier_phase.is_some(),
             self.vehicle.is_some(),
             self.vibration.is_some(),
             self.gravity.is_some(),
@@ -213,6 +221,7 @@ impl WorldSection {
             code_noise,
             receiver_clock,
             gnss_antenna,
+            carrier_phase,
             vehicle,
             vibration,
             gravity,
@@ -275,6 +284,10 @@ impl WorldSection {
     /// The antenna spec when enabled.
     pub fn antenna(&self) -> Option<GnssAntennaSpec> {
         on(self.gnss_antenna, |s| s.enabled)
+    }
+    /// The carrier-phase tracking world when enabled.
+    pub fn carrier_phase(&self) -> Option<CarrierPhaseSpec> {
+        on(self.carrier_phase, |s| s.enabled)
     }
     /// The receiver oscillator when enabled.
     pub fn receiver_clock(&self) -> Option<ReceiverClockSpec> {
@@ -396,6 +409,30 @@ impl WorldSection {
                         "{} must be a whole number of milliseconds (the truth grid) in [0, 1) s",
                         s.latency_s
                     ),
+                ));
+            }
+        }
+        if let Some(s) = &self.carrier_phase {
+            nonneg(
+                "carrier_phase.slips_per_hour_at_45_dbhz",
+                s.slips_per_hour_at_45_dbhz,
+            )?;
+            if !(s.unflagged_fraction.is_finite() && (0.0..=1.0).contains(&s.unflagged_fraction)) {
+                return Err(bad(
+                    "carrier_phase.unflagged_fraction",
+                    "outside 0..1".into(),
+                ));
+            }
+            if !(1..=1000).contains(&s.max_slip_cycles) {
+                return Err(bad(
+                    "carrier_phase.max_slip_cycles",
+                    format!("{} is outside 1..1000", s.max_slip_cycles),
+                ));
+            }
+            if s.initial_ambiguity_cycles > 1_000_000 {
+                return Err(bad(
+                    "carrier_phase.initial_ambiguity_cycles",
+                    format!("{} is above 1e6", s.initial_ambiguity_cycles),
                 ));
             }
         }

@@ -271,6 +271,15 @@ pub struct AidingNoise {
     pub zupt_sigma_m_s: f64,
     /// 1-σ noise of each baseline carrier-phase difference, cycles (dual-baseline attitude).
     pub baseline_phase_sigma_cycles: f64,
+    /// Ratio test of the baseline integer search ([`crate::phase_ambiguity`]): the second
+    /// best integer set's phase χ² over the best one's must reach this, ≥ 1. Derivation for
+    /// the receiver class (L1, 1 m baselines, σ_φ = 0.01 cycle): a correct set has χ² ≈ its
+    /// 2n − 3 ≥ 5 degrees of freedom; a wrong set that still meets both baseline lengths is off
+    /// by ≥ 0.1 cycle (= 10σ_φ) on at least one phase of a satellite outside the primary three,
+    /// i.e. χ² ≥ 100 — a ratio ≥ 15 for 7 satellites, so 3 (the fixed-ratio test's customary
+    /// value) refuses only epochs whose runner-up is genuinely close; the χ² test
+    /// (`gate_probability`) decides the rest.
+    pub baseline_ratio_threshold: f64,
     /// 1-σ low-frequency error of the star tracker per axis, arcsec: its thermo-elastic
     /// bending and field-of-view errors, which stay for minutes to hours and do not average
     /// like its white noise (fused with the inflation of [`crate::ekf::correlated`] on top of
@@ -311,6 +320,7 @@ impl Default for AidingNoise {
             nhc_sigma_m_s: 1e-5,
             zupt_sigma_m_s: 0.005,
             baseline_phase_sigma_cycles: 0.01,
+            baseline_ratio_threshold: 3.0,
             star_low_frequency_sigma_arcsec: 0.0,
             star_low_frequency_correlation_time_s: 3600.0,
             boresight_sigma_deg: 0.1,
@@ -932,6 +942,17 @@ impl NavigatorConfig {
         ] {
             check(nonneg(v), k, "must be a finite number >= 0")?;
         }
+        check(
+            self.aiding.baseline_ratio_threshold.is_finite()
+                && self.aiding.baseline_ratio_threshold >= 1.0,
+            "aiding.baseline_ratio_threshold",
+            "must be a finite number >= 1",
+        )?;
+        check(
+            self.aiding.baseline_phase_sigma_cycles < 0.1,
+            "aiding.baseline_phase_sigma_cycles",
+            "must be below 0.1 cycle (integer ambiguities cannot be resolved above it)",
+        )?;
         for (i, v) in self.gnss.lever_arm_b_m.iter().enumerate() {
             check(
                 v.is_finite() && v.abs() <= 50.0,

@@ -14,31 +14,92 @@ impl Navigator {
         }
     }
 
-    /// Dual-baseline attitude of a sample (paper 003, [`crate::baseline_attitude`]), started
-    /// from the inertial attitude (so two satellites suffice), lines of sight from the
-    /// inertial position; None when switched off, not navigating, or not solvable.
-    pub(super) fn baseline_attitude(&self, s: &GnssSample) -> Option<(Matrix3<f64>, Matrix3<f64>)> {
+    /// Dual-baseline attitude of a sample (paper 003, [`crate::baseline_attitude`]) from its
+    /// integer-resolved phases ([`crate::phase_ambiguity`]): the receiver's phases carry an
+    /// unknown integer per satellite and baseline, which the navigator's resolver finds by a
+    /// search constrained by the baseline lengths and holds across epochs while the receiver
+    /// keeps lock, dropping slipped satellites (lock indicator, residual test) and rejecting
+    /// wrong sets. The resolution runs from the first sample on (lines of sight from the
+    /// sample's own fix until navigation starts, from the inertial position after), so the
+    /// integers are ready when navigation starts; an attitude is returned only while
+    /// navigating, started from the inertial one (the result does not depend on it). The
+    /// outcome of every epoch is counted in [`NavigatorDiagnostics`] (`baseline_*`). None when
+    /// switched off, not navigating, not fixed, or not solvable.
+    pub(super) fn baseline_attitude(
+        &mut self,
+        s: &GnssSample,
+        fix_r_e_m: Option<Vector3<f64>>,
+    ) -> Option<(Matrix3<f64>, Matrix3<f64>)> {
         use crate::baseline_attitude as ba;
-        if !self.config.updates.baseline_attitude
-            || self.phase != Phase::Navigating
-            || !(s.baseline_length_m.iter().all(|d| pos(*d)) && pos(s.wavelength_m))
-        {
+        use crate::phase_ambiguity as pa;
+        let has_baselines = s.baseline_length_m.iter().all(|d| pos(*d)) && pos(s.wavelength_m);
+        if !(self.config.updates.baseline_attitude && has_baselines) {
             return None;
         }
-        let obs = ba::PhaseObservations::from_sample(s, &self.core.nav.r_e).ok()?;
-        let cfg = ba::BaselineConfig {
+        let navigating = self.phase == Phase::Navigating;
+        let r_e = if navigating {
+            self.core.nav.r_e
+        } else {
+            fix_r_e_m?
+        };
+        let baseline = ba::BaselineConfig {
             baseline_length_m: s.baseline_length_m,
             wavelength_m: s.wavelength_m,
             sigma_phase_cycles: self.config.aiding.baseline_phase_sigma_cycles,
         };
-        let prior = self.core.nav.q_e_b.to_rotation_matrix().into_inner();
-        let sol = ba::solve(&obs, &cfg, &self.core.nav.r_e, Some(&prior)).ok()?;
+        let resolver = match &mut self.ambiguity {
+            Some(r) => {
+                r.set_baseline(baseline).ok()?;
+                r
+            }
+            None => self.ambiguity.insert(
+                pa::AmbiguityResolver::new(pa::AmbiguityConfig {
+                    baseline,
+                    ratio_threshold: self.config.aiding.baseline_ratio_threshold,
+                    chi2_probability: self.config.gate_probability,
+                })
+                .ok()?,
+            ),
+        };
+        let dg = &mut self.diagnostics;
+        let Ok(raw) = pa::RawPhases::from_sample(s, &r_e) else {
+            dg.baseline_rejected += 1;
+            return None;
+        };
+        if raw.as_slice().is_empty() {
+            return None;
+        }
+        let prior = navigating.then(|| self.core.nav.q_e_b.to_rotation_matrix().into_inner());
+        let t_s = s.header.time_ns as f64 * 1e-9;
+        let out = resolver.resolve(t_s, &raw, &r_e, prior.as_ref());
+        dg.baseline_epochs += 1;
+        dg.baseline_slips_flagged += out.slips_flagged as u64;
+        dg.baseline_slips_detected += out.slips_detected as u64;
+        dg.baseline_held_sets_rejected += u64::from(out.held_set_rejected);
+        let sol = match out.result {
+            Ok(r) => {
+                dg.baseline_fixed += 1;
+                dg.baseline_search_fixes += u64::from(r.searched);
+                if dg.baseline_first_fix_ns == 0 {
+                    dg.baseline_first_fix_ns = s.header.time_ns;
+                }
+                r.attitude
+            }
+            Err(e) => {
+                if e.is_float_only() {
+                    dg.baseline_float_only += 1;
+                } else {
+                    dg.baseline_rejected += 1;
+                }
+                return None;
+            }
+        };
         let finite = sol
             .c_e_b
             .iter()
             .chain(sol.cov_e_rad2.iter())
             .all(|x| x.is_finite());
-        finite.then_some((sol.c_e_b, sol.cov_e_rad2))
+        (navigating && finite).then_some((sol.c_e_b, sol.cov_e_rad2))
     }
 
     pub(super) fn fuse_gnss(&mut self, ts: GpsTime, obs: &GnssObs, tally: Tally) {

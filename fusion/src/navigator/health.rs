@@ -135,4 +135,28 @@ pub struct NavigatorDiagnostics {
     /// Times the baro bias was acquired anew after `aiding.baro_reacquire_after` rejections
     /// in a row (the day's pressure far from the bias state's belief).
     pub baro_bias_reacquisitions: u64,
+    /// Dual-baseline epochs given to the integer ambiguity resolution
+    /// ([`crate::phase_ambiguity`]).
+    pub baseline_epochs: u64,
+    /// Of those, epochs whose attitude came from integer-fixed phases (queued for fusion).
+    pub baseline_fixed: u64,
+    /// Of the fixed epochs, those fixed by a new search (the first fix, after a rejected set
+    /// or after losing the held satellites).
+    pub baseline_search_fixes: u64,
+    /// Epochs float only: the search could not validate an integer set (ratio test, no
+    /// candidate); nothing fused.
+    pub baseline_float_only: u64,
+    /// Epochs rejected for another reason (too few satellites, χ² test, solver); nothing
+    /// fused.
+    pub baseline_rejected: u64,
+    /// Held satellites dropped because the receiver's lock time restarted: a slip it
+    /// flagged, or a reacquisition since the last epoch given (after an outage).
+    pub baseline_slips_flagged: u64,
+    /// Held satellites dropped by the residual test: slips the receiver did not flag.
+    pub baseline_slips_detected: u64,
+    /// Held integer sets rejected as a whole by the residual test (a wrong fix, or several
+    /// slips at once).
+    pub baseline_held_sets_rejected: u64,
+    /// Receiver time of the first integer fix, GPS ns (0 before it).
+    pub baseline_first_fix_ns: i64,
 }

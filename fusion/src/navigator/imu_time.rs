@@ -115,6 +115,8 @@ impl Navigator {
         // The held samples were received, not lost: no sequence gap for the IMU.
         fresh.last_seq[sid(SensorId::Imu)] = None;
         fresh.redundancy = self.redundancy.take();
+        // The receiver keeps tracking through an IMU gap: its integers stay valid.
+        fresh.ambiguity = self.ambiguity.take();
         fresh.redundancy_config = self.redundancy_config;
         // The sensor-error estimates survive the gap (calibration memory): resumed when the
         // new alignment is one in motion and the gap is within `warm_start.max_age_s`.

@@ -137,7 +137,7 @@ impl Navigator {
         // Raw satellites are kept in both modes: tight fuses them, and both use them for the
         // least-squares fix (initialisation and cross-check, `gnss_ls_cross_check`).
         let (n_sats, sats) = usable_satellites(s);
-        let attitude = self.baseline_attitude(s);
+        let attitude = self.baseline_attitude(s, fix.as_ref().map(|f| f.pos));
         if fix.is_none() && n_sats == 0 && attitude.is_none() {
             return Ok(());
         }

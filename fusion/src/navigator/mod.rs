@@ -273,6 +273,11 @@ pub struct Navigator {
     redundancy_config: Option<crate::redundancy::FdiConfig>,
     /// Cross-check and re-initialisation counters.
     diagnostics: NavigatorDiagnostics,
+    /// The baseline phases' integers held per satellite ([`crate::phase_ambiguity`]), built
+    /// from the first sample with baselines. Not part of [`Core`]: samples arrive in time
+    /// order and are resolved once, on arrival; the queued observation keeps the resolved
+    /// attitude, so a replay re-fuses exactly what was resolved and this state never rewinds.
+    ambiguity: Option<crate::phase_ambiguity::AmbiguityResolver>,
     /// An IMU time discontinuity waiting for confirmation (see [`Navigator::check_imu_time`]).
     imu_time_jump: Option<ImuTimeJump>,
     /// The last odometer epoch (interval-mean to end-point speed, `fuse_odometer`).
@@ -348,6 +353,7 @@ impl Navigator {
             redundancy: None,
             redundancy_config: None,
             diagnostics: NavigatorDiagnostics::default(),
+            ambiguity: None,
             imu_time_jump: None,
             odo_epoch: None,
             nhc: NhcHealth::default(),

@@ -730,3 +730,4 @@ fn late_samples_are_dropped_and_solution_is_complete() {
 }
 
 mod baro;
+mod baseline;
