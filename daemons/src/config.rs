@@ -142,6 +142,17 @@ pub struct RecorderSection {
     /// it for runs of days.
     #[serde(default = "default_segment_duration_s")]
     pub segment_duration_s: f64,
+    /// The messages' encoding: `protobuf` (compact, the default) or `json` (text).
+    #[serde(default)]
+    pub encoding: crate::recorder::RecordingEncoding,
+    /// Rate of the solution's Foxglove views (map, pose, frame tree), Hz of time of validity;
+    /// 0: a view of every solution (the `nav` channel always holds every solution).
+    #[serde(default = "default_view_rate_hz")]
+    pub view_rate_hz: f64,
+}
+
+fn default_view_rate_hz() -> f64 {
+    crate::recorder::DEFAULT_VIEW_RATE_HZ
 }
 
 fn default_segment_duration_s() -> f64 {
@@ -337,6 +348,13 @@ impl SystemConfig {
             ));
         }
         positive(file, "recorder.flush_interval_s", rec.flush_interval_s)?;
+        if !(rec.view_rate_hz.is_finite() && rec.view_rate_hz >= 0.0) {
+            return Err(invalid(
+                file,
+                "recorder.view_rate_hz",
+                "must be a finite rate >= 0 (0: a view of every solution)",
+            ));
+        }
         if !(rec.segment_duration_s.is_finite() && rec.segment_duration_s >= 0.0) {
             return Err(invalid(
                 file,

@@ -521,6 +521,8 @@ pub fn run<E: NavEngine>(
             segment_duration: (rc.segment_duration_s > 0.0)
                 .then(|| Duration::from_secs_f64(rc.segment_duration_s)),
             metadata: opts.metadata.clone(),
+            encoding: rc.encoding,
+            view_rate_hz: rc.view_rate_hz,
             ..Default::default()
         },
     );

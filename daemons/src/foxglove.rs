@@ -62,7 +62,7 @@ pub const STATUS_PLOT_SCHEMA: &str = "sextant.StatusPlot";
 const C_S_B_NOMINAL: [[f64; 3]; 3] = [[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]];
 
 /// Foxglove `time`.
-#[derive(Debug, Clone, Copy, Serialize, PartialEq, schemars::JsonSchema)]
+#[derive(Debug, Clone, Copy, Default, Serialize, PartialEq, schemars::JsonSchema)]
 pub struct Timestamp {
     /// Whole seconds.
     pub sec: u32,
@@ -167,7 +167,7 @@ pub struct FrameTransforms {
 }
 
 /// The plottable status (`sextant.StatusPlot`): every field a plain number.
-#[derive(Debug, Clone, Serialize, PartialEq, schemars::JsonSchema)]
+#[derive(Debug, Clone, Default, Serialize, PartialEq, schemars::JsonSchema)]
 pub struct StatusPlot {
     /// Time of the status (Unix).
     pub timestamp: Timestamp,
@@ -203,6 +203,167 @@ pub struct StatusPlot {
     pub warm_starts: u64,
     /// Solutions published stale so far.
     pub solutions_stale: u64,
+}
+
+/// A view's protobuf form (recordings of [`crate::recorder::RecordingEncoding::Protobuf`]):
+/// the Foxglove views on Foxglove's own protobuf schemas (the `foxglove` crate's generated
+/// types and descriptors), the status plot on its own descriptor ([`msgs::protobuf`]).
+pub trait ToProtobuf {
+    /// The MCAP schema: name and serialized `FileDescriptorSet`.
+    fn protobuf_schema() -> (&'static str, Vec<u8>);
+    /// Append the protobuf wire form of the view to `buf`.
+    fn write_protobuf(&self, buf: &mut Vec<u8>);
+}
+
+fn foxglove_schema<T: ::foxglove::Encode>(name: &'static str) -> (&'static str, Vec<u8>) {
+    let data = T::get_schema().map_or_else(Vec::new, |s| s.data.into_owned());
+    (name, data)
+}
+
+fn foxglove_encode<T: ::foxglove::Encode>(view: &T, buf: &mut Vec<u8>) {
+    // A Vec grows as needed: encoding into it cannot run out of space.
+    let _ = view.encode(buf);
+}
+
+impl Timestamp {
+    fn to_protobuf(self) -> ::foxglove::schemas::Timestamp {
+        ::foxglove::schemas::Timestamp::new(self.sec, self.nsec)
+    }
+}
+
+impl Vector3 {
+    fn to_protobuf(self) -> ::foxglove::schemas::Vector3 {
+        ::foxglove::schemas::Vector3 {
+            x: self.x,
+            y: self.y,
+            z: self.z,
+        }
+    }
+}
+
+impl Quaternion {
+    fn to_protobuf(self) -> ::foxglove::schemas::Quaternion {
+        ::foxglove::schemas::Quaternion {
+            x: self.x,
+            y: self.y,
+            z: self.z,
+            w: self.w,
+        }
+    }
+}
+
+impl ToProtobuf for LocationFix {
+    fn protobuf_schema() -> (&'static str, Vec<u8>) {
+        foxglove_schema::<::foxglove::schemas::LocationFix>(LOCATION_FIX_SCHEMA)
+    }
+    fn write_protobuf(&self, buf: &mut Vec<u8>) {
+        let fix = ::foxglove::schemas::LocationFix {
+            timestamp: Some(self.timestamp.to_protobuf()),
+            frame_id: self.frame_id.to_string(),
+            latitude: self.latitude,
+            longitude: self.longitude,
+            altitude: self.altitude,
+            position_covariance: self.position_covariance.to_vec(),
+            position_covariance_type: i32::from(self.position_covariance_type),
+            ..Default::default()
+        };
+        foxglove_encode(&fix, buf);
+    }
+}
+
+impl ToProtobuf for PoseInFrame {
+    fn protobuf_schema() -> (&'static str, Vec<u8>) {
+        foxglove_schema::<::foxglove::schemas::PoseInFrame>(POSE_SCHEMA)
+    }
+    fn write_protobuf(&self, buf: &mut Vec<u8>) {
+        let pose = ::foxglove::schemas::PoseInFrame {
+            timestamp: Some(self.timestamp.to_protobuf()),
+            frame_id: self.frame_id.to_string(),
+            pose: Some(::foxglove::schemas::Pose {
+                position: Some(self.pose.position.to_protobuf()),
+                orientation: Some(self.pose.orientation.to_protobuf()),
+            }),
+        };
+        foxglove_encode(&pose, buf);
+    }
+}
+
+impl ToProtobuf for FrameTransforms {
+    fn protobuf_schema() -> (&'static str, Vec<u8>) {
+        foxglove_schema::<::foxglove::schemas::FrameTransforms>(TF_SCHEMA)
+    }
+    fn write_protobuf(&self, buf: &mut Vec<u8>) {
+        let tf = ::foxglove::schemas::FrameTransforms {
+            transforms: self
+                .transforms
+                .iter()
+                .map(|t| ::foxglove::schemas::FrameTransform {
+                    timestamp: Some(t.timestamp.to_protobuf()),
+                    parent_frame_id: t.parent_frame_id.to_string(),
+                    child_frame_id: t.child_frame_id.to_string(),
+                    translation: Some(t.translation.to_protobuf()),
+                    rotation: Some(t.rotation.to_protobuf()),
+                })
+                .collect(),
+        };
+        foxglove_encode(&tf, buf);
+    }
+}
+
+/// The status plot's time as `google.protobuf.Timestamp`, the type Foxglove shows as a time.
+impl msgs::protobuf::Field for Timestamp {
+    fn encode(&self, number: u32, buf: &mut Vec<u8>) {
+        self.to_well_known().encode(number, buf);
+    }
+    fn merge(
+        &mut self,
+        wire: msgs::protobuf::WireType,
+        data: &mut &[u8],
+        count: &mut usize,
+        depth: u32,
+    ) -> Result<(), msgs::protobuf::FieldError> {
+        let mut t = self.to_well_known();
+        t.merge(wire, data, count, depth)?;
+        self.sec = u32::try_from(t.seconds).map_err(|_| msgs::protobuf::FieldError::OutOfRange)?;
+        self.nsec = u32::try_from(t.nanos).map_err(|_| msgs::protobuf::FieldError::OutOfRange)?;
+        Ok(())
+    }
+    fn describe(
+        name: &str,
+        number: u32,
+        nested: &mut BTreeMap<&'static str, msgs::protobuf::prost_types::DescriptorProto>,
+    ) -> msgs::protobuf::prost_types::FieldDescriptorProto {
+        <msgs::protobuf::Timestamp as msgs::protobuf::Field>::describe(name, number, nested)
+    }
+}
+
+impl Timestamp {
+    fn to_well_known(self) -> msgs::protobuf::Timestamp {
+        msgs::protobuf::Timestamp {
+            seconds: i64::from(self.sec),
+            nanos: self.nsec as i32,
+        }
+    }
+}
+
+msgs::proto_message!(StatusPlot = "sextant.StatusPlot" {
+    1 => timestamp, 2 => mode, 3 => imu_alive, 4 => star_tracker_alive, 5 => gnss_alive,
+    6 => odometer_alive, 7 => baro_alive, 8 => deadline_misses, 9 => solutions_published,
+    10 => records_written, 11 => records_dropped, 12 => recorder_errors,
+    13 => imu_channels_excluded, 14 => reinitializations, 15 => motion_alignments,
+    16 => warm_starts, 17 => solutions_stale,
+});
+
+impl ToProtobuf for StatusPlot {
+    fn protobuf_schema() -> (&'static str, Vec<u8>) {
+        (
+            STATUS_PLOT_SCHEMA,
+            msgs::protobuf::file_descriptor_set::<StatusPlot>(),
+        )
+    }
+    fn write_protobuf(&self, buf: &mut Vec<u8>) {
+        msgs::protobuf::ProtoMessage::encode_fields(self, buf);
+    }
 }
 
 /// The plottable view of a status stamped `unix_ns` (its log time).

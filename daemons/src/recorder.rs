@@ -53,11 +53,13 @@
 //! NED origin at its first solution); readers of the recording take the segments in order as
 //! one stream ([`crate::recording::segments_of`]).
 
-use crate::foxglove;
+use crate::foxglove::{self, ToProtobuf};
 use mcap::{WriteOptions, Writer};
 use msgs::Channel;
+use msgs::RecordKind;
 /// What the recorder records: one message of any kind (see [`msgs::record`]).
 pub use msgs::{Record, SENSOR_ALIVE_TOPIC, SensorAliveEvent};
+use serde::Serialize;
 use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::BufWriter;
@@ -177,6 +179,31 @@ fn error_chain(e: &dyn std::error::Error) -> String {
     s
 }
 
+/// How the recorder encodes messages (`[recorder] encoding`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum RecordingEncoding {
+    /// Protocol Buffers, the schema records holding each message's `FileDescriptorSet`
+    /// ([`msgs::protobuf`]; the Foxglove views on Foxglove's own protobuf schemas): compact
+    /// and exact (doubles as their 64 bits, NaN included). Foxglove and Python's
+    /// `mcap-protobuf-support` decode it from the file alone.
+    #[default]
+    Protobuf,
+    /// JSON with JSON Schemas: text a person can read, about four times larger, slower to
+    /// write and read; a non-finite input goes to [`NON_FINITE_TOPIC`].
+    Json,
+}
+
+impl RecordingEncoding {
+    /// The MCAP message encoding (`protobuf` or `json`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Protobuf => msgs::protobuf::ENCODING,
+            Self::Json => "json",
+        }
+    }
+}
+
 /// Recorder settings.
 #[derive(Debug, Clone)]
 pub struct RecorderOptions {
@@ -196,7 +223,17 @@ pub struct RecorderOptions {
     /// Start the next segment when the current file spans this much time of validity (log
     /// time); `None`: one file (see the module comment).
     pub segment_duration: Option<Duration>,
+    /// The messages' encoding.
+    pub encoding: RecordingEncoding,
+    /// Rate of the solution's Foxglove views (`nav/location_fix`, `nav/pose`, `tf`), Hz of
+    /// time of validity: the view of the first solution in each `1/view_rate_hz` interval of
+    /// log time; 0: a view of every solution. The views are for display (the `nav` channel
+    /// keeps every solution); at the solution's own rate they would be a third of the file.
+    pub view_rate_hz: f64,
 }
+
+/// Default of [`RecorderOptions::view_rate_hz`], Hz: smooth on a map and in a 3D view.
+pub const DEFAULT_VIEW_RATE_HZ: f64 = 20.0;
 
 impl Default for RecorderOptions {
     fn default() -> Self {
@@ -207,6 +244,8 @@ impl Default for RecorderOptions {
             metadata: Vec::new(),
             unix_minus_monotonic_ns: None,
             segment_duration: None,
+            encoding: RecordingEncoding::default(),
+            view_rate_hz: DEFAULT_VIEW_RATE_HZ,
         }
     }
 }
@@ -298,7 +337,13 @@ struct Sink {
     /// The sensors' mounts of the frame tree, from the filter configuration in the metadata.
     mounts: foxglove::SensorMounts,
     sensor_alive: u16,
-    non_finite: u16,
+    /// [`NON_FINITE_TOPIC`]'s channel (JSON recordings only).
+    non_finite: Option<u16>,
+    encoding: RecordingEncoding,
+    /// Interval of the solution's views, ns of log time (0: every solution), and the interval
+    /// index of the last view written.
+    view_period_ns: u64,
+    last_view_slot: Option<u64>,
     /// CLOCK_REALTIME − CLOCK_MONOTONIC, ns (publish_time = reception + this).
     unix_minus_monotonic_ns: i64,
     buf: Vec<u8>,
@@ -308,6 +353,128 @@ struct Sink {
     unflushed: u64,
     /// Log time of the first message of this file, Unix ns.
     first_log_time: Option<u64>,
+}
+
+/// The channel ids of a recording file.
+struct Channels {
+    channels: BTreeMap<&'static str, u16>,
+    location_fix: u16,
+    pose: u16,
+    tf: u16,
+    status_plot: u16,
+    sensor_alive: u16,
+    non_finite: Option<u16>,
+}
+
+enum ChannelsError {
+    Mcap(mcap::McapError),
+    Schema(String),
+}
+
+impl From<mcap::McapError> for ChannelsError {
+    fn from(e: mcap::McapError) -> Self {
+        Self::Mcap(e)
+    }
+}
+
+type McapWriter = Writer<BufWriter<File>>;
+
+impl Channels {
+    fn add(
+        writer: &mut McapWriter,
+        schema: (&str, &str, &[u8]),
+        topic: &str,
+        encoding: &str,
+    ) -> Result<u16, mcap::McapError> {
+        let (name, schema_encoding, data) = schema;
+        let sid = writer.add_schema(name, schema_encoding, data)?;
+        writer.add_channel(sid, topic, encoding, &BTreeMap::new())
+    }
+
+    /// JSON messages with JSON Schemas.
+    fn json(writer: &mut McapWriter) -> Result<Self, ChannelsError> {
+        const J: &str = "jsonschema";
+        let mut channels = BTreeMap::new();
+        for ch in Channel::ALL {
+            let (name, schema) = msgs::channel_schema(ch);
+            let cid = Self::add(writer, (name, J, schema.as_bytes()), ch.name(), "json")?;
+            channels.insert(ch.name(), cid);
+        }
+        let alive_schema = serde_json::to_string(&schemars::schema_for!(SensorAliveEvent))
+            .map_err(|e| ChannelsError::Schema(e.to_string()))?;
+        let mut view = |name: &str, schema: &str, topic: &str| {
+            Self::add(writer, (name, J, schema.as_bytes()), topic, "json")
+        };
+        Ok(Self {
+            channels,
+            location_fix: view(
+                foxglove::LOCATION_FIX_SCHEMA,
+                &foxglove::location_fix_schema(),
+                foxglove::LOCATION_FIX_TOPIC,
+            )?,
+            pose: view(
+                foxglove::POSE_SCHEMA,
+                &foxglove::pose_in_frame_schema(),
+                foxglove::POSE_TOPIC,
+            )?,
+            tf: view(
+                foxglove::TF_SCHEMA,
+                &foxglove::frame_transforms_schema(),
+                foxglove::TF_TOPIC,
+            )?,
+            status_plot: view(
+                foxglove::STATUS_PLOT_SCHEMA,
+                &foxglove::status_plot_schema(),
+                foxglove::STATUS_PLOT_TOPIC,
+            )?,
+            sensor_alive: view(
+                msgs::record::SENSOR_ALIVE_SCHEMA_NAME,
+                &alive_schema,
+                SENSOR_ALIVE_TOPIC,
+            )?,
+            non_finite: Some(view(
+                "sextant::NonFiniteInput",
+                NON_FINITE_SCHEMA,
+                NON_FINITE_TOPIC,
+            )?),
+        })
+    }
+
+    /// Protobuf messages with their descriptors; the views on Foxglove's protobuf schemas.
+    fn protobuf(writer: &mut McapWriter) -> Result<Self, ChannelsError> {
+        const P: &str = msgs::protobuf::ENCODING;
+        let mut channels = BTreeMap::new();
+        for ch in Channel::ALL {
+            let (name, fds) = RecordKind::Channel(ch).protobuf_schema();
+            let cid = Self::add(writer, (name, P, &fds), ch.name(), P)?;
+            channels.insert(ch.name(), cid);
+        }
+        let (alive_name, alive_fds) = RecordKind::SensorAlive.protobuf_schema();
+        let mut view = |(name, data): (&str, Vec<u8>), topic: &str| {
+            Self::add(writer, (name, P, &data), topic, P)
+        };
+        Ok(Self {
+            channels,
+            location_fix: view(
+                foxglove::LocationFix::protobuf_schema(),
+                foxglove::LOCATION_FIX_TOPIC,
+            )?,
+            pose: view(
+                foxglove::PoseInFrame::protobuf_schema(),
+                foxglove::POSE_TOPIC,
+            )?,
+            tf: view(
+                foxglove::FrameTransforms::protobuf_schema(),
+                foxglove::TF_TOPIC,
+            )?,
+            status_plot: view(
+                foxglove::StatusPlot::protobuf_schema(),
+                foxglove::STATUS_PLOT_TOPIC,
+            )?,
+            sensor_alive: view((alive_name, alive_fds), SENSOR_ALIVE_TOPIC)?,
+            non_finite: None,
+        })
+    }
 }
 
 impl Sink {
@@ -376,83 +543,26 @@ impl Sink {
                 })
                 .map_err(mcap_err)?;
         }
-        let no_meta = BTreeMap::new();
-        let mut channels = BTreeMap::new();
-        for ch in Channel::ALL {
-            let (name, schema) = msgs::channel_schema(ch);
-            let sid = writer
-                .add_schema(name, "jsonschema", schema.as_bytes())
-                .map_err(mcap_err)?;
-            let cid = writer
-                .add_channel(sid, ch.name(), "json", &no_meta)
-                .map_err(mcap_err)?;
-            channels.insert(ch.name(), cid);
+        let views = match opts.encoding {
+            RecordingEncoding::Json => Channels::json(&mut writer),
+            RecordingEncoding::Protobuf => Channels::protobuf(&mut writer),
         }
-        let sid = writer
-            .add_schema(
-                foxglove::LOCATION_FIX_SCHEMA,
-                "jsonschema",
-                foxglove::location_fix_schema().as_bytes(),
-            )
-            .map_err(mcap_err)?;
-        let location_fix = writer
-            .add_channel(sid, foxglove::LOCATION_FIX_TOPIC, "json", &no_meta)
-            .map_err(mcap_err)?;
-        let sid = writer
-            .add_schema(
-                foxglove::POSE_SCHEMA,
-                "jsonschema",
-                foxglove::pose_in_frame_schema().as_bytes(),
-            )
-            .map_err(mcap_err)?;
-        let pose = writer
-            .add_channel(sid, foxglove::POSE_TOPIC, "json", &no_meta)
-            .map_err(mcap_err)?;
-        let sid = writer
-            .add_schema(
-                foxglove::TF_SCHEMA,
-                "jsonschema",
-                foxglove::frame_transforms_schema().as_bytes(),
-            )
-            .map_err(mcap_err)?;
-        let tf = writer
-            .add_channel(sid, foxglove::TF_TOPIC, "json", &no_meta)
-            .map_err(mcap_err)?;
-        let sid = writer
-            .add_schema(
-                foxglove::STATUS_PLOT_SCHEMA,
-                "jsonschema",
-                foxglove::status_plot_schema().as_bytes(),
-            )
-            .map_err(mcap_err)?;
-        let status_plot = writer
-            .add_channel(sid, foxglove::STATUS_PLOT_TOPIC, "json", &no_meta)
-            .map_err(mcap_err)?;
-        let alive_schema = serde_json::to_string(&schemars::schema_for!(SensorAliveEvent))
-            .map_err(|e| RecorderError::Mcap {
+        .map_err(|e| match e {
+            ChannelsError::Mcap(e) => mcap_err(e),
+            ChannelsError::Schema(detail) => RecorderError::Mcap {
                 path: path.to_path_buf(),
-                detail: e.to_string(),
-            })?;
-        let sid = writer
-            .add_schema(
-                msgs::record::SENSOR_ALIVE_SCHEMA_NAME,
-                "jsonschema",
-                alive_schema.as_bytes(),
-            )
-            .map_err(mcap_err)?;
-        let sensor_alive = writer
-            .add_channel(sid, SENSOR_ALIVE_TOPIC, "json", &no_meta)
-            .map_err(mcap_err)?;
-        let sid = writer
-            .add_schema(
-                "sextant::NonFiniteInput",
-                "jsonschema",
-                NON_FINITE_SCHEMA.as_bytes(),
-            )
-            .map_err(mcap_err)?;
-        let non_finite = writer
-            .add_channel(sid, NON_FINITE_TOPIC, "json", &no_meta)
-            .map_err(mcap_err)?;
+                detail,
+            },
+        })?;
+        let Channels {
+            channels,
+            location_fix,
+            pose,
+            tf,
+            status_plot,
+            sensor_alive,
+            non_finite,
+        } = views;
         // Make the header, schemas and channels durable at once.
         writer.flush().map_err(mcap_err)?;
         Ok(Self {
@@ -467,6 +577,13 @@ impl Sink {
             mounts: foxglove::SensorMounts::of_metadata(&opts.metadata),
             sensor_alive,
             non_finite,
+            encoding: opts.encoding,
+            view_period_ns: if opts.view_rate_hz > 0.0 {
+                (1e9 / opts.view_rate_hz).round() as u64
+            } else {
+                0
+            },
+            last_view_slot: None,
             unix_minus_monotonic_ns,
             buf: Vec::with_capacity(16 * 1024),
             dirty: false,
@@ -482,7 +599,8 @@ impl Sink {
         }
     }
 
-    fn write_json(
+    /// Write the message in `self.buf` on `channel_id`.
+    fn write_message(
         &mut self,
         channel_id: u16,
         seq: u64,
@@ -508,6 +626,20 @@ impl Sink {
         Ok(())
     }
 
+    /// Encode `view` into `self.buf` in the recording's encoding.
+    fn encode_view<T: Serialize + ToProtobuf>(&mut self, view: &T) -> Result<(), RecorderError> {
+        self.buf.clear();
+        match self.encoding {
+            RecordingEncoding::Json => {
+                serde_json::to_writer(&mut self.buf, view).map_err(|e| self.err(e))
+            }
+            RecordingEncoding::Protobuf => {
+                view.write_protobuf(&mut self.buf);
+                Ok(())
+            }
+        }
+    }
+
     /// Write one record at `log_time` (Unix ns); returns the number of messages written.
     fn write(&mut self, item: &Item, log_time: u64) -> Result<u64, RecorderError> {
         let cid = match item.record.channel() {
@@ -522,11 +654,19 @@ impl Sink {
         };
         let h = *item.record.header();
         let mut buf = std::mem::take(&mut self.buf);
-        let r = item.record.write_json(&mut buf);
+        let r = match self.encoding {
+            RecordingEncoding::Protobuf => {
+                item.record.write_protobuf(&mut buf);
+                Ok(())
+            }
+            RecordingEncoding::Json => item.record.write_json(&mut buf),
+        };
         self.buf = buf;
         r.map_err(|e| self.err(e))?;
-        // Our messages hold only numbers, so `null` can only be a non-finite float.
-        if self.buf.windows(4).any(|w| w == b"null") {
+        // JSON only: our messages hold only numbers, so `null` can only be a non-finite float.
+        if let Some(non_finite) = self.non_finite
+            && self.buf.windows(4).any(|w| w == b"null")
+        {
             let topic = item.record.topic();
             self.buf.clear();
             serde_json::to_writer(
@@ -539,40 +679,33 @@ impl Sink {
                 }),
             )
             .map_err(|e| self.err(e))?;
-            self.write_json(self.non_finite, h.seq, log_time, item.receive_mono_ns)?;
+            self.write_message(non_finite, h.seq, log_time, item.receive_mono_ns)?;
             return Ok(1);
         }
-        self.write_json(cid, h.seq, log_time, item.receive_mono_ns)?;
+        self.write_message(cid, h.seq, log_time, item.receive_mono_ns)?;
         let mut n = 1;
-        if let Record::Nav(nav) = &item.record {
+        let view_slot = log_time
+            .checked_div(self.view_period_ns)
+            .unwrap_or(log_time);
+        if let Record::Nav(nav) = &item.record
+            && self.last_view_slot != Some(view_slot)
+        {
+            self.last_view_slot = Some(view_slot);
             let origin = *self
                 .ned_origin
                 .get_or_insert_with(|| foxglove::NedOrigin::at(nav));
-            self.buf.clear();
-            serde_json::to_writer(&mut self.buf, &foxglove::location_fix(nav, log_time))
-                .map_err(|e| self.err(e))?;
-            self.write_json(self.location_fix, h.seq, log_time, item.receive_mono_ns)?;
-            self.buf.clear();
-            serde_json::to_writer(
-                &mut self.buf,
-                &foxglove::pose_in_frame(nav, &origin, log_time),
-            )
-            .map_err(|e| self.err(e))?;
-            self.write_json(self.pose, h.seq, log_time, item.receive_mono_ns)?;
-            self.buf.clear();
-            serde_json::to_writer(
-                &mut self.buf,
-                &foxglove::frame_transforms(nav, &origin, &self.mounts, log_time),
-            )
-            .map_err(|e| self.err(e))?;
-            self.write_json(self.tf, h.seq, log_time, item.receive_mono_ns)?;
+            self.encode_view(&foxglove::location_fix(nav, log_time))?;
+            self.write_message(self.location_fix, h.seq, log_time, item.receive_mono_ns)?;
+            self.encode_view(&foxglove::pose_in_frame(nav, &origin, log_time))?;
+            self.write_message(self.pose, h.seq, log_time, item.receive_mono_ns)?;
+            let tf = foxglove::frame_transforms(nav, &origin, &self.mounts, log_time);
+            self.encode_view(&tf)?;
+            self.write_message(self.tf, h.seq, log_time, item.receive_mono_ns)?;
             n += 3;
         }
         if let Record::Status(st) = &item.record {
-            self.buf.clear();
-            serde_json::to_writer(&mut self.buf, &foxglove::status_plot(st, log_time))
-                .map_err(|e| self.err(e))?;
-            self.write_json(self.status_plot, h.seq, log_time, item.receive_mono_ns)?;
+            self.encode_view(&foxglove::status_plot(st, log_time))?;
+            self.write_message(self.status_plot, h.seq, log_time, item.receive_mono_ns)?;
             n += 1;
         }
         Ok(n)
@@ -1177,9 +1310,67 @@ mod tests {
     }
 
     #[test]
-    fn recording_reads_back_with_schemas_in_order() {
-        let path = tmp("roundtrip");
+    fn json_recording_reads_back_with_schemas_in_order() {
+        reads_back_with_schemas_in_order(RecordingEncoding::Json);
+    }
+
+    #[test]
+    fn protobuf_recording_reads_back_with_schemas_in_order() {
+        reads_back_with_schemas_in_order(RecordingEncoding::Protobuf);
+    }
+
+    /// The views are written for the first solution of each `1/view_rate_hz` of log time;
+    /// every solution stays on `nav`.
+    #[test]
+    fn views_follow_their_rate_and_every_solution_is_kept() {
+        let path = tmp("views");
         let rec = Recorder::start(&path, &RecorderOptions::default()).unwrap();
+        // 1 s of solutions at 200 Hz, starting 3 ms into a 50 ms interval of log time
+        // (log time = GPS + 315 964 800 s − 19 s at the GPS epoch: whole seconds).
+        for k in 0..200i64 {
+            let mut nav = NavSolution::default();
+            nav.header.time_ns = 3_000_000 + k * 5_000_000;
+            nav.header.seq = k as u64 + 1;
+            nav.q_ned_body = [1.0, 0.0, 0.0, 0.0];
+            assert!(rec.record(Record::Nav(nav), 0));
+        }
+        rec.finish().unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        let mut nav = Vec::new();
+        let mut views: BTreeMap<String, Vec<u64>> = BTreeMap::new();
+        for m in MessageStream::new(&bytes).unwrap() {
+            let m = m.unwrap();
+            if m.channel.topic == "nav" {
+                nav.push(m.log_time);
+            } else {
+                views
+                    .entry(m.channel.topic.clone())
+                    .or_default()
+                    .push(m.log_time);
+            }
+        }
+        assert_eq!(nav.len(), 200);
+        let t0 = 315_964_800_000_000_000u64 + 3_000_000;
+        // Intervals [0, 50 ms), [50, 100 ms), …: the first solution of each is at 3 ms, then
+        // 53 ms, 103 ms, …; 20 in one second.
+        let expected: Vec<u64> = (0..20).map(|k| t0 + k * 50_000_000).collect();
+        for topic in [
+            foxglove::LOCATION_FIX_TOPIC,
+            foxglove::POSE_TOPIC,
+            foxglove::TF_TOPIC,
+        ] {
+            assert_eq!(views[topic], expected, "{topic}");
+        }
+    }
+
+    fn reads_back_with_schemas_in_order(encoding: RecordingEncoding) {
+        let path = tmp(&format!("roundtrip-{encoding:?}"));
+        let opts = RecorderOptions {
+            encoding,
+            view_rate_hz: 0.0,
+            ..Default::default()
+        };
+        let rec = Recorder::start(&path, &opts).unwrap();
         let records = sample_records();
         for (i, r) in records.iter().enumerate() {
             assert!(rec.record(r.clone(), 1000 + i as u64));
@@ -1197,9 +1388,27 @@ mod tests {
         }
         for c in summary.channels.values() {
             let s = c.schema.as_ref().expect("schema");
-            assert_eq!(s.encoding, "jsonschema");
-            assert_eq!(c.message_encoding, "json");
-            let _: serde_json::Value = serde_json::from_slice(&s.data).unwrap();
+            assert_eq!(c.message_encoding, encoding.name());
+            match encoding {
+                RecordingEncoding::Json => {
+                    assert_eq!(s.encoding, "jsonschema");
+                    let _: serde_json::Value = serde_json::from_slice(&s.data).unwrap();
+                }
+                RecordingEncoding::Protobuf => {
+                    use prost::Message;
+                    assert_eq!(s.encoding, "protobuf");
+                    // The schema names a message its descriptor set declares.
+                    let set = msgs::protobuf::prost_types::FileDescriptorSet::decode(&s.data[..])
+                        .unwrap();
+                    let (package, name) = s.name.rsplit_once('.').unwrap();
+                    assert!(
+                        set.file.iter().any(|f| f.package() == package
+                            && f.message_type.iter().any(|m| m.name() == name)),
+                        "{}",
+                        s.name
+                    );
+                }
+            }
         }
         let msgs: Vec<_> = MessageStream::new(&bytes)
             .unwrap()
@@ -1214,14 +1423,23 @@ mod tests {
             .collect();
         let expected: Vec<_> = records.iter().map(|r| r.topic().to_string()).collect();
         assert_eq!(order, expected);
-        // Messages validate against their schemas; log_time is GPS ns, publish_time receive.
-        for m in &msgs {
-            let schema: serde_json::Value =
-                serde_json::from_slice(&m.channel.schema.as_ref().unwrap().data).unwrap();
-            let v: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
-            let validator = jsonschema::validator_for(&schema).unwrap();
-            assert!(validator.is_valid(&v), "{}: {v}", m.channel.topic);
+        // JSON messages validate against their schemas; every record reads back equal.
+        if encoding == RecordingEncoding::Json {
+            for m in &msgs {
+                let schema: serde_json::Value =
+                    serde_json::from_slice(&m.channel.schema.as_ref().unwrap().data).unwrap();
+                let v: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
+                let validator = jsonschema::validator_for(&schema).unwrap();
+                assert!(validator.is_valid(&v), "{}: {v}", m.channel.topic);
+            }
         }
+        let back: Vec<Record> = crate::recording::read_all(&path)
+            .unwrap()
+            .entries
+            .into_iter()
+            .filter_map(|e| e.record)
+            .collect();
+        assert_eq!(back, records);
         // log_time = Unix ns of the time of validity (GPS 5 ms after the GPS epoch, when
         // TAI − UTC was 19 s = TAI − GPS: Unix 315964800 s + 5 ms); publish_time = reception
         // (1000 ns on CLOCK_MONOTONIC) + the offset stated in the metadata.

@@ -174,6 +174,8 @@ struct ChannelInfo {
     /// `None` for a topic that holds no [`Record`] (Foxglove views, non-finite inputs, topics
     /// of other versions).
     kind: Option<RecordKind>,
+    /// The channel's message encoding: protobuf (true) or JSON.
+    protobuf: bool,
 }
 
 /// Everything [`Recording::read_to_end`] could read.
@@ -633,7 +635,7 @@ impl Recording {
                 let id = c.u16()?;
                 let schema_id = c.u16()?;
                 let topic = c.string()?;
-                let _encoding = c.string()?;
+                let encoding = c.string()?;
                 let _meta = c.map()?;
                 if schema_id != 0 && !self.schemas.contains_key(&schema_id) {
                     return Err(format!(
@@ -641,11 +643,24 @@ impl Recording {
                     ));
                 }
                 let kind = RecordKind::from_topic(&topic);
+                let protobuf = match encoding.as_str() {
+                    msgs::protobuf::ENCODING => true,
+                    "json" => false,
+                    // A topic of ours in an encoding this version cannot read is an error;
+                    // any other topic is a view (or a later version's) and is passed over.
+                    other if kind.is_some() => {
+                        return Err(format!(
+                            "channel {topic} has message encoding {other:?} (this version reads protobuf and json)"
+                        ));
+                    }
+                    _ => false,
+                };
                 self.channels.insert(
                     id,
                     ChannelInfo {
                         topic: topic.into(),
                         kind,
+                        protobuf,
                     },
                 );
                 Ok(None)
@@ -660,8 +675,17 @@ impl Recording {
                     return Err(format!("message on unknown channel id {channel_id}"));
                 };
                 let (topic, kind) = (ch.topic.clone(), ch.kind);
-                let record = decode(kind, data)
-                    .map_err(|e| format!("message on topic {topic}: bad JSON: {e}"))?;
+                let record = match kind {
+                    None => None,
+                    Some(k) if ch.protobuf => Some(
+                        Record::from_protobuf(k, data)
+                            .map_err(|e| format!("message on topic {topic}: bad protobuf: {e}"))?,
+                    ),
+                    Some(k) => Some(
+                        Record::from_json(k, data)
+                            .map_err(|e| format!("message on topic {topic}: bad JSON: {e}"))?,
+                    ),
+                };
                 Ok(Some(Entry {
                     offset: self.segments_before_len + at,
                     log_time_ns,
@@ -778,10 +802,6 @@ impl<'a> Cur<'a> {
     }
 }
 
-fn decode(kind: Option<RecordKind>, data: &[u8]) -> serde_json::Result<Option<Record>> {
-    kind.map(|k| Record::from_json(k, data)).transpose()
-}
-
 impl Iterator for Recording {
     type Item = Result<Entry, RecordingError>;
 
@@ -851,14 +871,24 @@ mod tests {
         d.join("recording.mcap")
     }
 
-    /// A small recording with several chunks (64 kB chunk size) and the config metadata.
+    /// A small recording with several chunks (64 kB chunk size) and the config metadata, the
+    /// views of every solution.
     fn make_recording(name: &str) -> (PathBuf, Vec<Record>) {
+        make_recording_in(name, crate::recorder::RecordingEncoding::default())
+    }
+
+    fn make_recording_in(
+        name: &str,
+        encoding: crate::recorder::RecordingEncoding,
+    ) -> (PathBuf, Vec<Record>) {
         let path = tmp(name);
         let mut meta = BTreeMap::new();
         meta.insert("filter_toml".to_string(), "x = 1\n".to_string());
         let opts = RecorderOptions {
             chunk_size_bytes: 16 * 1024,
             metadata: vec![(crate::recorder::CONFIG_METADATA_NAME.into(), meta)],
+            encoding,
+            view_rate_hz: 0.0,
             ..Default::default()
         };
         let rec = Recorder::start(&path, &opts).unwrap();
@@ -897,7 +927,16 @@ mod tests {
 
     #[test]
     fn reads_back_every_record_bit_exact_with_metadata() {
-        let (path, records) = make_recording("roundtrip");
+        for encoding in [
+            crate::recorder::RecordingEncoding::Protobuf,
+            crate::recorder::RecordingEncoding::Json,
+        ] {
+            reads_back_bit_exact(encoding);
+        }
+    }
+
+    fn reads_back_bit_exact(encoding: crate::recorder::RecordingEncoding) {
+        let (path, records) = make_recording_in(&format!("roundtrip-{encoding:?}"), encoding);
         let rec = Recording::open(&path).unwrap();
         assert_eq!(
             rec.metadata()[crate::recorder::CONFIG_METADATA_NAME]["filter_toml"],

@@ -12,6 +12,7 @@
 //! `c_n_b` maps body coordinates into NED.
 
 pub mod ipc;
+pub mod protobuf;
 pub mod record;
 /// The service manager's notification protocol (readiness, watchdog pings), spoken by every
 /// Sextant process to `sextant run` or to systemd.

@@ -158,6 +158,45 @@ impl Record {
         }
     }
 
+    /// Write the message in its protobuf wire form into `buf` (cleared first), as compact
+    /// recordings hold it (see [`crate::protobuf`]).
+    pub fn write_protobuf(&self, buf: &mut Vec<u8>) {
+        use crate::protobuf::encode;
+        match self {
+            Record::Imu(m) => encode(m, buf),
+            Record::StarTracker(m) => encode(m, buf),
+            Record::Gnss(m) => encode(m.as_ref(), buf),
+            Record::Odometer(m) => encode(m, buf),
+            Record::Baro(m) => encode(m, buf),
+            Record::Truth(m) => encode(m, buf),
+            Record::Nav(m) => encode(m, buf),
+            Record::Status(m) => encode(m.as_ref(), buf),
+            Record::SensorAlive(m) => encode(m, buf),
+        }
+    }
+
+    /// Read a record of `kind` from its protobuf wire form (the inverse of
+    /// [`Record::write_protobuf`], bit for bit).
+    pub fn from_protobuf(
+        kind: RecordKind,
+        data: &[u8],
+    ) -> Result<Self, crate::protobuf::DecodeError> {
+        use crate::protobuf::decode;
+        Ok(match kind {
+            RecordKind::SensorAlive => Record::SensorAlive(decode(data)?),
+            RecordKind::Channel(c) => match c {
+                Channel::Imu => Record::Imu(decode(data)?),
+                Channel::StarTracker => Record::StarTracker(decode(data)?),
+                Channel::Gnss => Record::Gnss(Box::new(decode(data)?)),
+                Channel::Odometer => Record::Odometer(decode(data)?),
+                Channel::Baro => Record::Baro(decode(data)?),
+                Channel::Truth => Record::Truth(decode(data)?),
+                Channel::Nav => Record::Nav(decode(data)?),
+                Channel::Status => Record::Status(Box::new(decode(data)?)),
+            },
+        })
+    }
+
     /// Read a record of `kind` from its JSON (the inverse of [`Record::write_json`]).
     pub fn from_json(kind: RecordKind, data: &[u8]) -> serde_json::Result<Self> {
         use serde_json::from_slice;
@@ -174,6 +213,30 @@ impl Record {
                 Channel::Status => Record::Status(Box::new(from_slice(data)?)),
             },
         })
+    }
+}
+
+impl RecordKind {
+    /// The protobuf schema of the kind: the message's full name and the serialized
+    /// `FileDescriptorSet` (MCAP schema name and data, encoding `protobuf`).
+    pub fn protobuf_schema(self) -> (&'static str, Vec<u8>) {
+        use crate::protobuf::{ProtoMessage, file_descriptor_set as fds};
+        fn of<M: ProtoMessage>() -> (&'static str, Vec<u8>) {
+            (M::FULL_NAME, fds::<M>())
+        }
+        match self {
+            RecordKind::SensorAlive => of::<SensorAliveEvent>(),
+            RecordKind::Channel(c) => match c {
+                Channel::Imu => of::<ImuSample>(),
+                Channel::StarTracker => of::<StarTrackerSample>(),
+                Channel::Gnss => of::<GnssSample>(),
+                Channel::Odometer => of::<OdometerSample>(),
+                Channel::Baro => of::<BaroSample>(),
+                Channel::Truth => of::<TruthSample>(),
+                Channel::Nav => of::<NavSolution>(),
+                Channel::Status => of::<Status>(),
+            },
+        }
     }
 }
 

@@ -1,6 +1,8 @@
 //! Helpers for Sextant's end-to-end tests: locating the real binaries, reading recordings back
-//! with an independent reader (the `mcap` crate's reader and the `jsonschema` validator, never
-//! the writer's own state), and inspecting what a run left behind (processes, shared memory).
+//! with an independent reader (the `mcap` crate's reader, `prost-reflect` decoding protobuf
+//! messages from the descriptors in the file's schema records and the `jsonschema` validator
+//! for JSON ones, never the writer's own code), and inspecting what a run left behind
+//! (processes, shared memory).
 
 use anyhow::{Context, Result, anyhow, bail};
 use std::collections::{BTreeMap, BTreeSet};
@@ -171,14 +173,24 @@ fn read(path: &Path, may_be_cut: bool) -> Result<Recording> {
             )
         });
         if let std::collections::btree_map::Entry::Vacant(slot) = validators.entry(ch.id) {
-            let s: serde_json::Value = serde_json::from_slice(&schema.data)
-                .with_context(|| format!("schema of {} is not JSON", ch.topic))?;
-            let v = jsonschema::validator_for(&s)
-                .map_err(|e| anyhow!("schema of {} is not a valid JSON Schema: {e}", ch.topic))?;
-            slot.insert(v);
+            let s: Option<serde_json::Value> = match schema.encoding.as_str() {
+                "jsonschema" => Some(
+                    serde_json::from_slice(&schema.data)
+                        .with_context(|| format!("schema of {} is not JSON", ch.topic))?,
+                ),
+                // A protobuf message is checked against its descriptor by decoding it; a
+                // Foxglove view also against Foxglove's published JSON Schema.
+                "protobuf" => foxglove_json_schema(&schema.name)?,
+                other => bail!("channel {}: schema encoding {other}", ch.topic),
+            };
+            if let Some(s) = s {
+                let v = jsonschema::validator_for(&s).map_err(|e| {
+                    anyhow!("schema of {} is not a valid JSON Schema: {e}", ch.topic)
+                })?;
+                slot.insert(v);
+            }
         }
-        let json: serde_json::Value = serde_json::from_slice(&msg.data)
-            .with_context(|| format!("message on {} is not JSON", ch.topic))?;
+        let json = decode_message(&msg.channel, &msg.data)?;
         if let Some(v) = validators.get(&ch.id)
             && let Err(e) = v.validate(&json)
         {
@@ -191,6 +203,92 @@ fn read(path: &Path, may_be_cut: bool) -> Result<Recording> {
         });
     }
     Ok(rec)
+}
+
+/// Foxglove's published JSON Schema of a well-known schema (`foxglove.LocationFix`), from
+/// `tests/data/foxglove-schemas` (the npm package `@foxglove/schemas`); `None` for any other
+/// schema name.
+pub fn foxglove_json_schema(name: &str) -> Result<Option<serde_json::Value>> {
+    let Some(short) = name.strip_prefix("foxglove.") else {
+        return Ok(None);
+    };
+    let file = repo_root()
+        .join("tests/data/foxglove-schemas")
+        .join(format!("{short}.json"));
+    let text = std::fs::read_to_string(&file)
+        .with_context(|| format!("{} (schema {name} not shipped)", file.display()))?;
+    Ok(Some(serde_json::from_str(&text)?))
+}
+
+/// One message of a recording as JSON, whatever its encoding: `json` as written; `protobuf`
+/// decoded with `prost-reflect` from the `FileDescriptorSet` in the channel's schema record,
+/// every field by its name (proto3 scalars and repeated fields with their defaults, message
+/// fields when present), `google.protobuf.Timestamp` as Foxglove's `{sec, nsec}`, enums as
+/// numbers, non-finite doubles as `null`. Sextant's messages come out as their JSON form,
+/// except that nested arrays are flat (`channel_axis`: 24 numbers, row by row).
+pub fn decode_message(channel: &mcap::Channel, data: &[u8]) -> Result<serde_json::Value> {
+    match channel.message_encoding.as_str() {
+        "json" => serde_json::from_slice(data)
+            .with_context(|| format!("message on {} is not JSON", channel.topic)),
+        "protobuf" => {
+            let schema = channel
+                .schema
+                .as_ref()
+                .ok_or_else(|| anyhow!("protobuf channel {} has no schema", channel.topic))?;
+            let pool = prost_reflect::DescriptorPool::decode(&schema.data[..])
+                .with_context(|| format!("descriptors of {}", channel.topic))?;
+            let desc = pool.get_message_by_name(&schema.name).ok_or_else(|| {
+                anyhow!(
+                    "{}: no message {} in its descriptors",
+                    channel.topic,
+                    schema.name
+                )
+            })?;
+            let m = prost_reflect::DynamicMessage::decode(desc, data)
+                .with_context(|| format!("message on {} is not its protobuf", channel.topic))?;
+            Ok(dynamic_json(&m))
+        }
+        other => bail!("channel {}: message encoding {other}", channel.topic),
+    }
+}
+
+fn dynamic_json(m: &prost_reflect::DynamicMessage) -> serde_json::Value {
+    use prost_reflect::ReflectMessage;
+    use serde_json::{Value, json};
+    let desc = m.descriptor();
+    if desc.full_name() == "google.protobuf.Timestamp" {
+        let secs = m.get_field_by_name("seconds").and_then(|v| v.as_i64());
+        let nanos = m.get_field_by_name("nanos").and_then(|v| v.as_i32());
+        return json!({"sec": secs.unwrap_or(0), "nsec": nanos.unwrap_or(0)});
+    }
+    let mut obj = serde_json::Map::new();
+    for f in desc.fields() {
+        let is_message = matches!(f.kind(), prost_reflect::Kind::Message(_)) && !f.is_list();
+        if (is_message || f.supports_presence()) && !m.has_field(&f) {
+            continue;
+        }
+        obj.insert(f.name().to_string(), dynamic_value(&m.get_field(&f)));
+    }
+    Value::Object(obj)
+}
+
+fn dynamic_value(v: &prost_reflect::Value) -> serde_json::Value {
+    use prost_reflect::Value as V;
+    use serde_json::{Value, json};
+    match v {
+        V::Bool(b) => json!(b),
+        V::I32(x) | V::EnumNumber(x) => json!(x),
+        V::I64(x) => json!(x),
+        V::U32(x) => json!(x),
+        V::U64(x) => json!(x),
+        V::F32(x) => serde_json::Number::from_f64(f64::from(*x)).map_or(Value::Null, Value::Number),
+        V::F64(x) => serde_json::Number::from_f64(*x).map_or(Value::Null, Value::Number),
+        V::String(s) => json!(s),
+        V::Bytes(b) => json!(b.to_vec()),
+        V::Message(m) => dynamic_json(m),
+        V::List(l) => Value::Array(l.iter().map(dynamic_value).collect()),
+        V::Map(_) => Value::Null,
+    }
 }
 
 /// Entries (files and directories, recursively) that iceoryx2 keeps in the file system:

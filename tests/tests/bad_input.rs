@@ -34,14 +34,14 @@ fn rss_peak_mib(pid: u32) -> f64 {
         .map_or(f64::NAN, |k| k / 1024.0)
 }
 
-/// Every message of a recording up to the first undecodable byte (NaN inputs are recorded as
-/// JSON null, so the schema check of `read_recording` is not wanted here).
+/// Every message of a recording up to the first undecodable byte (NaN inputs come out as JSON
+/// null, so the schema check of `read_recording` is not wanted here).
 fn messages(path: &Path) -> Vec<(String, serde_json::Value)> {
     let bytes = std::fs::read(path).unwrap();
     let mut out = Vec::new();
     for m in mcap::MessageStream::new(&bytes).unwrap() {
         let Ok(m) = m else { break };
-        if let Ok(v) = serde_json::from_slice(&m.data) {
+        if let Ok(v) = decode_message(&m.channel, &m.data) {
             out.push((m.channel.topic.clone(), v));
         }
     }
@@ -663,21 +663,57 @@ fn analysis_of_a_chunk_claiming_an_absurd_size_is_an_error() {
 }
 
 /// A non-finite input value has no JSON encoding (serde_json would write `null`, which the
-/// schema and the reader reject, failing its whole chunk): the recorder keeps such a record on
-/// `fusion/non_finite_input` in `Debug` form, and every other record stays readable.
+/// schema and the reader reject, failing its whole chunk): a JSON recording keeps such a record
+/// on `fusion/non_finite_input` in `Debug` form, and every other record stays readable. A
+/// protobuf recording holds it on its own topic, its NaN bit for bit.
 #[test]
 fn recording_with_a_nan_input_stays_readable() {
+    use sextant_daemons::recorder::{Record, RecordingEncoding};
+    let (json, _) = record_with_a_nan(RecordingEncoding::Json);
+    let imu = json
+        .iter()
+        .filter(|e| matches!(e.record, Some(Record::Imu(_))))
+        .count();
+    assert_eq!(imu, 9, "the nine finite samples on their own topic");
+    let bad: Vec<_> = json
+        .iter()
+        .filter(|e| &*e.topic == sextant_daemons::recorder::NON_FINITE_TOPIC)
+        .collect();
+    assert_eq!(bad.len(), 1, "the NaN sample kept on the non-finite topic");
+
+    let (pb, nan_bits) = record_with_a_nan(RecordingEncoding::Protobuf);
+    let imu: Vec<_> = pb
+        .iter()
+        .filter_map(|e| match &e.record {
+            Some(Record::Imu(s)) => Some(s),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(imu.len(), 10, "every sample on its own topic");
+    assert_eq!(imu[5].delta_angle_rad[0].to_bits(), nan_bits);
+}
+
+/// Ten IMU samples, the sixth with a NaN (a payload of its own), recorded in `encoding`; the
+/// entries read back (no error) and the NaN's bits.
+fn record_with_a_nan(
+    encoding: sextant_daemons::recorder::RecordingEncoding,
+) -> (Vec<sextant_daemons::recording::Entry>, u64) {
     use sextant_daemons::recorder::{Record, Recorder, RecorderOptions};
-    let dir = tempdir("nan-record");
+    let dir = tempdir(&format!("nan-record-{encoding:?}"));
     let path = dir.join("nan.mcap");
-    let rec = Recorder::start(&path, &RecorderOptions::default()).unwrap();
+    let nan = f64::from_bits(0x7ff8_0000_dead_beef);
+    let opts = RecorderOptions {
+        encoding,
+        ..Default::default()
+    };
+    let rec = Recorder::start(&path, &opts).unwrap();
     for k in 0..10u64 {
         let mut s = ImuSample::default();
         s.header.seq = k + 1;
         s.header.time_ns = 1_398_556_800_000_000_000 + k as i64 * 5_000_000;
         s.dt_s = 0.005;
         if k == 5 {
-            s.delta_angle_rad[0] = f64::NAN;
+            s.delta_angle_rad[0] = nan;
         }
         rec.record(Record::Imu(s), k);
     }
@@ -685,18 +721,7 @@ fn recording_with_a_nan_input_stays_readable() {
     let out = sextant_daemons::recording::read_all(&path).unwrap();
     assert!(out.error.is_none(), "{:?}", out.error);
     assert_eq!(out.entries.len(), 10);
-    let imu = out
-        .entries
-        .iter()
-        .filter(|e| matches!(e.record, Some(Record::Imu(_))))
-        .count();
-    assert_eq!(imu, 9, "the nine finite samples on their own topic");
-    let bad: Vec<_> = out
-        .entries
-        .iter()
-        .filter(|e| &*e.topic == sextant_daemons::recorder::NON_FINITE_TOPIC)
-        .collect();
-    assert_eq!(bad.len(), 1, "the NaN sample kept on the non-finite topic");
+    (out.entries, nan.to_bits())
 }
 
 /// Regressions found by the `samples` fuzz target: a timestamp 170 years ahead and a subnormal

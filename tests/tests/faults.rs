@@ -35,7 +35,7 @@ fn read_tolerant(path: &Path) -> (BTreeMap<String, Vec<serde_json::Value>>, Opti
     for m in stream {
         match m {
             Ok(m) => {
-                let v: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
+                let v = decode_message(&m.channel, &m.data).unwrap();
                 out.entry(m.channel.topic.clone()).or_default().push(v);
             }
             Err(e) => return (out, Some(e.to_string())),

@@ -56,16 +56,6 @@ fn foxglove_time_ns(t: &serde_json::Value) -> u64 {
     t["sec"].as_u64().unwrap() * 1_000_000_000 + t["nsec"].as_u64().unwrap()
 }
 
-/// Foxglove's published JSON Schema of a well-known schema name (`foxglove.LocationFix`).
-fn foxglove_schema(name: &str) -> Option<serde_json::Value> {
-    let file = repo_root()
-        .join("tests/data/foxglove-schemas")
-        .join(format!("{}.json", name.strip_prefix("foxglove.")?));
-    let text = std::fs::read_to_string(&file)
-        .unwrap_or_else(|e| panic!("{}: {e} (schema {name} not shipped)", file.display()));
-    Some(serde_json::from_str(&text).unwrap())
-}
-
 fn replay_offline(rec: &Path, out: &Path) -> serde_json::Value {
     let o = Command::new(bin("sextant").unwrap())
         .current_dir(repo_root())
@@ -86,8 +76,10 @@ fn replay_offline(rec: &Path, out: &Path) -> serde_json::Value {
 
 /// Rewrite a recording into the earlier convention (log time = GPS ns of validity, publish
 /// time = CLOCK_MONOTONIC of reception, no time-base metadata), as recordings written before
-/// the change are, and without the solutions' position covariance (`pos_cov_ned_m2`, the
-/// last field of `nav`), which recordings of that time did not carry.
+/// the change are: JSON messages with their JSON Schemas (a protobuf recording's messages are
+/// rewritten as JSON, the Foxglove views left out: replay does not read them), and without the
+/// solutions' position covariance (`pos_cov_ned_m2`, the last field of `nav`), which
+/// recordings of that time did not carry.
 fn to_gps_monotonic(bytes: &[u8], out: &Path) {
     let summary = mcap::Summary::read(bytes).unwrap().unwrap();
     let mut metadata = BTreeMap::new();
@@ -108,13 +100,30 @@ fn to_gps_monotonic(bytes: &[u8], out: &Path) {
     let mut ids = BTreeMap::new();
     for m in mcap::MessageStream::new(bytes).unwrap() {
         let m = m.unwrap();
+        let Some(kind) = msgs::RecordKind::from_topic(&m.channel.topic) else {
+            continue;
+        };
+        let json_bytes = match m.channel.message_encoding.as_str() {
+            "json" => m.data.to_vec(),
+            _ => {
+                let record = msgs::Record::from_protobuf(kind, &m.data).unwrap();
+                let mut b = Vec::new();
+                record.write_json(&mut b).unwrap();
+                b
+            }
+        };
         let id = *ids.entry(m.channel.id).or_insert_with(|| {
-            let s = m.channel.schema.as_ref().unwrap();
-            let sid = w.add_schema(&s.name, &s.encoding, &s.data).unwrap();
+            let schema = match kind {
+                msgs::RecordKind::Channel(ch) => msgs::channel_schema(ch).1,
+                msgs::RecordKind::SensorAlive => "{}".to_string(),
+            };
+            let sid = w
+                .add_schema(kind.topic(), "jsonschema", schema.as_bytes())
+                .unwrap();
             w.add_channel(sid, &m.channel.topic, "json", &BTreeMap::new())
                 .unwrap()
         });
-        let json: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
+        let json: serde_json::Value = serde_json::from_slice(&json_bytes).unwrap();
         let gps = header_gps_ns(&json).unwrap_or(0).max(0) as u64;
         let mono = if m.publish_time == m.log_time {
             0
@@ -122,9 +131,9 @@ fn to_gps_monotonic(bytes: &[u8], out: &Path) {
             (m.publish_time as i64 - offset) as u64
         };
         let data = if m.channel.topic == "nav" {
-            without_pos_cov(&m.data)
+            without_pos_cov(&json_bytes)
         } else {
-            m.data.to_vec()
+            json_bytes
         };
         w.write_to_known_channel(
             &mcap::records::MessageHeader {
@@ -230,12 +239,17 @@ fn default_run_logs_at_utc_validates_against_foxglove_and_replays_in_both_time_b
     // written right after its solution, with the same log time).
     let mut last_nav: Option<(u64, serde_json::Value)> = None;
     let (mut fixes_checked, mut max_ne_correlation) = (0, 0.0f64);
+    // The views are written for the first solution of each 50 ms of log time (the default
+    // `[recorder] view_rate_hz = 20`).
+    const VIEW_PERIOD_NS: u64 = 50_000_000;
+    let mut view_slots = std::collections::BTreeSet::new();
     for m in mcap::MessageStream::new(&bytes).unwrap() {
         let m = m.unwrap();
         n += 1;
         let topic = &m.channel.topic;
-        let json: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
+        let json = decode_message(&m.channel, &m.data).unwrap();
         if topic == "nav" {
+            view_slots.insert(m.log_time / VIEW_PERIOD_NS);
             last_nav = Some((m.log_time, json.clone()));
         } else if topic == "nav/location_fix" {
             let (t, nav) = last_nav
@@ -282,7 +296,7 @@ fn default_run_logs_at_utc_validates_against_foxglove_and_replays_in_both_time_b
             m.publish_time
         );
         let schema = m.channel.schema.as_ref().unwrap();
-        if let Some(official) = foxglove_schema(&schema.name) {
+        if let Some(official) = foxglove_json_schema(&schema.name).unwrap() {
             let v = validators
                 .entry(schema.name.clone())
                 .or_insert_with(|| jsonschema::validator_for(&official).unwrap());
@@ -292,19 +306,30 @@ fn default_run_logs_at_utc_validates_against_foxglove_and_replays_in_both_time_b
             *validated.entry(schema.name.clone()).or_default() += 1;
         }
     }
-    // The default run navigates 20 s at 200 Hz: thousands of solutions, each with its views.
+    // The default run navigates 20 s at 200 Hz: thousands of solutions, and the views of one
+    // in each 50 ms.
+    assert!(
+        view_slots.len() >= 380,
+        "{} view intervals",
+        view_slots.len()
+    );
     for name in [
         "foxglove.LocationFix",
         "foxglove.PoseInFrame",
         "foxglove.FrameTransforms",
     ] {
-        assert!(
-            validated.get(name).copied().unwrap_or(0) >= 3000,
+        assert_eq!(
+            validated.get(name).copied().unwrap_or(0),
+            view_slots.len(),
             "{name}: {validated:?}"
         );
     }
     // Every fix carried its solution's full covariance.
-    assert!(fixes_checked >= 3000, "{fixes_checked} LocationFixes");
+    assert_eq!(
+        fixes_checked,
+        view_slots.len(),
+        "{fixes_checked} LocationFixes"
+    );
     eprintln!(
         "{fixes_checked} LocationFixes carry their solution's covariance in ENU; largest |north-east correlation| {max_ne_correlation:.3e}"
     );
