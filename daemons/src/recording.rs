@@ -67,7 +67,8 @@ pub enum RecordingError {
         /// What was expected.
         detail: String,
     },
-    /// A record is malformed (bad length, opcode, CRC, compression, JSON, unknown channel).
+    /// A record is malformed (bad length, opcode, CRC, compression, JSON or protobuf, unknown
+    /// channel).
     #[error("{path} is corrupt at byte offset {offset}: {detail}")]
     Corrupt {
         /// The file.
@@ -77,6 +78,9 @@ pub enum RecordingError {
         /// What was wrong.
         detail: String,
     },
+    /// The reading thread of [`Recording::read_ahead`] could not be started.
+    #[error("cannot start the recording's reading thread: {0}")]
+    Thread(String),
 }
 
 impl RecordingError {
@@ -84,7 +88,7 @@ impl RecordingError {
     pub fn offset(&self) -> Option<u64> {
         match self {
             Self::Truncated { offset, .. } | Self::Corrupt { offset, .. } => Some(*offset),
-            Self::Io { .. } | Self::NotMcap { .. } => None,
+            Self::Io { .. } | Self::NotMcap { .. } | Self::Thread(_) => None,
         }
     }
 }
@@ -848,6 +852,86 @@ fn read_up_to(r: &mut impl Read, buf: &mut [u8]) -> std::io::Result<usize> {
         }
     }
     Ok(n)
+}
+
+/// Entries read ahead per hand-over between the reading thread and the caller: large enough
+/// that the hand-over costs little per entry, small enough to keep the memory in flight small
+/// (a few MB with the queue's depth).
+const READ_AHEAD_BATCH: usize = 512;
+/// Batches in flight between the reading thread and the caller.
+const READ_AHEAD_DEPTH: usize = 4;
+
+type Batch = Vec<Result<Entry, RecordingError>>;
+
+/// A recording read on a thread of its own ([`Recording::read_ahead`]): decompressing and
+/// decoding overlap the caller's work on the entries (replay's filter, a report's analysis).
+/// The same entries in the same order as iterating the [`Recording`] itself, in bounded memory.
+pub struct ReadAhead {
+    rx: Option<std::sync::mpsc::Receiver<Batch>>,
+    batch: std::vec::IntoIter<Result<Entry, RecordingError>>,
+    thread: Option<std::thread::JoinHandle<Recording>>,
+}
+
+impl Recording {
+    /// Read the rest of the recording on a thread of its own; iterate the returned reader, then
+    /// take the recording back with [`ReadAhead::into_recording`] (e.g. for
+    /// [`Recording::is_complete`]).
+    pub fn read_ahead(mut self) -> ReadAhead {
+        let (tx, rx) = std::sync::mpsc::sync_channel::<Batch>(READ_AHEAD_DEPTH);
+        let thread = std::thread::Builder::new()
+            .name("recording-reader".into())
+            .spawn(move || {
+                loop {
+                    let batch: Batch = self.by_ref().take(READ_AHEAD_BATCH).collect();
+                    // An empty batch is the end; a caller that stopped listening ends it too.
+                    if batch.is_empty() || tx.send(batch).is_err() {
+                        return self;
+                    }
+                }
+            });
+        match thread {
+            Ok(t) => ReadAhead {
+                rx: Some(rx),
+                batch: Vec::new().into_iter(),
+                thread: Some(t),
+            },
+            // No thread to be had: an error entry, rather than reading nothing in silence.
+            Err(e) => ReadAhead {
+                rx: None,
+                batch: vec![Err(RecordingError::Thread(e.to_string()))].into_iter(),
+                thread: None,
+            },
+        }
+    }
+}
+
+impl Iterator for ReadAhead {
+    type Item = Result<Entry, RecordingError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        loop {
+            if let Some(e) = self.batch.next() {
+                return Some(e);
+            }
+            let rx = self.rx.as_ref()?;
+            match rx.recv() {
+                Ok(b) => self.batch = b.into_iter(),
+                Err(_) => {
+                    self.rx = None;
+                    return None;
+                }
+            }
+        }
+    }
+}
+
+impl ReadAhead {
+    /// Stop reading (if not at the end) and return the recording, where the reading thread left
+    /// it; `None` when the reading thread could not be started or panicked.
+    pub fn into_recording(mut self) -> Option<Recording> {
+        self.rx = None;
+        self.thread.take().and_then(|t| t.join().ok())
+    }
 }
 
 /// Open `path` and read all of it: the entries readable and the error that stopped reading.

@@ -290,7 +290,7 @@ pub fn replay_offline(opts: &OfflineOptions) -> Result<OfflineSummary, ReplayErr
         path: opts.out_dir.clone(),
         source,
     })?;
-    let mut rec = Recording::open(&opts.recording)?;
+    let rec = Recording::open(&opts.recording)?;
     let file_len = crate::recording::recording_len(&opts.recording);
     let (nav_cfg, source) = match &opts.config {
         Some(p) => (load_filter_config(p)?, p.display().to_string()),
@@ -359,7 +359,10 @@ pub fn replay_offline(opts: &OfflineOptions) -> Result<OfflineSummary, ReplayErr
     let mut alive = [false; MAX_SENSORS];
     let (mut t_first, mut t_last) = (None::<i64>, 0i64);
     let mut n = 0u64;
-    for entry in &mut rec {
+    // Decompressing and decoding on their own thread, the filter here, encoding and
+    // compressing the replay's recording on the recorder's: three stages in a pipeline.
+    let mut entries = rec.read_ahead();
+    for entry in &mut entries {
         let e = match entry {
             Ok(e) => e,
             Err(err) => {
@@ -462,7 +465,7 @@ pub fn replay_offline(opts: &OfflineOptions) -> Result<OfflineSummary, ReplayErr
         }
     }
     pb.finish_and_clear();
-    s.recording_complete = rec.is_complete();
+    s.recording_complete = entries.into_recording().is_some_and(|r| r.is_complete());
     s.wall_time_s = started.elapsed().as_secs_f64();
     s.imu_samples_per_s = s.imu_samples as f64 / s.wall_time_s.max(1e-9);
     if let Some(t0) = t_first {

@@ -381,14 +381,14 @@ fn report_refuses_an_empty_or_foreign_recording() {
 fn readme_python_recipe_reads_a_crashed_recording() {
     use sextant_daemons::recorder::{Recorder, RecorderOptions};
     let has_mcap = Command::new("python3")
-        .args(["-c", "import mcap.reader"])
+        .args(["-c", "import mcap.reader, mcap_protobuf.decoder"])
         .stdout(Stdio::null())
         .stderr(Stdio::null())
         .status()
         .is_ok_and(|s| s.success());
     if !has_mcap {
         eprintln!(
-            "NOT RUN: python3 with the `mcap` package is not installed here (pip install mcap)"
+            "NOT RUN: python3 with the `mcap` and `mcap-protobuf-support` packages is not installed here (pip install mcap mcap-protobuf-support)"
         );
         return;
     }

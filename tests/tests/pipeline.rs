@@ -118,7 +118,9 @@ fn run_records_every_channel_and_navigates_within_sensor_bounds() {
     // No process and no shared memory of this run is left behind.
     assert_nothing_left_behind(&prefix, &shm_before);
 
-    // Exactly one recording; every channel has a JSON Schema and every message validates.
+    // Exactly one recording; every channel is protobuf with its descriptors (the default
+    // encoding), every message decodes from them alone and the Foxglove views validate against
+    // Foxglove's published schemas.
     let mcaps: Vec<_> = std::fs::read_dir(&out)
         .unwrap()
         .flatten()
@@ -140,11 +142,12 @@ fn run_records_every_channel_and_navigates_within_sensor_bounds() {
             .channels
             .get(topic)
             .unwrap_or_else(|| panic!("no channel {topic}; have {:?}", rec.channels.keys()));
-        assert_eq!(schema_enc, "jsonschema", "{topic}: {schema}");
-        assert_eq!(msg_enc, "json", "{topic}");
+        assert_eq!(schema_enc, "protobuf", "{topic}: {schema}");
+        assert_eq!(msg_enc, "protobuf", "{topic}");
+        assert_eq!(schema, &format!("sextant.{}", schema_name_of(topic)), "{topic}");
     }
-    for (_topic, (_, schema_enc, _)) in rec.channels.iter() {
-        assert_eq!(schema_enc, "jsonschema");
+    for (topic, (_, schema_enc, msg_enc)) in rec.channels.iter() {
+        assert_eq!((schema_enc.as_str(), msg_enc.as_str()), ("protobuf", "protobuf"), "{topic}");
     }
     assert!(
         rec.invalid.is_empty(),
@@ -345,4 +348,19 @@ fn ctrl_c_leaves_no_process_no_shared_memory_and_a_readable_recording() {
     assert!(rec.count("imu") > 100, "imu messages: {}", rec.count("imu"));
     assert!(rec.count("nav") > 10);
     assert!(rec.invalid.is_empty());
+}
+
+/// The message type recorded on a Sextant channel (`imu` → `ImuSample`).
+fn schema_name_of(topic: &str) -> &'static str {
+    match topic {
+        "imu" => "ImuSample",
+        "star_tracker" => "StarTrackerSample",
+        "gnss" => "GnssSample",
+        "odometer" => "OdometerSample",
+        "baro" => "BaroSample",
+        "truth" => "TruthSample",
+        "nav" => "NavSolution",
+        "status" => "Status",
+        other => panic!("no Sextant channel {other}"),
+    }
 }
