@@ -1,5 +1,6 @@
-//! The solution on Foxglove's well-known schemas (JSON encoding), so that Foxglove's Map and 3D
-//! panels show it without configuration:
+//! The solution on Foxglove's well-known schemas (in the recording's encoding: JSON, or
+//! protobuf on Foxglove's own descriptors, [`ToProtobuf`]), so that Foxglove's Map and 3D panels
+//! show it without configuration:
 //! - topic `nav/location_fix`, schema `foxglove.LocationFix`: latitude/longitude in degrees,
 //!   altitude in m above the WGS-84 ellipsoid, diagonal ENU position covariance (m²).
 //! - topic `nav/pose`, schema `foxglove.PoseInFrame`: the body frame (x forward, y right,

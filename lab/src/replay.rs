@@ -238,9 +238,10 @@ pub fn embedded_calibration(rec: &Recording) -> Result<Option<(NavSnapshot, f64)
 
 /// Compare two solutions bit for bit, except `header.send_mono_ns` and `stale` (facts of the
 /// live publication's wall clock), and the position covariance when the recording predates it
-/// (its σ are still compared). `Err` names the first differing field. (JSON of f64 is the
-/// shortest round-trip representation, so equal JSON text means equal bits, −0.0 included;
-/// NaN is written as null and compares equal to any NaN.)
+/// (its σ are still compared). `Err` names the first differing field. (The protobuf form holds
+/// every field's bits, so equal encodings are equal solutions, −0.0 and NaN payloads
+/// included; the field is named from the JSON form, whose f64 text is the shortest
+/// round-trip representation.)
 pub fn compare_solutions(recorded: &NavSolution, replayed: &NavSolution) -> Result<(), String> {
     let mut b = *replayed;
     // Wall-clock facts of the live publication, not of the navigation: not reproducible.
@@ -250,17 +251,22 @@ pub fn compare_solutions(recorded: &NavSolution, replayed: &NavSolution) -> Resu
     if !recorded.has_pos_cov() {
         b.pos_cov_ned_m2 = recorded.pos_cov_ned_m2;
     }
-    let (ja, jb) = (
-        serde_json::to_string(recorded).unwrap_or_default(),
-        serde_json::to_string(&b).unwrap_or_default(),
-    );
-    if ja == jb {
+    thread_local! {
+        static BUFFERS: std::cell::RefCell<(Vec<u8>, Vec<u8>)> =
+            const { std::cell::RefCell::new((Vec::new(), Vec::new())) };
+    }
+    let same = BUFFERS.with_borrow_mut(|(ea, eb)| {
+        msgs::protobuf::encode(recorded, ea);
+        msgs::protobuf::encode(&b, eb);
+        ea == eb
+    });
+    if same {
         return Ok(());
     }
     let va = serde_json::to_value(recorded).unwrap_or_default();
     let vb = serde_json::to_value(b).unwrap_or_default();
     Err(first_difference(&va, &vb, String::new())
-        .unwrap_or_else(|| "JSON text differs (sign of zero?)".into()))
+        .unwrap_or_else(|| "bits differ (sign of zero or a NaN payload)".into()))
 }
 
 fn first_difference(a: &serde_json::Value, b: &serde_json::Value, path: String) -> Option<String> {

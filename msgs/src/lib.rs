@@ -1,8 +1,9 @@
 //! Message types shared by every Sextant process, their JSON Schemas, and service names.
 //!
 //! Every message is a plain `#[repr(C)]` struct of fixed size (no pointers, no heap) so that it
-//! crosses iceoryx2 shared memory without copies, and is `serde` + `schemars` so that the
-//! recorder writes it to MCAP as JSON with a JSON Schema. Every message starts with a
+//! crosses iceoryx2 shared memory without copies. The recorder writes it to MCAP in its
+//! protobuf form ([`protobuf`], with its descriptor) or as JSON (`serde` + `schemars`, with a
+//! JSON Schema). Every message starts with a
 //! [`Header`] carrying its *time of validity* in GPS nanoseconds, a sequence number and a
 //! driver-set status word.
 //!
