@@ -144,10 +144,18 @@ fn run_records_every_channel_and_navigates_within_sensor_bounds() {
             .unwrap_or_else(|| panic!("no channel {topic}; have {:?}", rec.channels.keys()));
         assert_eq!(schema_enc, "protobuf", "{topic}: {schema}");
         assert_eq!(msg_enc, "protobuf", "{topic}");
-        assert_eq!(schema, &format!("sextant.{}", schema_name_of(topic)), "{topic}");
+        assert_eq!(
+            schema,
+            &format!("sextant.{}", schema_name_of(topic)),
+            "{topic}"
+        );
     }
     for (topic, (_, schema_enc, msg_enc)) in rec.channels.iter() {
-        assert_eq!((schema_enc.as_str(), msg_enc.as_str()), ("protobuf", "protobuf"), "{topic}");
+        assert_eq!(
+            (schema_enc.as_str(), msg_enc.as_str()),
+            ("protobuf", "protobuf"),
+            "{topic}"
+        );
     }
     assert!(
         rec.invalid.is_empty(),
