@@ -112,6 +112,10 @@ pub struct FusionSection {
     /// estimate the run ended with. None: no calibration memory.
     #[serde(default)]
     pub calibration_file: Option<PathBuf>,
+    /// `[fusion.realtime]`: CPU, SCHED_FIFO priority and locked memory for the filter thread
+    /// on a dedicated computer ([`crate::realtime`]); absent: none.
+    #[serde(default)]
+    pub realtime: crate::realtime::RealtimeSection,
 }
 
 fn default_stale_after_ms() -> f64 {
@@ -318,6 +322,9 @@ impl SystemConfig {
         positive(file, "fusion.status_period_s", f.status_period_s)?;
         positive(file, "fusion.min_wall_deadline_ms", f.min_wall_deadline_ms)?;
         positive(file, "fusion.stale_after_ms", f.stale_after_ms)?;
+        f.realtime
+            .validate()
+            .map_err(|(key, message)| invalid(file, key, message))?;
         if !(f.checkpoint_interval_s.is_finite() && f.checkpoint_interval_s >= 0.0) {
             return Err(invalid(
                 file,

@@ -213,6 +213,9 @@ pub enum DaemonError {
     /// WaitSet creation, attachment or wait.
     #[error(transparent)]
     WaitSet(#[from] WaitSetError),
+    /// A real-time setting the system refused (`[fusion.realtime]`).
+    #[error(transparent)]
+    Realtime(#[from] crate::realtime::RealtimeError),
 }
 
 /// Settings of one daemon run.
@@ -342,8 +345,10 @@ impl<E: NavEngine> State<'_, E> {
         }
     }
 
-    /// A message received: a sensor's goes into the engine, then everything to the recorder;
-    /// an IMU sample's solution is published and recorded.
+    /// A message received: a sensor's goes into the engine; an IMU sample's solution is
+    /// published; then the input and the solution go to the recorder, in that order. The
+    /// recorder's hand-off (a queue push that may wake its thread) comes after the
+    /// publication, off the latency path from IMU sample to solution.
     fn on_message(&mut self, rec: Record) {
         let now = msgs::monotonic_ns();
         let Some(sensor) = rec.channel().and_then(Channel::sensor) else {
@@ -361,7 +366,6 @@ impl<E: NavEngine> State<'_, E> {
         }
         self.mark_received(sensor);
         let r = feed(&mut self.engine, &rec);
-        self.recorder.record(rec, now);
         match (r, imu) {
             (Ok(Some(mut sol)), Some(s)) => {
                 self.filter_time_ns = sol.header.time_ns;
@@ -375,13 +379,22 @@ impl<E: NavEngine> State<'_, E> {
                         Err(e) => tracing::error!("{e}"),
                     }
                 }
+                self.recorder.record(rec, now);
                 self.recorder
                     .record(Record::Nav(sol), sol.header.send_mono_ns);
                 self.maybe_checkpoint(sol.header.time_ns);
             }
-            (Ok(_), Some(s)) => self.filter_time_ns = s.header.time_ns,
-            (Ok(_), None) => {}
-            (Err(e), _) => self.log_push_error(e),
+            (Ok(_), Some(s)) => {
+                self.recorder.record(rec, now);
+                self.filter_time_ns = s.header.time_ns;
+            }
+            (Ok(_), None) => {
+                self.recorder.record(rec, now);
+            }
+            (Err(e), _) => {
+                self.recorder.record(rec, now);
+                self.log_push_error(e);
+            }
         }
     }
 
@@ -592,6 +605,13 @@ pub fn run<E: NavEngine>(
         opts.prefix,
         opts.out.display()
     );
+    // The real-time settings, on this (the filter) thread once the recorder's and checkpoint
+    // writer's threads have started with the normal policy.
+    let rt = &opts.system.fusion.realtime;
+    if rt.any() {
+        crate::realtime::apply(rt)?;
+        tracing::info!("real-time settings applied: {rt:?}");
+    }
     let started = Instant::now();
     // Readiness, status and watchdog for a service manager (no-op without NOTIFY_SOCKET).
     let mut service = crate::sd_notify::Service::from_env();

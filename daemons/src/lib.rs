@@ -5,6 +5,7 @@
 //! - [`checkpoint`]: the navigator checkpoint file of a warm restart.
 //! - [`config`]: the system configuration (`config/sextant.toml`) and the filter tuning file.
 //! - [`daemon`]: the fusion daemon's WaitSet loop.
+//! - [`realtime`]: CPU, SCHED_FIFO priority and locked memory for the filter thread.
 //! - [`recorder`]: the MCAP writer thread.
 //! - [`recording`]: the bounded, corruption-tolerant reader of those recordings.
 //! - [`exit_report`]: the fusion daemon's final counters, read by `sextant run`.
@@ -22,6 +23,7 @@ pub mod daemon;
 pub mod exit_report;
 pub mod foxglove;
 pub mod logging;
+pub mod realtime;
 pub mod recorder;
 pub mod recording;
 pub use msgs::sd_notify;

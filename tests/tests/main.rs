@@ -24,6 +24,7 @@ mod long_run;
 mod mcap_conventions;
 mod operation;
 mod pipeline;
+mod realtime;
 mod replay;
 mod report;
 mod report_memory;
