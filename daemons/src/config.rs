@@ -116,6 +116,11 @@ pub struct FusionSection {
     /// on a dedicated computer ([`crate::realtime`]); absent: none.
     #[serde(default)]
     pub realtime: crate::realtime::RealtimeSection,
+    /// After each wake-up, poll for the next sample this long (µs of wall time) before
+    /// blocking: no sleep and wake-up on the latency path when a sample arrives within it, at
+    /// the price of a busy CPU meanwhile; 0: block at once.
+    #[serde(default)]
+    pub spin_us: u64,
 }
 
 fn default_stale_after_ms() -> f64 {

@@ -631,24 +631,42 @@ pub fn run<E: NavEngine>(
         st.drain(&truth);
     };
 
+    // Spin-then-block: poll the WaitSet without sleeping for up to `spin_us` after each
+    // wake-up, so that a sample arriving meanwhile is taken without the sleep and wake-up of
+    // the blocking wait (a core's worth of CPU while spinning: for a dedicated computer).
+    let spin = Duration::from_micros(opts.system.fusion.spin_us);
     while !st.stop.load(Ordering::SeqCst) {
         let mut missed = PerSensor::splat(false);
         let mut status_due = false;
-        ws.wait_and_process_once_with_timeout(
-            |id| {
-                for (s, g) in &deadline_guards {
-                    if id.has_missed_deadline(g) {
-                        missed[*s] = true;
+        let mut woken = false;
+        let spin_until = Instant::now() + spin;
+        loop {
+            let polling = Instant::now() < spin_until;
+            ws.wait_and_process_once_with_timeout(
+                |id| {
+                    woken = true;
+                    for (s, g) in &deadline_guards {
+                        if id.has_missed_deadline(g) {
+                            missed[*s] = true;
+                        }
                     }
-                }
-                if id.has_event_from(&g_status) {
-                    status_due = true;
-                }
-                CallbackProgression::Continue
-            },
-            Duration::from_secs(1),
-        )
-        .map_err(WaitSetError::Wait)?;
+                    if id.has_event_from(&g_status) {
+                        status_due = true;
+                    }
+                    CallbackProgression::Continue
+                },
+                if polling {
+                    Duration::ZERO
+                } else {
+                    Duration::from_secs(1)
+                },
+            )
+            .map_err(WaitSetError::Wait)?;
+            if woken || !polling {
+                break;
+            }
+            std::hint::spin_loop();
+        }
         drain_all(&mut st);
         for s in SensorId::ALL {
             if missed[s] {
