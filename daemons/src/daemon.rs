@@ -631,42 +631,36 @@ pub fn run<E: NavEngine>(
         st.drain(&truth);
     };
 
-    // Spin-then-block: poll the WaitSet without sleeping for up to `spin_us` after each
-    // wake-up, so that a sample arriving meanwhile is taken without the sleep and wake-up of
-    // the blocking wait (a core's worth of CPU while spinning: for a dedicated computer).
+    // Spin-then-block: after each wake-up, poll the IMU listener's wake-up for up to `spin_us`
+    // (a `poll` with no timeout: no sleep, no allocation, nothing consumed), so that the next
+    // sample is met awake: the WaitSet wait after it returns at once instead of sleeping and
+    // being woken, and still sees every wake-up (its deadlines count them). A core's worth of
+    // CPU while spinning: for a computer that has one to give.
     let spin = Duration::from_micros(opts.system.fusion.spin_us);
     while !st.stop.load(Ordering::SeqCst) {
         let mut missed = PerSensor::splat(false);
         let mut status_due = false;
-        let mut woken = false;
-        let spin_until = Instant::now() + spin;
-        loop {
-            let polling = Instant::now() < spin_until;
-            ws.wait_and_process_once_with_timeout(
-                |id| {
-                    woken = true;
-                    for (s, g) in &deadline_guards {
-                        if id.has_missed_deadline(g) {
-                            missed[*s] = true;
-                        }
-                    }
-                    if id.has_event_from(&g_status) {
-                        status_due = true;
-                    }
-                    CallbackProgression::Continue
-                },
-                if polling {
-                    Duration::ZERO
-                } else {
-                    Duration::from_secs(1)
-                },
-            )
-            .map_err(WaitSetError::Wait)?;
-            if woken || !polling {
-                break;
+        if !spin.is_zero() {
+            let until = Instant::now() + spin;
+            while !imu.wake_up_pending() && Instant::now() < until {
+                std::hint::spin_loop();
             }
-            std::hint::spin_loop();
         }
+        ws.wait_and_process_once_with_timeout(
+            |id| {
+                for (s, g) in &deadline_guards {
+                    if id.has_missed_deadline(g) {
+                        missed[*s] = true;
+                    }
+                }
+                if id.has_event_from(&g_status) {
+                    status_due = true;
+                }
+                CallbackProgression::Continue
+            },
+            Duration::from_secs(1),
+        )
+        .map_err(WaitSetError::Wait)?;
         drain_all(&mut st);
         for s in SensorId::ALL {
             if missed[s] {

@@ -370,6 +370,22 @@ impl<T: Message> Sub<T> {
     pub fn receive(&self) -> Result<Option<T>, ReceiveError> {
         T::receive_on(self)
     }
+
+    /// Whether a wake-up is pending on the listener, without consuming it (a `poll` of its file
+    /// descriptor with no timeout: one system call, no allocation, no sleep). For polling
+    /// before a WaitSet wait, which then returns at once and still sees the wake-up.
+    pub fn wake_up_pending(&self) -> bool {
+        // SAFETY: the descriptor belongs to the listener, alive for the borrow of `self`.
+        let fd = unsafe { self.listener.file_descriptor().native_handle() };
+        let mut pfd = [PollFd {
+            fd,
+            events: POLLIN,
+            revents: 0,
+        }];
+        // SAFETY: one pollfd we own, timeout 0 (never blocks).
+        let n = unsafe { poll(pfd.as_mut_ptr(), 1, 0) };
+        n > 0 && pfd[0].revents & POLLIN != 0
+    }
 }
 
 /// Remove the shared-memory resources of nodes whose process died (a crashed run), so that a new
@@ -399,4 +415,19 @@ pub fn alive_node_count() -> Result<usize, NodeListError> {
     })
     .map_err(NodeListError)?;
     Ok(n)
+}
+
+/// `struct pollfd` of poll(2).
+#[repr(C)]
+struct PollFd {
+    fd: i32,
+    events: i16,
+    revents: i16,
+}
+
+/// `POLLIN` of poll(2): data to read.
+const POLLIN: i16 = 0x001;
+
+unsafe extern "C" {
+    fn poll(fds: *mut PollFd, nfds: core::ffi::c_ulong, timeout_ms: i32) -> i32;
 }
