@@ -318,13 +318,10 @@ impl msgs::protobuf::Field for Timestamp {
     }
     fn merge(
         &mut self,
-        wire: msgs::protobuf::WireType,
-        data: &mut &[u8],
-        count: &mut usize,
-        depth: u32,
+        at: msgs::protobuf::Occurrence<'_, '_>,
     ) -> Result<(), msgs::protobuf::FieldError> {
         let mut t = self.to_well_known();
-        t.merge(wire, data, count, depth)?;
+        t.merge(at)?;
         self.sec = u32::try_from(t.seconds).map_err(|_| msgs::protobuf::FieldError::OutOfRange)?;
         self.nsec = u32::try_from(t.nanos).map_err(|_| msgs::protobuf::FieldError::OutOfRange)?;
         Ok(())

@@ -207,20 +207,28 @@ fn file_name(package: &str) -> String {
     }
 }
 
+/// One occurrence of a field being read: its wire type, the data from its value on, the
+/// elements of a repeated field already read, and the nesting depth of its message.
+#[doc(hidden)]
+pub struct Occurrence<'a, 'b> {
+    /// The occurrence's wire type.
+    pub wire: WireType,
+    /// The data, from the occurrence's value on; advanced past it.
+    pub data: &'a mut &'b [u8],
+    /// Elements of a repeated field already read (fixed-size arrays fill from here).
+    pub count: &'a mut usize,
+    /// Nesting depth of the message holding the field.
+    pub depth: u32,
+}
+
 /// One field's type: how it is written, read and described. Implemented for the scalar and
 /// array types Sextant's messages use and for every [`ProtoMessage`].
 #[doc(hidden)]
 pub trait Field {
     /// Append the field with number `number` (nothing for a default scalar).
     fn encode(&self, number: u32, buf: &mut Vec<u8>);
-    /// Merge one occurrence of the field. `count` = elements of a repeated field already read.
-    fn merge(
-        &mut self,
-        wire: WireType,
-        data: &mut &[u8],
-        count: &mut usize,
-        depth: u32,
-    ) -> Result<(), FieldError>;
+    /// Merge one occurrence of the field.
+    fn merge(&mut self, at: Occurrence<'_, '_>) -> Result<(), FieldError>;
     /// The field's descriptor; message types it uses go into `nested`.
     fn describe(
         name: &str,
@@ -339,13 +347,8 @@ macro_rules! varint_field {
                     encode_varint(v, buf);
                 }
             }
-            fn merge(
-                &mut self,
-                wire: WireType,
-                data: &mut &[u8],
-                _count: &mut usize,
-                _depth: u32,
-            ) -> Result<(), FieldError> {
+            fn merge(&mut self, at: Occurrence<'_, '_>) -> Result<(), FieldError> {
+                let Occurrence { wire, data, .. } = at;
                 if wire != WireType::Varint {
                     return Err(FieldError::WireType(wire_code(wire)));
                 }
@@ -385,13 +388,8 @@ impl Field for f64 {
             buf.extend_from_slice(&self.to_le_bytes());
         }
     }
-    fn merge(
-        &mut self,
-        wire: WireType,
-        data: &mut &[u8],
-        _count: &mut usize,
-        _depth: u32,
-    ) -> Result<(), FieldError> {
+    fn merge(&mut self, at: Occurrence<'_, '_>) -> Result<(), FieldError> {
+        let Occurrence { wire, data, .. } = at;
         if wire != WireType::SixtyFourBit {
             return Err(FieldError::WireType(wire_code(wire)));
         }
@@ -478,13 +476,8 @@ macro_rules! double_array_field {
             fn encode(&self, number: u32, buf: &mut Vec<u8>) {
                 encode_doubles(self.values(), number, buf);
             }
-            fn merge(
-                &mut self,
-                wire: WireType,
-                data: &mut &[u8],
-                count: &mut usize,
-                _depth: u32,
-            ) -> Result<(), FieldError> {
+            fn merge(&mut self, at: Occurrence<'_, '_>) -> Result<(), FieldError> {
+                let Occurrence { wire, data, count, .. } = at;
                 merge_doubles(self.values_mut(), wire, data, count)
             }
             fn describe(
@@ -508,13 +501,10 @@ impl<const N: usize> Field for [u32; N] {
             encode_varint(u64::from(*v), buf);
         }
     }
-    fn merge(
-        &mut self,
-        wire: WireType,
-        data: &mut &[u8],
-        count: &mut usize,
-        _depth: u32,
-    ) -> Result<(), FieldError> {
+    fn merge(&mut self, at: Occurrence<'_, '_>) -> Result<(), FieldError> {
+        let Occurrence {
+            wire, data, count, ..
+        } = at;
         let mut put = |v: u64, count: &mut usize| {
             let slot = self.get_mut(*count).ok_or(FieldError::TooMany(N))?;
             *slot = u32::try_from(v).map_err(|_| FieldError::OutOfRange)?;
@@ -548,13 +538,8 @@ impl Field for String {
             encode_len_delimited(number, buf, |b| b.extend_from_slice(self.as_bytes()));
         }
     }
-    fn merge(
-        &mut self,
-        wire: WireType,
-        data: &mut &[u8],
-        _count: &mut usize,
-        _depth: u32,
-    ) -> Result<(), FieldError> {
+    fn merge(&mut self, at: Occurrence<'_, '_>) -> Result<(), FieldError> {
+        let Occurrence { wire, data, .. } = at;
         if wire != WireType::LengthDelimited {
             return Err(FieldError::WireType(wire_code(wire)));
         }
@@ -580,6 +565,23 @@ fn describe_message<M: ProtoMessage>(nested: &mut BTreeMap<&'static str, Descrip
     }
 }
 
+fn encode_messages<M: ProtoMessage>(ms: &[M], number: u32, buf: &mut Vec<u8>) {
+    for m in ms {
+        encode_len_delimited(number, buf, |b| m.encode_fields(b));
+    }
+}
+
+/// The descriptor of a field of message type `M` (its type registered in `nested`).
+fn message_field<M: ProtoMessage>(
+    name: &str,
+    number: u32,
+    nested: &mut BTreeMap<&'static str, DescriptorProto>,
+    repeated: bool,
+) -> FieldDescriptorProto {
+    describe_message::<M>(nested);
+    field_descriptor(name, number, Type::Message, repeated, Some(M::FULL_NAME))
+}
+
 fn merge_message<M: ProtoMessage>(
     m: &mut M,
     wire: WireType,
@@ -602,13 +604,10 @@ impl<M: ProtoMessage> Field for M {
     fn encode(&self, number: u32, buf: &mut Vec<u8>) {
         encode_len_delimited(number, buf, |b| self.encode_fields(b));
     }
-    fn merge(
-        &mut self,
-        wire: WireType,
-        data: &mut &[u8],
-        _count: &mut usize,
-        depth: u32,
-    ) -> Result<(), FieldError> {
+    fn merge(&mut self, at: Occurrence<'_, '_>) -> Result<(), FieldError> {
+        let Occurrence {
+            wire, data, depth, ..
+        } = at;
         merge_message(self, wire, data, depth)
     }
     fn describe(
@@ -616,24 +615,22 @@ impl<M: ProtoMessage> Field for M {
         number: u32,
         nested: &mut BTreeMap<&'static str, DescriptorProto>,
     ) -> FieldDescriptorProto {
-        describe_message::<M>(nested);
-        field_descriptor(name, number, Type::Message, false, Some(M::FULL_NAME))
+        message_field::<M>(name, number, nested, false)
     }
 }
 
 impl<M: ProtoMessage, const N: usize> Field for [M; N] {
     fn encode(&self, number: u32, buf: &mut Vec<u8>) {
-        for m in self {
-            encode_len_delimited(number, buf, |b| m.encode_fields(b));
-        }
+        encode_messages(self, number, buf);
     }
-    fn merge(
-        &mut self,
-        wire: WireType,
-        data: &mut &[u8],
-        count: &mut usize,
-        depth: u32,
-    ) -> Result<(), FieldError> {
+    fn merge(&mut self, at: Occurrence<'_, '_>) -> Result<(), FieldError> {
+        let Occurrence {
+            wire,
+            data,
+            count,
+            depth,
+            ..
+        } = at;
         let slot = self.get_mut(*count).ok_or(FieldError::TooMany(N))?;
         merge_message(slot, wire, data, depth)?;
         *count += 1;
@@ -644,24 +641,22 @@ impl<M: ProtoMessage, const N: usize> Field for [M; N] {
         number: u32,
         nested: &mut BTreeMap<&'static str, DescriptorProto>,
     ) -> FieldDescriptorProto {
-        describe_message::<M>(nested);
-        field_descriptor(name, number, Type::Message, true, Some(M::FULL_NAME))
+        message_field::<M>(name, number, nested, true)
     }
 }
 
 impl<M: ProtoMessage> Field for Vec<M> {
     fn encode(&self, number: u32, buf: &mut Vec<u8>) {
-        for m in self {
-            encode_len_delimited(number, buf, |b| m.encode_fields(b));
-        }
+        encode_messages(self, number, buf);
     }
-    fn merge(
-        &mut self,
-        wire: WireType,
-        data: &mut &[u8],
-        count: &mut usize,
-        depth: u32,
-    ) -> Result<(), FieldError> {
+    fn merge(&mut self, at: Occurrence<'_, '_>) -> Result<(), FieldError> {
+        let Occurrence {
+            wire,
+            data,
+            count,
+            depth,
+            ..
+        } = at;
         let mut m = M::default();
         merge_message(&mut m, wire, data, depth)?;
         self.push(m);
@@ -673,8 +668,7 @@ impl<M: ProtoMessage> Field for Vec<M> {
         number: u32,
         nested: &mut BTreeMap<&'static str, DescriptorProto>,
     ) -> FieldDescriptorProto {
-        describe_message::<M>(nested);
-        field_descriptor(name, number, Type::Message, true, Some(M::FULL_NAME))
+        message_field::<M>(name, number, nested, true)
     }
 }
 
@@ -702,7 +696,13 @@ macro_rules! proto_message {
                 while let Some((number, wire)) = $crate::protobuf::next_key(&mut data, $full)? {
                     match number {
                         $( $n => $crate::protobuf::Field::merge(
-                            &mut self.$f, wire, &mut data, &mut counts[Counts::$f as usize], depth,
+                            &mut self.$f,
+                            $crate::protobuf::Occurrence {
+                                wire,
+                                data: &mut data,
+                                count: &mut counts[Counts::$f as usize],
+                                depth,
+                            },
                         ).map_err(|e| e.at($full, stringify!($f)))?, )+
                         _ => $crate::protobuf::skip(wire, &mut data)
                             .map_err(|e| e.at($full, "?"))?,
