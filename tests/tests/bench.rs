@@ -75,6 +75,21 @@ fn quick_bench_reports_every_figure() {
         assert!(excess.is_finite(), "{key}: p50 excess {excess}");
         assert!(ratio.is_finite() && ratio > 0.0, "{key}: p99 ratio {ratio}");
         assert!(f(&s, &p("floor/echo_peak_rss_mib")) > 0.0);
+        // The recording's size: the run's files on disk, scaled to 600 s of operation.
+        let stem = format!("latency_{}hz", hz as u64);
+        let on_disk: u64 = std::fs::read_dir(&out)
+            .unwrap()
+            .flatten()
+            .filter(|e| e.file_name().to_string_lossy().starts_with(&stem))
+            .map(|e| e.metadata().unwrap().len())
+            .sum();
+        assert!(on_disk > 0, "{key}: no recording");
+        assert_eq!(f(&s, &p("recording/bytes")), on_disk as f64, "{key}");
+        let per_600 = on_disk as f64 / 1e6 * 600.0 / f(&s, &p("recording/duration_s"));
+        assert!(
+            (f(&s, &p("recording/mb_per_600s")) - per_600).abs() <= 1e-9 * per_600,
+            "{key}"
+        );
         for proc_name in ["sextant-fusion", "sextant-sim-imu", "sextant-sim-gnss"] {
             let cpu = f(&s, &p(&format!("processes/{proc_name}/cpu_percent")));
             let rss = f(&s, &p(&format!("processes/{proc_name}/peak_rss_mib")));
@@ -102,6 +117,7 @@ fn quick_bench_reports_every_figure() {
         "offline_x_real_time_all_aiding",
         "fusion_peak_rss_mib",
         "recorder_10x_dropped",
+        "recording_mb_per_600s_at_200hz",
     ] {
         assert!(s["targets"][t]["measured"].is_number(), "target {t}");
     }

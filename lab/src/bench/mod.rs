@@ -336,6 +336,17 @@ fn live_run(
         }
     }
     let (mut lat, mut transport, mut processing) = latencies_us(&recording)?;
+    // The recording's size per 600 s of operation (the default run's length), in the
+    // configuration's encoding: this run's files scaled by its simulated duration.
+    let bytes = crate::recording::recording_len(&recording);
+    procs.insert(
+        "recording".into(),
+        json!({
+            "bytes": bytes,
+            "duration_s": duration_s,
+            "mb_per_600s": bytes as f64 / 1e6 * 600.0 / duration_s,
+        }),
+    );
     transport.sort_by(f64::total_cmp);
     processing.sort_by(f64::total_cmp);
     procs.insert(
@@ -685,6 +696,12 @@ pub fn run(opts: &BenchOptions) -> anyhow::Result<Value> {
         {
             fig["latency_split"] = split;
         }
+        if let Some(r) = fig["processes"]
+            .as_object_mut()
+            .and_then(|m| m.remove("recording"))
+        {
+            fig["recording"] = r;
+        }
         let mut ff = latency_figures(&fl.latencies_us, hz, sizes.floor_s);
         ff["sent"] = json!(fl.sent);
         ff["echo_cpu_percent"] = json!(fl.echo_cpu_percent);
@@ -724,6 +741,10 @@ pub fn run(opts: &BenchOptions) -> anyhow::Result<Value> {
         "offline_x_real_time_all_aiding": { "target": 1000.0, "measured": offline["navigating_x_real_time"] },
         "fusion_peak_rss_mib": { "target": 30.0, "measured": fusion_rss },
         "recorder_10x_dropped": { "target": 0, "measured": recorder["paced_10x_dropped"] },
+        "recording_mb_per_600s_at_200hz": {
+            "target": 16.0,
+            "measured": live["imu_200hz"]["recording"]["mb_per_600s"],
+        },
     });
     let summary = json!({
         "machine": machine(),
