@@ -366,7 +366,7 @@ impl<E: NavEngine> State<'_, E> {
         }
         self.mark_received(sensor);
         let r = feed(&mut self.engine, &rec);
-        match (r, imu) {
+        let solution = match (r, imu) {
             (Ok(Some(mut sol)), Some(s)) => {
                 self.filter_time_ns = sol.header.time_ns;
                 self.solutions += 1;
@@ -379,22 +379,23 @@ impl<E: NavEngine> State<'_, E> {
                         Err(e) => tracing::error!("{e}"),
                     }
                 }
-                self.recorder.record(rec, now);
-                self.recorder
-                    .record(Record::Nav(sol), sol.header.send_mono_ns);
-                self.maybe_checkpoint(sol.header.time_ns);
+                Some(sol)
             }
             (Ok(_), Some(s)) => {
-                self.recorder.record(rec, now);
                 self.filter_time_ns = s.header.time_ns;
+                None
             }
-            (Ok(_), None) => {
-                self.recorder.record(rec, now);
-            }
+            (Ok(_), None) => None,
             (Err(e), _) => {
-                self.recorder.record(rec, now);
                 self.log_push_error(e);
+                None
             }
+        };
+        self.recorder.record(rec, now);
+        if let Some(sol) = solution {
+            self.recorder
+                .record(Record::Nav(sol), sol.header.send_mono_ns);
+            self.maybe_checkpoint(sol.header.time_ns);
         }
     }
 
