@@ -864,7 +864,7 @@ const READ_AHEAD_DEPTH: usize = 4;
 type Batch = Vec<Result<Entry, RecordingError>>;
 
 /// A recording read on a thread of its own ([`Recording::read_ahead`]): decompressing and
-/// decoding overlap the caller's work on the entries (replay's filter, a report's analysis).
+/// decoding overlap the caller's work on the entries (`sextant replay --offline`'s filter).
 /// The same entries in the same order as iterating the [`Recording`] itself, in bounded memory.
 pub struct ReadAhead {
     rx: Option<std::sync::mpsc::Receiver<Batch>>,
