@@ -179,6 +179,78 @@ pub struct FoxgloveSection {
     pub listen: std::net::SocketAddr,
 }
 
+/// `[bridge]` (optional): the Zenoh bridge to other computers. When present, `sextant run`
+/// starts `sextant-bridge` beside the fusion daemon (and restarts it when it dies). The wire
+/// format is documented in `docs/DATA.md`; the endpoints and key prefixes are checked by the
+/// bridge itself (`sextant-bridge --check`) before the run starts.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct BridgeSection {
+    /// Key prefix of the exported channels (`<key_prefix>/v1/<channel>`); default: the bus's
+    /// service prefix (`system.prefix`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub key_prefix: Option<String>,
+    /// Zenoh endpoints to listen on, `tcp/IP:PORT` (`tcp/0.0.0.0:7447` to serve others).
+    #[serde(default)]
+    pub listen: Vec<String>,
+    /// Zenoh endpoints to connect to, `tcp/HOST:PORT` (retried for ever).
+    #[serde(default)]
+    pub connect: Vec<String>,
+    /// Bus channels published on Zenoh (default: `nav`, `status`).
+    #[serde(default = "default_bridge_export")]
+    pub export: Vec<String>,
+    /// Remote channels published on the local bus (default: none).
+    #[serde(default)]
+    pub import: Vec<String>,
+    /// Key prefix of the remote system whose channels are imported.
+    #[serde(default)]
+    pub import_from: String,
+    /// Lease of the links, ms: a silently dropped link is declared down after it.
+    #[serde(default = "default_bridge_lease_ms")]
+    pub lease_ms: u64,
+}
+
+fn default_bridge_export() -> Vec<String> {
+    vec!["nav".into(), "status".into()]
+}
+
+fn default_bridge_lease_ms() -> u64 {
+    3000
+}
+
+impl BridgeSection {
+    /// The bridge's command-line arguments for the bus `prefix`.
+    pub fn args(&self, prefix: &str) -> Vec<String> {
+        let mut a = vec![
+            "--prefix".to_string(),
+            prefix.to_string(),
+            "--key-prefix".into(),
+            self.key_prefix
+                .clone()
+                .unwrap_or_else(|| prefix.to_string()),
+            "--export".into(),
+            self.export.join(","),
+            "--lease-ms".into(),
+            self.lease_ms.to_string(),
+        ];
+        for e in &self.listen {
+            a.extend(["--listen".to_string(), e.clone()]);
+        }
+        for e in &self.connect {
+            a.extend(["--connect".to_string(), e.clone()]);
+        }
+        if !self.import.is_empty() {
+            a.extend([
+                "--import".to_string(),
+                self.import.join(","),
+                "--import-from".into(),
+                self.import_from.clone(),
+            ]);
+        }
+        a
+    }
+}
+
 /// The whole system configuration file.
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
@@ -194,6 +266,9 @@ pub struct SystemConfig {
     /// `[foxglove]`: the live view (absent: not started unless `sextant run --foxglove`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub foxglove: Option<FoxgloveSection>,
+    /// `[bridge]`: the Zenoh bridge (absent: not started).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bridge: Option<BridgeSection>,
 }
 
 /// A loaded and validated configuration with the file it came from.
@@ -317,6 +392,27 @@ impl SystemConfig {
                     file,
                     &format!("run.drivers[{i}]"),
                     format!("must be a binary name without a path, got {d:?}"),
+                ));
+            }
+        }
+        if let Some(b) = &self.bridge {
+            for (key, names) in [("bridge.export", &b.export), ("bridge.import", &b.import)] {
+                for (i, n) in names.iter().enumerate() {
+                    if msgs::Channel::from_name(n).is_none() {
+                        let all: Vec<&str> = msgs::Channel::ALL.iter().map(|c| c.name()).collect();
+                        return Err(invalid(
+                            file,
+                            &format!("{key}[{i}]"),
+                            format!("unknown channel {n:?} (channels: {})", all.join(", ")),
+                        ));
+                    }
+                }
+            }
+            if b.listen.is_empty() && b.connect.is_empty() {
+                return Err(invalid(
+                    file,
+                    "bridge.listen",
+                    "the bridge needs at least one endpoint to listen on or connect to",
                 ));
             }
         }
@@ -497,6 +593,49 @@ mod tests {
         let text = format!("{GOOD}\n[foxglove]\nlisten = \"localhost\"\n");
         let e = SystemConfig::parse(&text, &f()).unwrap_err().to_string();
         assert!(e.contains("listen"), "{e}");
+    }
+
+    /// `[bridge]` is optional, defaults to exporting the solution and the status, and names
+    /// an unknown channel.
+    #[test]
+    fn bridge_section_is_optional_and_checked() {
+        let c = SystemConfig::parse(GOOD, &f()).unwrap();
+        assert_eq!(c.bridge, None);
+        let text = format!("{GOOD}\n[bridge]\nlisten = [\"tcp/0.0.0.0:7447\"]\n");
+        let c = SystemConfig::parse(&text, &f()).unwrap();
+        c.validate(&f()).unwrap();
+        let b = c.bridge.unwrap();
+        assert_eq!(b.export, ["nav", "status"]);
+        assert_eq!(
+            b.args("car1"),
+            [
+                "--prefix",
+                "car1",
+                "--key-prefix",
+                "car1",
+                "--export",
+                "nav,status",
+                "--lease-ms",
+                "3000",
+                "--listen",
+                "tcp/0.0.0.0:7447"
+            ]
+        );
+        let text =
+            format!("{GOOD}\n[bridge]\nlisten = [\"tcp/0.0.0.0:7447\"]\nimport = [\"gps\"]\n");
+        let e = SystemConfig::parse(&text, &f())
+            .unwrap()
+            .validate(&f())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("bridge.import[0]") && e.contains("gps"), "{e}");
+        let text = format!("{GOOD}\n[bridge]\n");
+        let e = SystemConfig::parse(&text, &f())
+            .unwrap()
+            .validate(&f())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("bridge.listen"), "{e}");
     }
 
     #[test]

@@ -199,6 +199,20 @@ impl Service {
         }
     }
 
+    /// `STATUS=text` (and `READY=1` the first time): for a process whose state is not a
+    /// navigation mode (the bridge's link). `text` is one line.
+    pub fn status(&mut self, text: &str) {
+        if self.notifier.is_none() {
+            return;
+        }
+        let mut state = format!("STATUS={text}");
+        if !self.ready {
+            self.ready = true;
+            state.insert_str(0, "READY=1\n");
+        }
+        self.send(&state);
+    }
+
     /// `STOPPING=1`: the daemon is shutting down.
     pub fn stopping(&mut self) {
         if self.notifier.is_some() {

@@ -11,6 +11,7 @@
 
 mod bad_input;
 mod bench;
+mod bridge;
 mod calibration_memory;
 mod disk;
 mod faults;

@@ -943,7 +943,27 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
     if foxglove.is_some() {
         names.push("sextant-foxglove".into());
     }
+    let bridge_args = cfg.system.bridge.as_ref().map(|b| b.args(&prefix));
+    if bridge_args.is_some() {
+        names.push("sextant-bridge".into());
+    }
     ensure_binaries(&bin_dir, &names)?;
+    // The bridge checks its own endpoints and key prefixes: ask it now, so that a bad value
+    // refuses the run with the bridge's message rather than a bridge that dies at start-up.
+    if let Some(a) = &bridge_args {
+        let check = std::process::Command::new(bin_dir.join("sextant-bridge"))
+            .args(a)
+            .arg("--check")
+            .output()
+            .context("running sextant-bridge --check")?;
+        if !check.status.success() {
+            bail!(
+                "[bridge] of {}: {}",
+                cfg.path.display(),
+                String::from_utf8_lossy(&check.stderr).trim()
+            );
+        }
+    }
 
     let interrupt = supervisor::stop_signals()?;
     let start_mono_ns = msgs::monotonic_ns() + (rc.start_delay_s * 1e9) as u64;
@@ -983,6 +1003,12 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
             log: out.join("logs").join("sextant-foxglove.log"),
         })
         .into_iter()
+        .chain(bridge_args.map(|args| ChildSpec {
+            name: "sextant-bridge".into(),
+            program: bin_dir.join("sextant-bridge"),
+            args,
+            log: out.join("logs").join("sextant-bridge.log"),
+        }))
         .collect();
     // The drivers end by themselves; a watchdog stops a run that overruns by far.
     let expected = Duration::from_secs_f64(rc.start_delay_s + duration / speed);
