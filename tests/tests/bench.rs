@@ -100,6 +100,23 @@ fn quick_bench_reports_every_figure() {
             assert!(rss > 1.0 && rss < 1024.0, "{proc_name} {rss} MiB");
         }
     }
+    // The Zenoh bridge: 1 s at 200 Hz through two real bridges on loopback; every solution
+    // crosses (TCP is reliable and the bridges' queues are far deeper than 200 messages), in
+    // order of its percentiles, and its median is above the bare iceoryx2 floor's (it holds
+    // two iceoryx2 deliveries).
+    let (b50, b99, bmax) = (
+        f(&s, "/bridge/latency_p50_us"),
+        f(&s, "/bridge/latency_p99_us"),
+        f(&s, "/bridge/latency_max_us"),
+    );
+    assert!(
+        0.0 < b50 && b50 <= b99 && b99 <= bmax,
+        "bridge: {b50} {b99} {bmax}"
+    );
+    assert_eq!(f(&s, "/bridge/sent"), 200.0);
+    assert_eq!(f(&s, "/bridge/lost"), 0.0, "bridge lost solutions");
+    assert!(f(&s, "/bridge/p50_over_floor_us") > 0.0);
+    assert!(stdout.contains("Zenoh bridge"), "{stdout}");
     // Offline: 60 s simulated, faster than real time by far even on a loaded machine.
     assert!(f(&s, "/offline/navigating_imu_samples") > 200.0 * 40.0);
     assert!(f(&s, "/offline/navigating_x_real_time") > 10.0);

@@ -28,6 +28,7 @@
 //! Writes `summary.json`, a latency histogram PNG (Sextant and the floor), the cost curves'
 //! PNG, and returns the summary for the table.
 
+pub mod bridge;
 pub mod cost;
 pub mod floor;
 
@@ -712,6 +713,21 @@ pub fn run(opts: &BenchOptions) -> anyhow::Result<Value> {
         runs.push((hz, lat));
         floors.push((hz, fl.latencies_us));
     }
+    eprintln!("bench: Zenoh bridge, {} s", sizes.floor_s);
+    let br = bridge::run(
+        &opts.bin_dir,
+        &format!("{}_bridge", opts.prefix),
+        sizes.floor_s,
+        &logs,
+    )?;
+    let mut bridge_fig = latency_figures(&br.latencies_us, bridge::RATE_HZ, sizes.floor_s);
+    bridge_fig["sent"] = json!(br.sent);
+    bridge_fig["lost"] = json!(br.sent.saturating_sub(br.latencies_us.len() as u64));
+    let floor_200 = &live["imu_200hz"]["floor"];
+    bridge_fig["p50_over_floor_us"] = json!(
+        percentile(&br.latencies_us, 50.0)
+            - floor_200["latency_p50_us"].as_f64().unwrap_or(f64::NAN)
+    );
     eprintln!("bench: offline fusion, {} s simulated", sizes.offline_s);
     let offline = offline_throughput(&cfg_dir, sizes.offline_s)?;
     eprintln!("bench: recorder");
@@ -752,6 +768,7 @@ pub fn run(opts: &BenchOptions) -> anyhow::Result<Value> {
         "live": Value::Object(live),
         "offline": offline,
         "recorder": recorder,
+        "bridge": bridge_fig,
         "cost_curves": curves,
         "targets": targets,
         "histogram_png": png.display().to_string(),
@@ -812,6 +829,17 @@ pub fn table(s: &Value) -> String {
             v["p99_9_ratio"].as_f64().unwrap_or(f64::NAN),
         );
     }
+    let b = &s["bridge"];
+    t += &format!(
+        "Zenoh bridge (bus -> sextant-bridge -> TCP loopback -> sextant-bridge -> bus, {} Hz): p50 {} us, p99 {} us, p99.9 {} us, max {} us, {} of {} lost\n",
+        b["imu_rate_hz"],
+        f(&b["latency_p50_us"]),
+        f(&b["latency_p99_us"]),
+        f(&b["latency_p99_9_us"]),
+        f(&b["latency_max_us"]),
+        b["lost"],
+        b["sent"]
+    );
     let o = &s["offline"];
     t += &format!(
         "offline fusion (all aiding, {} Hz IMU): {} IMU samples/s, {} x real time\n",
