@@ -2,7 +2,8 @@
 //! protobuf on Foxglove's own descriptors, [`ToProtobuf`]), so that Foxglove's Map and 3D panels
 //! show it without configuration:
 //! - topic `nav/location_fix`, schema `foxglove.LocationFix`: latitude/longitude in degrees,
-//!   altitude in m above the WGS-84 ellipsoid, diagonal ENU position covariance (m²).
+//!   altitude in m above the WGS-84 ellipsoid, the full ENU position covariance (m²; its
+//!   diagonal for a solution recorded before it carried the covariance).
 //! - topic `nav/pose`, schema `foxglove.PoseInFrame`: the body frame (x forward, y right,
 //!   z down) in the local NED frame `ned` whose origin is the first recorded solution
 //!   (position = NED offset from that origin, m; orientation = `q_ned_body`).
