@@ -54,9 +54,11 @@ pub fn stdout_line(text: &str) {
 }
 
 /// Install the process's `tracing` subscriber: stderr through [`LossyStderr`], filter from
-/// `RUST_LOG` (default `info`), and no internal-error reports (they go through `eprintln!`).
+/// `RUST_LOG` (default `info`), and no internal-error reports (they go through `eprintln!`);
+/// iceoryx2's own log at its errors only unless its environment variable says otherwise.
 /// A second call is a no-op.
 pub fn init() {
+    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
     let _ = tracing_subscriber::fmt()

@@ -57,6 +57,14 @@ pub fn start_run(out: &Path, prefix: &str, extra: &[&str]) -> Result<std::proces
         .context("starting sextant run")
 }
 
+/// A loopback TCP port nobody listens on now (the kernel's pick for port 0, released at once).
+pub fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .map(|a| a.port())
+        .expect("no free loopback port")
+}
+
 /// Repository root (for `config/`).
 pub fn repo_root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))

@@ -38,14 +38,6 @@ const SPEED: f64 = 10.0;
 /// The links' lease (both bridges): a silent link is down after it.
 const LEASE_MS: u64 = 1000;
 
-fn free_port() -> u16 {
-    TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
-
 /// A TCP relay from a port of its own to `to`, which can stop forwarding: while `forwarding`
 /// is false it keeps accepting and reading and discards everything (a link that went silent:
 /// no reset, no FIN, as when a cable is pulled or a radio fades).

@@ -72,7 +72,6 @@ fn channels(flag: &str, names: &[String]) -> anyhow::Result<Vec<Channel>> {
 
 fn main() -> anyhow::Result<()> {
     logging::init();
-    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
     let args = Args::parse();
     let stop = signals::install()?;
     bus_check::validate_prefix(&args.prefix)

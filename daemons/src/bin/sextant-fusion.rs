@@ -44,7 +44,6 @@ fn main() -> anyhow::Result<()> {
     // A failed log write (full disk) is never fatal.
     logging::init();
     // iceoryx2's own log: warnings and errors only unless IOX2_LOG_LEVEL says otherwise.
-    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
     let args = Args::parse();
     let stop = signals::install()?;
     if !(args.speed.is_finite() && args.speed > 0.0) {

@@ -426,7 +426,6 @@ fn main() -> anyhow::Result<()> {
     // A failed log write (full disk) is never fatal.
     sextant_lab::logging::init();
     // iceoryx2's own log: warnings and errors only unless IOX2_LOG_LEVEL says otherwise.
-    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
     let cli = Cli::parse();
     sextant_lab::progress::set_quiet(cli.quiet);
     match cli.command {

@@ -32,7 +32,6 @@ struct Args {
 
 fn main() -> anyhow::Result<()> {
     logging::init();
-    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
     let args = Args::parse();
     let stop = signals::install()?;
     bus_check::validate_prefix(&args.prefix)
