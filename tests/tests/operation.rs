@@ -441,3 +441,51 @@ fn readme_python_recipe_reads_a_crashed_recording() {
     assert!(solutions > 500, "{solutions} solutions read\n{out}");
     assert!(out.contains("recording ends early"), "{out}");
 }
+
+/// The documentation stands alone: every file or folder of the repository that the README and
+/// the docs name in backticks exists. A path is one word under one of the repository's
+/// top-level folders ending in `/` or in a file name with an extension (`fusion/sensor_alive`
+/// is a recording topic); a `*` in the last part must match at least one file.
+#[test]
+fn every_path_the_documentation_names_exists() {
+    let root = repo_root();
+    let tops: Vec<String> = std::fs::read_dir(&root)
+        .unwrap()
+        .flatten()
+        .filter(|e| e.path().is_dir())
+        .map(|e| format!("{}/", e.file_name().to_string_lossy()))
+        .filter(|t| !t.starts_with('.') && t != "target/" && t != "out/")
+        .collect();
+    let mut missing = Vec::new();
+    for doc in ["README.md", "docs/ARCHITECTURE.md", "docs/DATA.md", "CHANGELOG.md"] {
+        let text = std::fs::read_to_string(root.join(doc)).unwrap();
+        for (k, quoted) in text.split('`').enumerate() {
+            // Odd pieces are inside backticks; a path is one word under a top-level folder.
+            let path = quoted.trim_end_matches([',', ':']);
+            let last = path.rsplit('/').next().unwrap_or_default();
+            let is_path = k % 2 == 1
+                && !path.contains(char::is_whitespace)
+                && tops.iter().any(|t| path.starts_with(t.as_str()))
+                && (path.ends_with('/') || last.contains('.'));
+            if !is_path {
+                continue;
+            }
+            let found = match last.split_once('*') {
+                None => root.join(path).exists(),
+                Some((head, tail)) => {
+                    let dir = root.join(&path[..path.len() - last.len()]);
+                    std::fs::read_dir(dir).is_ok_and(|rd| {
+                        rd.flatten().any(|e| {
+                            let n = e.file_name().to_string_lossy().to_string();
+                            n.starts_with(head) && n.ends_with(tail)
+                        })
+                    })
+                }
+            };
+            if !found {
+                missing.push(format!("{doc}: {quoted}"));
+            }
+        }
+    }
+    assert!(missing.is_empty(), "named but absent: {missing:#?}");
+}
