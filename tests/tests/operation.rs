@@ -457,7 +457,12 @@ fn every_path_the_documentation_names_exists() {
         .filter(|t| !t.starts_with('.') && t != "target/" && t != "out/")
         .collect();
     let mut missing = Vec::new();
-    for doc in ["README.md", "docs/ARCHITECTURE.md", "docs/DATA.md", "CHANGELOG.md"] {
+    for doc in [
+        "README.md",
+        "docs/ARCHITECTURE.md",
+        "docs/DATA.md",
+        "CHANGELOG.md",
+    ] {
         let text = std::fs::read_to_string(root.join(doc)).unwrap();
         for (k, quoted) in text.split('`').enumerate() {
             // Odd pieces are inside backticks; a path is one word under a top-level folder.
