@@ -271,8 +271,10 @@ fn disk_filling_up_mid_run_counts_the_drops_and_resumes_in_a_new_segment() {
 
 /// How this machine gives a test a small filesystem: a tmpfs in a private mount namespace
 /// (`unshare -m` as root, `unshare -Urm` where user namespaces are allowed), or, where mounting
-/// is not allowed, a file-size limit on every process of the run (`prlimit --fsize`: every
-/// file, the logs included, can grow to that size only — a per-file full disk).
+/// is not allowed (a container without the right, a chroot), a file-size limit on the fusion
+/// daemon once it has created its shared memory (`prlimit --pid --fsize`: each file it writes,
+/// the recording's included, can grow to that size only — a per-file full disk; a limit from
+/// the start would refuse the shared memory itself, which the kernel sizes as a file).
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum SmallFs {
     Tmpfs(&'static [&'static str]),
@@ -350,7 +352,7 @@ fn run_on_small_fs(
             )
         }
         SmallFs::FileSizeLimit => format!(
-            "trap '' XFSZ; prlimit --fsize={free_bytes} {run} > {d}/stdout 2> {d}/stderr; \
+            "trap '' XFSZ; {run} > {d}/stdout 2> {d}/stderr; \
              echo $? > {d}/rc; cp -r {m}/run {c}",
             m = mnt.display(),
             d = dir.display(),
@@ -374,16 +376,34 @@ fn run_on_small_fs(
     // run has started: before, the test's node would be a live user of the prefix, and the run
     // would refuse to start.
     let t0 = Instant::now();
-    while !processes_matching(&prefix)
-        .iter()
-        .any(|(_, c)| c.contains("sextant-fusion"))
-    {
+    let fusion_pid = loop {
+        if let Some((pid, _)) = processes_matching(&prefix)
+            .into_iter()
+            .find(|(_, c)| c.contains("sextant-fusion"))
+        {
+            break pid;
+        }
         assert!(
             t0.elapsed() < Duration::from_secs(30),
             "the run did not start"
         );
         assert!(child.try_wait().unwrap().is_none(), "the run ended at once");
         std::thread::sleep(Duration::from_millis(20));
+    };
+    let prlimit = |fsize: &str| {
+        let st = Command::new("prlimit")
+            .args(["--pid", &fusion_pid.to_string(), &format!("--fsize={fsize}")])
+            .status()
+            .unwrap();
+        assert!(st.success(), "prlimit --fsize={fsize} failed");
+    };
+    let mut lift_at = None;
+    if fs == SmallFs::FileSizeLimit {
+        // Its services exist once it subscribes; 300 ms is far more than that takes.
+        std::thread::sleep(Duration::from_millis(300));
+        // The soft limit only: raising it back needs no privilege (the hard one stays).
+        prlimit(&format!("{free_bytes}:unlimited"));
+        lift_at = free_after_s.map(|t| t0 + Duration::from_secs_f64(t));
     }
     let bus = Bus::new(&prefix, "smallfs-test").unwrap();
     let status = bus.subscriber::<Status>().unwrap();
@@ -392,6 +412,10 @@ fn run_on_small_fs(
     while child.try_wait().unwrap().is_none() {
         while let Ok(Some(s)) = status.receive() {
             live_dropped_max = live_dropped_max.max(s.records_dropped);
+        }
+        if lift_at.is_some_and(|t| Instant::now() >= t) {
+            lift_at = None;
+            prlimit("unlimited:unlimited");
         }
         assert!(t0.elapsed() < Duration::from_secs(120), "run overran");
         std::thread::sleep(Duration::from_millis(20));
