@@ -392,7 +392,11 @@ fn run_on_small_fs(
     };
     let prlimit = |fsize: &str| {
         let st = Command::new("prlimit")
-            .args(["--pid", &fusion_pid.to_string(), &format!("--fsize={fsize}")])
+            .args([
+                "--pid",
+                &fusion_pid.to_string(),
+                &format!("--fsize={fsize}"),
+            ])
             .status()
             .unwrap();
         assert!(st.success(), "prlimit --fsize={fsize} failed");
