@@ -2,7 +2,9 @@
 //! exporting the `gnss` and `imu` channels of bus A, bridge B importing them into bus B. This
 //! test publishes on A and subscribes on B as the fusion daemon would: every sample arrives,
 //! in order, identical to the one sent (header, every double to the bit, all 32 satellite
-//! slots); then both bridges stop cleanly on SIGTERM.
+//! slots). Then a stranger on Zenoh puts bytes that are no GNSS message on the same key: the
+//! importing bridge counts them and publishes nothing; both bridges stop cleanly on SIGTERM,
+//! the importer's exit log naming the undecodable messages.
 
 use msgs::ipc::{Bus, Pub, Sub};
 use msgs::{GnssSample, ImuSample, Message};
@@ -24,16 +26,24 @@ impl Drop for Bridge {
     }
 }
 
-fn bridge(args: &[&str]) -> Bridge {
+fn bridge(args: &[&str], log: &std::path::Path) -> Bridge {
     Bridge(
         Command::new(BIN)
             .args(args)
             .stdin(Stdio::null())
             .stdout(Stdio::null())
-            .stderr(Stdio::null())
+            .stderr(std::fs::File::create(log).unwrap())
             .spawn()
             .unwrap(),
     )
+}
+
+fn free_port() -> u16 {
+    TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
 }
 
 /// A GNSS sample whose every field differs from the others' and from zero, with values whose
@@ -103,38 +113,48 @@ fn remote_sensor_samples_arrive_on_the_local_bus_unchanged() {
     let pid = std::process::id();
     let (prefix_a, prefix_b) = (format!("brimp_a_{pid}"), format!("brimp_b_{pid}"));
     let key_a = format!("rover{pid}");
-    let port = TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
-    let listen = format!("tcp/127.0.0.1:{port}");
-    let _a = bridge(&[
+    let dir = std::env::temp_dir().join(format!("sextant-bridge-import-{pid}"));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let listen = format!("tcp/127.0.0.1:{}", free_port());
+    let listen_b = format!("tcp/127.0.0.1:{}", free_port());
+    let a_args = [
         "--prefix",
         &prefix_a,
         "--key-prefix",
         &key_a,
         "--listen",
         &listen,
-        "--export",
-        "gnss,imu",
-        "--name",
-        "a",
-    ]);
-    let _b = bridge(&[
+    ];
+    let _a = bridge(
+        &[&a_args[..], &["--export", "gnss,imu", "--name", "a"]].concat(),
+        &dir.join("a.log"),
+    );
+    let b_args = [
         "--prefix",
         &prefix_b,
         "--connect",
         &listen,
-        "--export",
-        "",
-        "--import",
-        "gnss,imu",
-        "--import-from",
-        &key_a,
-        "--name",
-        "b",
-    ]);
+        "--listen",
+        &listen_b,
+    ];
+    let b = bridge(
+        &[
+            &b_args[..],
+            &[
+                "--export",
+                "",
+                "--import",
+                "gnss,imu",
+                "--import-from",
+                &key_a,
+                "--name",
+                "b",
+            ],
+        ]
+        .concat(),
+        &dir.join("b.log"),
+    );
     let bus_a = Bus::new(&prefix_a, "test-a").unwrap();
     let bus_b = Bus::new(&prefix_b, "test-b").unwrap();
     let mut gnss_pub: Pub<GnssSample> = bus_a.publisher().unwrap();
@@ -170,4 +190,37 @@ fn remote_sensor_samples_arrive_on_the_local_bus_unchanged() {
     let got = receive_n(&imu_sub, sent.len());
     assert_eq!(got.len(), sent.len(), "IMU samples lost");
     assert!(sent == got, "IMU samples changed or reordered on the way");
+
+    // A stranger connected to B puts garbage on A's GNSS key: counted, never published.
+    use zenoh::Wait;
+    let mut c = zenoh::Config::default();
+    for (k, v) in [
+        ("mode", "\"peer\"".to_string()),
+        ("connect/endpoints", format!("[\"{listen_b}\"]")),
+        ("listen/endpoints", "[]".into()),
+        ("scouting/multicast/enabled", "false".into()),
+        ("scouting/gossip/enabled", "false".into()),
+    ] {
+        c.insert_json5(k, &v).unwrap();
+    }
+    let stranger = zenoh::open(c).wait().unwrap();
+    std::thread::sleep(Duration::from_millis(500));
+    let key = format!("{key_a}/v1/gnss");
+    for garbage in [
+        &b"\xff\xff\xff\xff"[..],
+        b"not protobuf at all",
+        &[0x0a, 0x80][..],
+    ] {
+        stranger.put(&key, garbage).wait().unwrap();
+    }
+    std::thread::sleep(Duration::from_millis(500));
+    assert!(
+        gnss_sub.receive().unwrap().is_none(),
+        "garbage reached the local bus"
+    );
+    stranger.close().wait().unwrap();
+    drop(b);
+    let log = std::fs::read_to_string(dir.join("b.log")).unwrap();
+    assert!(log.contains("does not decode"), "{log}");
+    assert!(log.contains("3 undecodable"), "{log}");
 }
