@@ -14,7 +14,10 @@
 //! - the cut: B's status says the link is down within the lease (plus Zenoh's keep-alive
 //!   granularity), the solutions stop, nothing crashes (the run and both bridges live on);
 //! - the repair: B reconnects by itself, its status says the link is up, the solutions flow
-//!   again; on SIGTERM B exits 0 having counted one link loss; the run completes cleanly.
+//!   again;
+//! - a crash of A's bridge (SIGKILL): B says the link is down at once, `sextant run` restarts
+//!   the bridge, B links again and the solutions flow; on SIGTERM B exits 0 having counted two
+//!   link losses; the run completes cleanly with one restart of its bridge.
 
 use msgs::ipc::Bus;
 use msgs::{Channel, NavSolution};
@@ -30,10 +33,11 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 use zenoh::Wait;
 
-/// The default scenario aligns for 100 s of simulated time; 300 s at 10× leave 20 s of wall
+/// The default scenario aligns for 100 s of simulated time; 340 s at 10× leave 24 s of wall
 /// time with solutions at 200 Hz (2000 per wall second through the bridge), of which the test
-/// needs about 12 s (3 s of flow, the cut, the repair, 2 s of flow again).
-const DURATION_S: f64 = 300.0;
+/// needs about 16 s (3 s of flow, the cut, the repair, 2 s of flow, the crash and restart of
+/// A's bridge, 1 s of flow).
+const DURATION_S: f64 = 340.0;
 const SPEED: f64 = 10.0;
 /// The links' lease (both bridges): a silent link is down after it.
 const LEASE_MS: u64 = 1000;
@@ -396,18 +400,65 @@ fn solution_to_another_computer_over_zenoh_survives_a_dropped_link() {
     assert!(resumed > 100, "{resumed} solutions after the reconnection");
     assert!(far.navs.last().unwrap().1.header.seq > last_seq);
 
+    // A crash of A's bridge: its connection closes, so B says so at once (no lease to wait
+    // for); `sextant run` restarts it and B links again by itself.
+    let pid_a = processes_matching(&prefix_a)
+        .into_iter()
+        .find(|(_, c)| {
+            c.split(' ')
+                .next()
+                .is_some_and(|program| program.ends_with("/sextant-bridge"))
+        })
+        .map(|(p, _)| p)
+        .expect("A's bridge is not running");
+    let t_kill = t0.elapsed();
+    nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(pid_a),
+        nix::sys::signal::Signal::SIGKILL,
+    )
+    .unwrap();
+    let t_down = loop {
+        listen(&mut far, &sub, &notify, t0, Duration::from_millis(50));
+        if let Some(t) = far.status_since(t_kill, "down") {
+            break t;
+        }
+        assert!(
+            t0.elapsed() < t_kill + Duration::from_secs(5),
+            "B's status did not say the link is down after A's bridge died: {:?}",
+            far.statuses
+        );
+    };
+    let t_up = loop {
+        listen(&mut far, &sub, &notify, t0, Duration::from_millis(50));
+        if let Some(t) = far.status_since(t_down, "up") {
+            break t;
+        }
+        assert!(
+            t0.elapsed() < t_kill + Duration::from_secs(10),
+            "B did not link again to A's restarted bridge: {:?}",
+            far.statuses
+        );
+    };
+    eprintln!(
+        "bridge: A's bridge killed: link down after {:?}, up again after {:?}",
+        t_down - t_kill,
+        t_up - t_kill
+    );
+    listen(&mut far, &sub, &notify, t0, Duration::from_secs(1));
+    assert!(far.navs_after(t_up) > 100, "no solutions after the restart");
+
     sigterm(&bridge_b);
     let st = wait_exit(&mut bridge_b, "bridge B", Duration::from_secs(10));
     let log = std::fs::read_to_string(dir.join("bridge-b.log")).unwrap();
     assert!(st.success(), "bridge B: {st}\n{log}");
-    assert!(log.contains("1 link loss(es)"), "{log}");
+    assert!(log.contains("2 link loss(es)"), "{log}");
 
     let st = wait_exit(&mut run, "sextant run", Duration::from_secs(120));
     let run_log = std::fs::read_to_string(run_out.join("sextant.log")).unwrap_or_default();
     assert!(st.success(), "sextant run: {st}\n{run_log}");
     let summary = summary_json(&run_out);
     assert_eq!(
-        summary["service_restarts"]["sextant-bridge"], 0,
+        summary["service_restarts"]["sextant-bridge"], 1,
         "{summary}"
     );
     let bridge_a_log = std::fs::read_to_string(run_out.join("logs/sextant-bridge.log")).unwrap();
