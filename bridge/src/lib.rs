@@ -380,7 +380,8 @@ fn import_loop(
     let bus = Bus::new(&opts.prefix, &format!("{}-import", opts.name))
         .map_err(|e| bus_err(e.to_string()))?;
     let mut pubs = ImportPubs::new(&bus, &opts.import).map_err(|e| bus_err(e.to_string()))?;
-    let mut alive: Vec<String> = Vec::new();
+    // Remote bridges' liveliness tokens seen, per key, with their count.
+    let mut alive: Vec<(String, u32)> = Vec::new();
     while !stop.load(Ordering::SeqCst) {
         let inbound = match rx.recv_timeout(TICK) {
             Ok(i) => i,
@@ -410,17 +411,23 @@ fn import_loop(
                     }
                 }
             }
+            // Tokens are counted per key: a restarted remote bridge declares the same key
+            // again, possibly before its old token's lease has run out.
             Inbound::Alive(key, true) => {
-                if !alive.contains(&key) {
-                    alive.push(key.clone());
-                    if alive.len() == 1 {
-                        tracing::info!("link to {} up (bridge {key})", opts.import_from);
-                    }
+                match alive.iter_mut().find(|(k, _)| *k == key) {
+                    Some((_, n)) => *n += 1,
+                    None => alive.push((key.clone(), 1)),
+                }
+                if alive.len() == 1 && alive[0].1 == 1 {
+                    tracing::info!("link to {} up (bridge {key})", opts.import_from);
                 }
             }
             Inbound::Alive(key, false) => {
                 let before = alive.len();
-                alive.retain(|k| *k != key);
+                if let Some((_, n)) = alive.iter_mut().find(|(k, _)| *k == key) {
+                    *n = n.saturating_sub(1);
+                }
+                alive.retain(|(_, n)| *n > 0);
                 if before > 0 && alive.is_empty() {
                     shared.link_losses.fetch_add(1, Ordering::Relaxed);
                     tracing::warn!(
