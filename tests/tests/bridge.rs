@@ -295,6 +295,19 @@ fn solution_to_another_computer_over_zenoh_survives_a_dropped_link() {
 
     let _stop = StopOnPanic(vec![run.id(), bridge_b.id()]);
     let mut far = FarSide::default();
+    // Listen until B's status says `needle` at or after `since` (times since t0); `failure`
+    // names what did not happen by `deadline`.
+    let await_status = |far: &mut FarSide,
+                        since: Duration,
+                        needle: &str,
+                        deadline: Duration,
+                        failure: &str| loop {
+        listen(far, &sub, &notify, t0, Duration::from_millis(50));
+        if let Some(t) = far.status_since(since, needle) {
+            break t;
+        }
+        assert!(t0.elapsed() < deadline, "{failure}: {:?}", far.statuses);
+    };
     // Solutions start after the alignment (10 s of wall time) and the start delay.
     let deadline = Instant::now() + Duration::from_secs(60);
     while far.navs.len() < 200 {
@@ -344,17 +357,13 @@ fn solution_to_another_computer_over_zenoh_survives_a_dropped_link() {
     let t_cut = t0.elapsed();
     relay.forwarding.store(false, Ordering::SeqCst);
     let limit = Duration::from_millis(LEASE_MS) + Duration::from_millis(1500);
-    let t_down = loop {
-        listen(&mut far, &sub, &notify, t0, Duration::from_millis(50));
-        if let Some(t) = far.status_since(t_cut, "down") {
-            break t;
-        }
-        assert!(
-            t0.elapsed() < t_cut + limit + Duration::from_secs(2),
-            "B's status did not say the link is down: {:?}",
-            far.statuses
-        );
-    };
+    let t_down = await_status(
+        &mut far,
+        t_cut,
+        "down",
+        t_cut + limit + Duration::from_secs(2),
+        "B's status did not say the link is down",
+    );
     eprintln!(
         "bridge: link down reported {:?} after the cut",
         t_down - t_cut
@@ -379,17 +388,13 @@ fn solution_to_another_computer_over_zenoh_survives_a_dropped_link() {
     let t_fix = t0.elapsed();
     let last_seq = far.navs.last().unwrap().1.header.seq;
     relay.forwarding.store(true, Ordering::SeqCst);
-    let t_up = loop {
-        listen(&mut far, &sub, &notify, t0, Duration::from_millis(50));
-        if let Some(t) = far.status_since(t_fix, "up") {
-            break t;
-        }
-        assert!(
-            t0.elapsed() < t_fix + Duration::from_secs(10),
-            "B did not reconnect within 10 s: {:?}",
-            far.statuses
-        );
-    };
+    let t_up = await_status(
+        &mut far,
+        t_fix,
+        "up",
+        t_fix + Duration::from_secs(10),
+        "B did not reconnect within 10 s",
+    );
     eprintln!("bridge: link up again {:?} after the repair", t_up - t_fix);
     // An attempt that started while the link was silent gives up after a lease (the bridge's
     // handshake timeout), the next comes within the retry period's 1 s cap.
@@ -417,28 +422,20 @@ fn solution_to_another_computer_over_zenoh_survives_a_dropped_link() {
         nix::sys::signal::Signal::SIGKILL,
     )
     .unwrap();
-    let t_down = loop {
-        listen(&mut far, &sub, &notify, t0, Duration::from_millis(50));
-        if let Some(t) = far.status_since(t_kill, "down") {
-            break t;
-        }
-        assert!(
-            t0.elapsed() < t_kill + Duration::from_secs(5),
-            "B's status did not say the link is down after A's bridge died: {:?}",
-            far.statuses
-        );
-    };
-    let t_up = loop {
-        listen(&mut far, &sub, &notify, t0, Duration::from_millis(50));
-        if let Some(t) = far.status_since(t_down, "up") {
-            break t;
-        }
-        assert!(
-            t0.elapsed() < t_kill + Duration::from_secs(10),
-            "B did not link again to A's restarted bridge: {:?}",
-            far.statuses
-        );
-    };
+    let t_down = await_status(
+        &mut far,
+        t_kill,
+        "down",
+        t_kill + Duration::from_secs(5),
+        "B's status did not say the link is down after A's bridge died",
+    );
+    let t_up = await_status(
+        &mut far,
+        t_down,
+        "up",
+        t_kill + Duration::from_secs(10),
+        "B did not link again to A's restarted bridge",
+    );
     eprintln!(
         "bridge: A's bridge killed: link down after {:?}, up again after {:?}",
         t_down - t_kill,
