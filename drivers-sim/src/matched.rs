@@ -97,6 +97,16 @@ mod tests {
         m.validate().unwrap();
         let all = world.only(&crate::world::EFFECTS).unwrap();
         assert_eq!(
+            all.effects_on(),
+            crate::world::EFFECTS,
+            "every table of the car's"
+        );
+        let mut one_off = all;
+        one_off.gravity.as_mut().unwrap().enabled = false;
+        assert!(one_off.effects_present().contains(&"gravity"));
+        assert!(!one_off.effects_on().contains(&"gravity"));
+        assert_eq!(one_off.effects_on().len(), crate::world::EFFECTS.len() - 1);
+        assert_eq!(
             installed_for(Some(&all), m.clone(), &car),
             car,
             "the whole world"

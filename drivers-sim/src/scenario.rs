@@ -1375,6 +1375,19 @@ impl Scenario {
     pub fn epoch_gps(&self) -> fusion::time::GpsTime {
         fusion::time::GpsTime::from_utc_datetime(&self.start)
     }
+
+    /// The world's gravity disturbance at the site, NED, m/s² (true gravity minus the normal
+    /// gravity an INS computes; its horizontal part is `g` times the deflection of the
+    /// vertical): what a unit standing at the site senses beyond the normal gravity. Zero
+    /// without `[world.gravity]`. The same draw as every driver's truth (stream
+    /// `"world_gravity"` of the scenario seed).
+    pub fn site_gravity_disturbance_ned_m_s2(&self) -> nalgebra::Vector3<f64> {
+        crate::world::MotionWorld::new(self.spec.world.as_ref(), self.spec.scenario.seed)
+            .gravity
+            .map_or_else(nalgebra::Vector3::zeros, |field| {
+                field.disturbance_ned_m_s2(0.0, 0.0, 0.0)
+            })
+    }
 }
 
 /// Checks of `[imu.channels]` (paper 004 channels).

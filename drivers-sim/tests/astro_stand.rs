@@ -66,13 +66,18 @@ fn static_shortcut_equals_the_driver_sources() {
         assert!((da_src - da).norm() < 1e-12 * da.norm().max(1e-9), "k {k}");
         assert!((dv_src - dv).norm() < 1e-12 * dv.norm(), "k {k}");
     }
-    // Star tracker: the source at whole seconds equals the sensor model on the constant truth.
+    // Star tracker: the source at whole seconds equals the sensor model on the constant truth,
+    // measured a time tag's latency before the stamp (the stand's `[world.star_tracker]`).
+    let latency_ns = scn.spec.world.map_or(0, |w| w.star_tracker_latency_ns());
+    assert!(latency_ns > 0, "the stand's head has a time tag");
     let mut st_src = StarTrackerSource::new(&scn, epoch);
     let mut st = StarTrackerSim::new(&scn);
-    for k in 0..20i64 {
+    for k in 1..20i64 {
         let t_ns = k * 1_000_000_000;
         let a = st_src.sample(t_ns);
-        let b = st.sample(k as f64, epoch + t_ns, &truth);
+        let t_meas_ns = t_ns - latency_ns;
+        let b = st.sample(t_meas_ns as f64 * 1e-9, epoch + t_meas_ns, &truth);
+        assert_eq!(a.header.time_ns, epoch + t_ns, "stamped at t");
         for i in 0..4 {
             assert!(
                 (a.q_sensor_icrf[i] - b.q_sensor_icrf[i]).abs() < 1e-12,
@@ -84,7 +89,8 @@ fn static_shortcut_equals_the_driver_sources() {
 
 /// The navigator's online boresight κ and its reported σ (rad) on the stand with seed `seed`,
 /// over the first `seconds`, configured as the astro-calibration experiment configures it
-/// ([`sextant_drivers_sim::stand::boresight_filter_config`]).
+/// ([`sextant_drivers_sim::stand::boresight_filter_config`], installed for the stand's world
+/// from `config/filter.toml`).
 fn online_boresight(seed: u64, seconds: f64) -> (Vector3<f64>, Vector3<f64>, Vector3<f64>) {
     use fusion::navigator::Navigator;
     use msgs::Channel;
@@ -98,7 +104,16 @@ fn online_boresight(seed: u64, seconds: f64) -> (Vector3<f64>, Vector3<f64>, Vec
     let sim = OfflineSim::with_channels(&scn, &[Channel::Imu, Channel::StarTracker, Channel::Gnss])
         .with_duration_s(seconds);
     let epoch = sim.epoch_ns();
-    let config = sextant_drivers_sim::stand::boresight_filter_config(&scn);
+    let car_text = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../config/filter.toml"),
+    )
+    .expect("filter.toml");
+    let car: fusion::navigator::NavigatorConfig = toml::from_str(&car_text).expect("filter.toml");
+    let config = sextant_drivers_sim::matched::installed_for(
+        scn.spec.world.as_ref(),
+        sextant_drivers_sim::stand::boresight_filter_config(&scn),
+        &car,
+    );
     let mut nav = Navigator::new(config).expect("config");
     run_navigator(sim, epoch, &mut nav, |_| {}).expect("run");
     assert!(nav.is_navigating());

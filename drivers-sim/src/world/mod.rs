@@ -165,29 +165,47 @@ pub const EFFECTS: [&str; 15] = [
 ];
 
 impl WorldSection {
+    /// Each table of [`EFFECTS`], in that order: (present, present and enabled).
+    fn tables(&self) -> [(bool, bool); EFFECTS.len()] {
+        macro_rules! flags {
+            ($($field:ident),*) => {
+                [$((self.$field.is_some(), self.$field.is_some_and(|s| s.enabled)),)*]
+            };
+        }
+        flags!(
+            ionosphere,
+            troposphere,
+            multipath,
+            satellite_clock,
+            ephemeris,
+            code_noise,
+            receiver_clock,
+            gnss_antenna,
+            carrier_phase,
+            vehicle,
+            vibration,
+            gravity,
+            imu,
+            star_tracker,
+            baro
+        )
+    }
+
     /// The effects whose tables are present (enabled or not), in the order of [`EFFECTS`].
     pub fn effects_present(&self) -> Vec<&'static str> {
-        let present = [
-            self.ionosphere.is_some(),
-            self.troposphere.is_some(),
-            self.multipath.is_some(),
-            self.satellite_clock.is_some(),
-            self.ephemeris.is_some(),
-            self.code_noise.is_some(),
-            self.receiver_clock.is_some(),
-            self.gnss_antenna.is_some(),
-            self.carrier_phase.is_some(),
-            self.vehicle.is_some(),
-            self.vibration.is_some(),
-            self.gravity.is_some(),
-            self.imu.is_some(),
-            self.star_tracker.is_some(),
-            self.baro.is_some(),
-        ];
         EFFECTS
             .iter()
-            .zip(present)
-            .filter_map(|(name, on)| on.then_some(*name))
+            .zip(self.tables())
+            .filter_map(|(name, (present, _))| present.then_some(*name))
+            .collect()
+    }
+
+    /// The effects switched on (present and enabled), in the order of [`EFFECTS`].
+    pub fn effects_on(&self) -> Vec<&'static str> {
+        EFFECTS
+            .iter()
+            .zip(self.tables())
+            .filter_map(|(name, (_, on))| on.then_some(*name))
             .collect()
     }
 

@@ -205,12 +205,15 @@ pub fn simulate(k: usize, duration_s: f64, window_s: f64) -> Result<Record, Expe
     let (r_win, p_win) = fusion::alignment::level(&f_win);
     let heading = fusion::alignment::gyrocompass(&w_win, r_win, p_win);
     let rph_true = truth.roll_pitch_heading_rad;
+    // The head's time tag (`[world.star_tracker] latency_s`): the sample stamped t is the sky
+    // seen at t − latency, as the driver's source makes it. The calibration uses the stamp.
+    let latency_ns = scn.spec.world.map_or(0, |w| w.star_tracker_latency_ns());
     let mut samples = Vec::with_capacity(n);
     let (mut ew, mut ea) = (Vector2::zeros(), Vector2::zeros());
     for (sec, f) in f_mean.iter().enumerate() {
         let t_s = (sec + 1) as f64;
         let time = epoch.add_ns((sec as i64 + 1) * NS_PER_S);
-        let st = tracker.sample(t_s, time.ns, &truth);
+        let st = tracker.sample(t_s - latency_ns as f64 * 1e-9, time.ns - latency_ns, &truth);
         let c_s_i = fusion::attitude::quat_from_wire(&st.q_sensor_icrf)
             .to_rotation_matrix()
             .into_inner();
@@ -257,7 +260,7 @@ fn fusion_wrap(a: f64) -> f64 {
 
 /// The navigator's online boresight estimate over the first `online_s` of record `k`: the
 /// full filter (IMU, star tracker, GNSS; the stand's configuration,
-/// [`drivers_sim::stand::boresight_filter_config`]) fed by the simulated drivers'
+/// [`drivers_sim::stand::boresight_filter_config`], installed for the stand's world) fed by the simulated drivers'
 /// time-ordered stream ([`drivers_sim::offline`]). Returns κ̂ and the σ the navigator
 /// reports, rad.
 fn online_estimate(
@@ -271,7 +274,11 @@ fn online_estimate(
     let sim = OfflineSim::with_channels(&scn, &[Channel::Imu, Channel::StarTracker, Channel::Gnss])
         .with_duration_s(online_s);
     let epoch = sim.epoch_ns();
-    let config = drivers_sim::stand::boresight_filter_config(&scn);
+    // Installed for the stand's world as an engineer would (the star tracker's time tag and
+    // slow error class, the receiver's error correlation, the region's gravity class):
+    // `config/filter.toml`'s values, never the world's.
+    let config =
+        super::consistency::installed(&scn, drivers_sim::stand::boresight_filter_config(&scn))?;
     let mut nav = Navigator::new(config).map_err(measurement)?;
     run_navigator(sim, epoch, &mut nav, |_| {}).map_err(measurement)?;
     if !nav.is_navigating() {
@@ -647,6 +654,9 @@ pub struct SettingsFigures {
 pub struct Summary {
     /// `"astro-calibration"`.
     pub experiment: String,
+    /// The scenario's world effects that were on (truth only; empty: the matched world).
+    #[serde(default)]
+    pub world_effects: Vec<String>,
     /// The paper reproduced.
     pub paper: String,
     /// The settings.
@@ -939,6 +949,7 @@ fn measure(
     let cal_h = means.three_stage.mean_fix_error_m;
     let summary = Summary {
         experiment: AstroCalibration::NAME.into(),
+        world_effects: super::world_effects(&record_scenario(1)?),
         paper: "000 (astro-inertial basis alignment)".into(),
         settings: SettingsFigures {
             records: settings.records,
@@ -1145,6 +1156,8 @@ pub fn table(summary: &Summary) -> String {
     out.push_str(
         "Paper 000 — astro position fix errors, mean |error| over each record after the 600 s window\n",
     );
+    out.push_str(&super::world_line(&summary.world_effects));
+    out.push('\n');
     out.push_str(&format!(
         "{:>6} | {:>8} {:>8} | {:>8} {:>6} | {:>8} {:>8} | {:>8} {:>6} | {:>6} {:>6}\n",
         "record",

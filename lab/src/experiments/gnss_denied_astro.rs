@@ -22,7 +22,11 @@
 //!    accelerometer bias tilting the sensed vertical by `δb/g`. Computed at every epoch from the
 //!    true bias minus the filter's estimate and the model's own gravity gradient
 //!    (`fusion::ekf::gravity_gradient`), so it includes the bias random walk and temperature.
-//!    For 50 µg per axis: R·δb/g ≈ 320 m per axis.
+//!    For 50 µg per axis: R·δb/g ≈ 320 m per axis. The Earth's real gravity field adds its own
+//!    term: the INS computes the normal gravity, so the site's gravity disturbance δg (truth,
+//!    `[world.gravity]`) acts as an accelerometer error of `−δg`, and the floor is
+//!    `G_hh⁻¹ (C_n_b δb_a − δg)_h`: a deflection of the vertical θ moves it by `R·θ` (5″ ≈
+//!    155 m), which no star can see — the astronomer's classical astro-geodetic difference.
 //! 2. **Noise term** — the residual tilt noise and the accelerometer white noise drive the
 //!    (undamped) Schuler oscillator. Tilt: a random walk of density `q = ARW²` observed with
 //!    white noise `σ_st²` at rate f (continuous `R_c = σ_st²/f`) has the steady-state variance
@@ -50,12 +54,12 @@
 //! the floor (the accelerometer level, bias included, defines the vertical) — the boresight
 //! states are therefore off here (mount calibrated).
 //!
-//! # Measured (seed 7, 10 h, IMU 100 Hz, filter of 2026-11-23)
-//! Bias floor 527 m mean (1132 m max, early, before the bias estimate improves; the
-//! effective accelerometer error is ≈ 160 µg horizontal, bias 2.5σ plus misalignment),
-//! noise term σ 38 m at 10 h, bound 2378 m. Astro-inertial: max 1841 m, final 227 m, mean
-//! error over the 7 whole Schuler periods (−465.7, 244.4) m against the floor's
-//! (−460.3, 251.2) m. Free inertial: 6688 m at 10 h.
+//! # Measured (seed 7, 10 h, IMU 100 Hz, the stand's world of `astro_10h.toml`)
+//! Floor 332 m mean (976 m max, early, before the bias estimate improves), of which the
+//! site's deflection of the vertical (4.4″ east) alone makes 137 m; noise term σ 38 m at 10 h,
+//! bound 2064 m. Astro-inertial: max 947 m, final 339 m, mean error over the 7 whole Schuler
+//! periods (−233.0, 252.2) m against the floor's (−226.9, 240.2) m. Free inertial: 20.2 km at
+//! 10 h. (On the matched world: floor 231 m mean, astro-inertial max 780 m, free 5.3 km.)
 
 use super::consistency::{filter_config, load_scenario};
 use super::plot::{Chart, Line, color, line_chart};
@@ -70,6 +74,9 @@ use msgs::Channel;
 use nalgebra::{Matrix2, Vector2, Vector3};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
+
+/// One arcsecond, rad.
+const ARCSEC_RAD: f64 = std::f64::consts::PI / 180.0 / 3600.0;
 
 /// Settings of the experiment.
 #[derive(Debug, Clone)]
@@ -110,12 +117,18 @@ struct Sample {
 }
 
 /// The horizontal equilibrium (bias floor) vector in NED north/east, m, at point `p`:
-/// `δr_h = G_hh⁻¹ (C_n_b δf)_h` with `δf` the accelerometer triad's effective error (body,
-/// m/s²) minus the filter's bias estimate.
-fn floor_ne(p: &RunPoint, accel_error_b: &Vector3<f64>) -> Vector2<f64> {
+/// `δr_h = G_hh⁻¹ (C_n_b δf − δg)_h` with `δf` the accelerometer triad's effective error (body,
+/// m/s²) minus the filter's bias estimate and `δg` the site's gravity disturbance (NED, m/s²:
+/// the INS computes the normal gravity, so a deflection of the vertical acts as a bias of
+/// `−δg`).
+fn floor_ne(
+    p: &RunPoint,
+    accel_error_b: &Vector3<f64>,
+    gravity_disturbance_n: &Vector3<f64>,
+) -> Vector2<f64> {
     let g_n = p.c_e_n.transpose() * gravity_gradient(&WGS84, &p.pos_true_e_m) * p.c_e_n;
     let g_hh = Matrix2::new(g_n[(0, 0)], g_n[(0, 1)], g_n[(1, 0)], g_n[(1, 1)]);
-    let db_n = p.c_n_b_true * (accel_error_b - p.accel_bias_est_m_s2);
+    let db_n = p.c_n_b_true * (accel_error_b - p.accel_bias_est_m_s2) - gravity_disturbance_n;
     g_hh.try_inverse()
         .map(|inv| inv * Vector2::new(db_n.x, db_n.y))
         .unwrap_or_else(|| Vector2::repeat(f64::NAN))
@@ -212,8 +225,9 @@ fn one_run(
     Ok(out)
 }
 
-/// The epochs of a run with the floor of the effective accelerometer error `accel_error`.
-fn samples(points: &[RunPoint], accel_error: &[Vector3<f64>]) -> Vec<Sample> {
+/// The epochs of a run with the floor of the effective accelerometer error `accel_error` and
+/// the site's gravity disturbance `dg_n` (NED, m/s²).
+fn samples(points: &[RunPoint], accel_error: &[Vector3<f64>], dg_n: &Vector3<f64>) -> Vec<Sample> {
     points
         .iter()
         .map(|p| {
@@ -226,7 +240,7 @@ fn samples(points: &[RunPoint], accel_error: &[Vector3<f64>]) -> Vec<Sample> {
                 err_h_m: p.horizontal_error_m(),
                 err_ne_m: Vector2::new(e.x, e.y),
                 sigma_h_m: p.horizontal_sigma_m(),
-                floor_ne_m: floor_ne(p, eff),
+                floor_ne_m: floor_ne(p, eff, dg_n),
                 bias_true_ned_ug: p.c_n_b_true * eff / 9.806_65e-6,
                 bias_est_ned_ug: p.c_n_b_true * p.accel_bias_est_m_s2 / 9.806_65e-6,
                 bias_truth_ned_ug: p.c_n_b_true * p.accel_bias_true_m_s2 / 9.806_65e-6,
@@ -273,6 +287,13 @@ pub struct Floor {
     pub noise_sigma_at_end_free_vrw_only_m: f64,
     /// `2·floor_max + 3σ_noise`, m.
     pub bound_2_floor_plus_3_sigma_m: f64,
+    /// The site's deflection of the vertical (the world's gravity field, truth), north and
+    /// east components of `−δg_h/g`, arcsec; zero without `[world.gravity]`.
+    #[serde(default)]
+    pub deflection_arcsec: [f64; 2],
+    /// The part of the floor the deflection alone makes, `|G_hh⁻¹ δg_h|`, m.
+    #[serde(default)]
+    pub deflection_floor_m: f64,
 }
 
 /// The astro-inertial run.
@@ -328,6 +349,9 @@ pub struct FreeRun {
 pub struct Summary {
     /// `"gnss-denied-astro"`.
     pub experiment: String,
+    /// The scenario's world effects that were on (truth only; empty: the matched world).
+    #[serde(default)]
+    pub world_effects: Vec<String>,
     /// Scenario name in `config/scenarios`.
     pub scenario: String,
     /// Simulated duration, s.
@@ -396,8 +420,10 @@ fn measure(
         },
     );
     bar.finish_and_clear();
-    let astro = samples(&astro?, &accel_error);
-    let free = samples(&free?, &accel_error);
+    let dg_n = scn.site_gravity_disturbance_ned_m_s2();
+    let astro_points = astro?;
+    let astro = samples(&astro_points, &accel_error, &dg_n);
+    let free = samples(&free?, &accel_error, &dg_n);
     let wall_s = t0.elapsed().as_secs_f64();
     let last = |v: &[Sample]| {
         v.last()
@@ -457,6 +483,7 @@ fn measure(
     let ned = |v: &Vector3<f64>| [v.x, v.y, v.z];
     let summary = Summary {
         experiment: GnssDeniedAstro::NAME.into(),
+        world_effects: super::world_effects(&scn),
         scenario: settings.scenario.clone(),
         duration_s,
         imu_rate_hz: scn.spec.imu.rate_hz,
@@ -470,6 +497,14 @@ fn measure(
             noise_sigma_at_end_free_vrw_only_m: noise_sigma_per_axis_m(&scn, nav_time, false)
                 * 2f64.sqrt(),
             bound_2_floor_plus_3_sigma_m: bound,
+            deflection_arcsec: [-dg_n.x / g / ARCSEC_RAD, -dg_n.y / g / ARCSEC_RAD],
+            deflection_floor_m: {
+                let p = &astro_points[0];
+                let g_n = p.c_e_n.transpose() * gravity_gradient(&WGS84, &p.pos_true_e_m) * p.c_e_n;
+                Matrix2::new(g_n[(0, 0)], g_n[(0, 1)], g_n[(1, 0)], g_n[(1, 1)])
+                    .try_inverse()
+                    .map_or(f64::NAN, |inv| (inv * Vector2::new(dg_n.x, dg_n.y)).norm())
+            },
         },
         astro_inertial: AstroRun {
             final_horizontal_error_m: a_end.err_h_m,
@@ -580,6 +615,8 @@ pub fn table(summary: &Summary) -> String {
         fmt_f64(summary.whole_schuler_periods, 0, false),
         fmt_f64(summary.schuler_period_s, 0, false),
     );
+    s += &super::world_line(&summary.world_effects);
+    s.push('\n');
     let floor = &summary.floor;
     s += &format!(
         "closed form: bias floor mean {} m (max {} m), noise σ at end {} m, bound {} m\n",
@@ -587,6 +624,12 @@ pub fn table(summary: &Summary) -> String {
         f1(floor.bias_floor_max_m),
         f1(floor.noise_sigma_at_end_astro_m),
         f1(floor.bound_2_floor_plus_3_sigma_m),
+    );
+    s += &format!(
+        "  the site's deflection of the vertical (N {}″, E {}″) alone: {} m of it\n",
+        f1(floor.deflection_arcsec[0]),
+        f1(floor.deflection_arcsec[1]),
+        f1(floor.deflection_floor_m),
     );
     s += "run              final error, m   max error, m   filter σ at end, m\n";
     let astro = &summary.astro_inertial;
@@ -654,6 +697,18 @@ mod tests {
         );
         // The floor is the accelerometer's, not zero: R·δb/g with δb of tens of µg.
         assert!(s.floor.bias_floor_mean_m > 3.0 * noise);
+        // The stand's world has the Earth's real gravity field: the site's deflection θ is
+        // part of the floor as R·θ (G_hh ≈ −g/r, r the geocentric radius, to J2's 0.3 %).
+        let d = s.floor.deflection_arcsec;
+        let theta = d[0].hypot(d[1]) * ARCSEC_RAD;
+        assert!(theta > 0.0, "the stand's world has a gravity field");
+        let lat = 55.655f64.to_radians();
+        let r = WGS84.a_m * (1.0 - WGS84.f * lat.sin().powi(2));
+        let ratio = s.floor.deflection_floor_m / (r * theta);
+        assert!(
+            (ratio - 1.0).abs() < 0.01,
+            "deflection floor / R·θ = {ratio}"
+        );
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -172,6 +172,9 @@ pub struct Summary {
     pub converge_s: f64,
     /// IMU grade and rate.
     pub imu: String,
+    /// The simulated IMU's world effects that were on (truth only; empty: the matched world).
+    #[serde(default)]
+    pub world_effects: Vec<String>,
     /// GNSS epochs in the run.
     pub epochs: usize,
     /// Mean GPS pseudoranges per epoch.
@@ -405,7 +408,8 @@ const CASES: [Case; 7] = [
 /// The filter configuration: the shipped tuning with the tactical grade's error model (from
 /// the scenario's resolved IMU grade), the odometer's white noise from the data's own
 /// variance, no baro; the star tracker only for the alignment in motion (the stream carries
-/// one sample); the coupling and the gate of the case.
+/// one sample); the coupling and the gate of the case; the region's gravity class where the
+/// scenario's world has a gravity field.
 fn config(
     case: &Case,
     scn: &Scenario,
@@ -437,7 +441,13 @@ fn config(
     if case.tight {
         o.push(("gnss_mode", toml::Value::String("tight".into())));
     }
-    filter_config(&o)
+    let mut cfg = filter_config(&o)?;
+    // The simulated IMU moves in the world's gravity field (`[world.gravity]`): the filter is
+    // told the region's gravity class, `config/filter.toml`'s.
+    if scn.spec.world.is_some_and(|w| w.gravity().is_some()) {
+        cfg.gravity_disturbance = super::consistency::car_filter()?.gravity_disturbance;
+    }
+    Ok(cfg)
 }
 
 /// What one run produces for the plots: (t, horizontal error, 3·σ_h) at the reference epochs.
@@ -708,6 +718,7 @@ pub fn measure(
         duration_s,
         converge_s: settings.converge_s,
         imu: format!("{} at {} Hz", scn.spec.imu.grade, scn.spec.imu.rate_hz),
+        world_effects: super::world_effects(&scn),
         epochs,
         mean_gps_satellites: n_sats as f64 / epochs.max(1) as f64,
         epochs_without_fix: without_fix,
@@ -813,6 +824,7 @@ pub fn table(s: &Summary) -> String {
         f2(s.spline_vs_reference_m[2]),
         s.reference_outliers,
     );
+    t += &format!("the IMU: {}\n", super::world_line(&s.world_effects));
     t += "solution                H p50   H p95   H max   V RMS   NEES mean  >χ²99  in 3σ  \
           GNSS NIS/dof  rejected  odo NIS/dof\n";
     for (name, e) in [

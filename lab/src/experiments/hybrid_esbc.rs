@@ -138,6 +138,10 @@ pub struct Summary {
     pub converge_s: f64,
     /// IMU grade of the simulated IMU.
     pub imu_grade: String,
+    /// The simulated part's world effects that were on (truth only; empty: the matched
+    /// world).
+    #[serde(default)]
+    pub world_effects: Vec<String>,
     /// IMU rate, Hz.
     pub imu_rate_hz: f64,
     /// Epochs read / fixed (L1 import).
@@ -291,7 +295,13 @@ fn one_run(
     tight: bool,
     gm: bool,
 ) -> Result<(Run, Series), ExperimentError> {
-    let cfg = config(tight, gm)?;
+    let mut cfg = config(tight, gm)?;
+    // The simulated IMU stands in the world's gravity field (`[world.gravity]`): the filter
+    // is told the region's gravity class, `config/filter.toml`'s (of the car's installation
+    // nothing else applies to a static bench).
+    if scn.spec.world.is_some_and(|w| w.gravity().is_some()) {
+        cfg.gravity_disturbance = super::consistency::car_filter()?.gravity_disturbance;
+    }
     let mut nav = Navigator::new(cfg).map_err(|e| measurement(format!("navigator: {e}")))?;
     let sim = OfflineSim::with_channels(scn, &[Channel::Imu, Channel::Truth]);
     let epoch = sim.epoch_ns();
@@ -483,6 +493,7 @@ pub fn measure(
         duration_s: settings.duration_s,
         converge_s: settings.converge_s,
         imu_grade: scn.spec.imu.grade.clone(),
+        world_effects: super::world_effects(&scn),
         imu_rate_hz: scn.spec.imu.rate_hz,
         epochs: epochs.0,
         epochs_fixed: epochs.1,
@@ -561,6 +572,7 @@ pub fn table(s: &Summary) -> String {
         s.epochs_fixed,
         s.epochs,
     );
+    t += &format!("the IMU: {}\n", super::world_line(&s.world_effects));
     t += "code       coupling  source     H RMS  H p95  H max   V RMS  V p95  V mean   \
           NEES mean  >χ²99   σH end  NIS/dof  rejected\n";
     for r in &s.runs {

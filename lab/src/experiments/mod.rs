@@ -269,6 +269,29 @@ pub(crate) fn scenario_file(name: &str) -> PathBuf {
 
 /// A step of the measurement that failed (a scenario that does not load, a solver that does
 /// not converge), as an experiment error: `.map_err(measurement)?`.
+/// What a simulated experiment's figures were measured on, for its table: the world effects
+/// that were on (`effects`, from [`world_effects`]; truth only, the filter does not know
+/// them), or the matched world.
+pub(crate) fn world_line(effects: &[String]) -> String {
+    if effects.is_empty() {
+        "SIMULATED on the matched world (no [world]: every error is the filter's own model)".into()
+    } else {
+        format!(
+            "SIMULATED, world effects on (truth only): {}",
+            effects.join(", ")
+        )
+    }
+}
+
+/// The effects of `scn`'s `[world]` that are on (for a summary).
+pub(crate) fn world_effects(scn: &drivers_sim::scenario::Scenario) -> Vec<String> {
+    scn.spec
+        .world
+        .as_ref()
+        .map(|w| w.effects_on().into_iter().map(String::from).collect())
+        .unwrap_or_default()
+}
+
 pub(crate) fn measurement(e: impl std::fmt::Display) -> ExperimentError {
     ExperimentError::Measurement(e.to_string())
 }

@@ -19,7 +19,12 @@
 //!   initial conditions) and is free inertial ([`fusion::strapdown`], ECEF, RK4, coning and
 //!   sculling) for the rest of the flight;
 //! - the vertical channel is a third-order baro-inertial loop (triple pole at 1/τ, τ = 30 s)
-//!   on the simulated barometer (ISA, the `baro` grade's 30 Pa bias and 5 Pa noise at 10 Hz).
+//!   on the simulator's barometer ([`drivers_sim::sensors::BaroSim`] at 10 Hz: the `baro`
+//!   grade's 30 Pa bias and 5 Pa noise, in the day's air of `[world.baro]` — not the standard
+//!   atmosphere the altimeter inverts — so the baro altitude is off by the weather's pressure
+//!   tendency and the day's temperature, as a real altimeter is), zeroed on the ground at the
+//!   known field height during the hold (the altimeter setting: it removes the day's
+//!   sea-level pressure and the sensor's bias, not the temperature's effect aloft).
 //!   τ is short because the free-inertial MEMS solution's horizontal velocity error (hundreds
 //!   of m/s after hours) feeds the vertical channel through Coriolis, 2Ω×δv, which oscillates
 //!   at the Schuler frequency ω_s; the loop passes such a disturbance to the height with gain
@@ -46,8 +51,9 @@ use drivers_sim::imu::ChannelErrorModel;
 use drivers_sim::scenario::{
     ChannelFailure, FailedSensor, FailureKind, Scenario, TemperatureProfile, period_ns,
 };
+use drivers_sim::sensors::BaroSim;
 use drivers_sim::truth::{Increments, TruthGenerator, TruthPoint, wrap_pi};
-use fusion::atmosphere::{isa_altitude_m, isa_pressure_pa};
+use fusion::atmosphere::isa_altitude_m;
 use fusion::attitude::rpy_from_q_n_b;
 use fusion::earth::{GravityModel, WGS84, ecef_to_geodetic, radii_of_curvature, up_e};
 use fusion::redundancy::{
@@ -57,8 +63,6 @@ use fusion::strapdown::{
     ImuIncrement, Integrator, MechanizationConfig, NavState, Strapdown, q_e_n,
 };
 use nalgebra::{Rotation3, UnitQuaternion, Vector3};
-use rand::Rng;
-use rand_distr::StandardNormal;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -273,9 +277,15 @@ fn fly(
     );
     let cfg = fdi_config(&model, scn, dt, exclude);
     let mut red = RedundantImu::new(&layout.axes[..layout.n], cfg).map_err(measurement)?;
-    let mut baro_rng = drivers_sim::sensor_rng(seed, "baro");
-    let baro_bias_pa = scn.baro.bias_pa;
-    let baro_noise_pa = scn.baro.noise_pa;
+    // The simulator's barometer of this run's seed: the grade's bias, random walk and noise
+    // on the scenario's air (`[world.baro]`: the day's pressure, temperature and tendency and
+    // the sensor's temperature coefficient; ISA without it). The loop inverts ISA, as a
+    // barometric altimeter does.
+    let mut baro = {
+        let mut s = scn.clone();
+        s.spec.scenario.seed = seed;
+        BaroSim::new(&s)
+    };
     let baro_every = (truth.rate_hz / 10).max(1);
 
     let n_steps = ((duration_s / dt).round() as usize).min(truth.inc.len());
@@ -301,6 +311,7 @@ fn fly(
     let mut out = RunResult::default();
     let record_every = ((record_every_s * truth.rate_hz as f64).round() as usize).max(1);
     let mut last_baro_err = 0.0;
+    let (mut baro_cal, mut baro_offset_m): ((f64, f64), f64) = ((0.0, 0.0), 0.0);
     for (k, (da, dv)) in truth.inc.iter().enumerate().take(n_steps) {
         let step = k + 1;
         let t_end = step as f64 * dt;
@@ -322,17 +333,44 @@ fn fly(
         if st.excluded_mask != 0 && out.first_exclusion_s.is_none() {
             out.first_exclusion_s = Some(t_end);
         }
+        // The barometer at its epochs: (ISA altitude of the pressure read, true height).
+        let baro_h = (step % baro_every == 0).then(|| {
+            let sec = step / truth.rate_hz;
+            let frac = (step % truth.rate_hz) as f64 / truth.rate_hz as f64;
+            // Truth height between whole-second points (linear; the climb rate is ≤ 2.6 m/s
+            // and smooth, so the interpolation error is < 1 mm).
+            let h0 = truth.points[sec.min(truth.points.len() - 1)]
+                .geodetic
+                .height_m;
+            let h1 = truth.points[(sec + 1).min(truth.points.len() - 1)]
+                .geodetic
+                .height_m;
+            let h_true = h0 + (h1 - h0) * frac;
+            let mut at = truth.points[sec.min(truth.points.len() - 1)];
+            at.geodetic.height_m = h_true;
+            (
+                isa_altitude_m(baro.sample(t_end, 0, &at).pressure_pa),
+                h_true,
+            )
+        });
         if step <= n_cal {
             // Primary calibration on the ground: channel output minus its projection of the
-            // known true increment.
+            // known true increment; the altimeter zeroed at the known field height (the
+            // day's pressure and the sensor's bias taken out; the air's temperature and its
+            // change over the flight are not).
             for i in 0..layout.n {
                 let e = Vector3::from(layout.axes[i]);
                 cal_g[i] += zg[i] - e.dot(da);
                 cal_a[i] += za[i] - e.dot(dv);
             }
+            if let Some((h_baro, h_true)) = baro_h {
+                baro_cal.0 += h_baro - h_true;
+                baro_cal.1 += 1.0;
+            }
             if step == n_cal {
                 bias_g = cal_g / n_cal as f64;
                 bias_a = cal_a / n_cal as f64;
+                baro_offset_m = baro_cal.0 / baro_cal.1.max(1.0);
             }
             continue;
         }
@@ -352,20 +390,9 @@ fn fly(
                 delta_velocity_m_s: d_v,
             },
         );
-        if step % baro_every == 0 {
-            let sec = step / truth.rate_hz;
-            let frac = (step % truth.rate_hz) as f64 / truth.rate_hz as f64;
-            // Truth height between whole-second points (linear; the climb rate is ≤ 2.6 m/s
-            // and smooth, so the interpolation error is < 1 mm).
-            let h0 = truth.points[sec.min(truth.points.len() - 1)]
-                .geodetic
-                .height_m;
-            let h1 = truth.points[(sec + 1).min(truth.points.len() - 1)]
-                .geodetic
-                .height_m;
-            let h_true = h0 + (h1 - h0) * frac;
-            let w: f64 = baro_rng.sample(StandardNormal);
-            let h_baro = isa_altitude_m(isa_pressure_pa(h_true) + baro_bias_pa + baro_noise_pa * w);
+        if let Some((h_baro_raw, h_true)) = baro_h {
+            // Zeroed on the field: the altimeter's setting from the ground hold.
+            let h_baro = h_baro_raw - baro_offset_m;
             last_baro_err = h_baro - h_true;
             let g = ecef_to_geodetic(&WGS84, &nav.r_e);
             let dh = g.height_m - h_baro;
@@ -576,6 +603,9 @@ pub struct Summary {
     pub paper: String,
     /// The scenario file.
     pub scenario: String,
+    /// The scenario's world effects that were on (truth only; empty: the matched world).
+    #[serde(default)]
+    pub world_effects: Vec<String>,
     /// Simulated flight, s.
     pub flight_s: f64,
     /// IMU rate, Hz.
@@ -805,6 +835,7 @@ fn measure(s: &Settings, out_dir: &Path, progress: bool) -> Result<Summary, Expe
         experiment: Redundancy::NAME.into(),
         paper: "004 structural redundancy (MEMS, UAV)".into(),
         scenario: "config/scenarios/uav.toml".into(),
+        world_effects: super::world_effects(&scn),
         flight_s: s.duration_s,
         imu_rate_hz: truth.rate_hz,
         runs_per_layout: s.runs,
@@ -918,6 +949,8 @@ pub fn table(s: &Summary) -> String {
         s.runs_per_layout,
         s.imu_rate_hz,
     ));
+    t.push_str(&super::world_line(&s.world_effects));
+    t.push('\n');
     t.push_str(&format!(
         "{:<22} {:>9} {:>9} {:>6} | {:>11} {:>11} {:>11} {:>6} {:>6}\n",
         "parameter",
