@@ -12,13 +12,15 @@
 //!   a fix consistent with it, `(HᵀH)⁻¹Hᵀε` with covariance exactly `σ²(HᵀH)⁻¹` — a fixture
 //!   for the filter's algebra.
 //! * **Real** (with `[world]`): the pseudoranges carry the world's errors ([`crate::world`]:
-//!   ionosphere, troposphere, multipath, broadcast clock and orbit, code noise by C/N0, the
+//!   ionosphere, troposphere, multipath, non-line-of-sight echoes (late and weak),
+//!   broadcast clock and orbit, code noise by C/N0, the
 //!   oscillator, the antenna lever arm and latency). The receiver corrects them with its own
 //!   models — the broadcast Klobuchar ionosphere (IS-GPS-200 §20.3.3.5.2.5, coefficients of a
 //!   real broadcast) and Saastamoinen with a standard atmosphere and the cosecant mapping —
 //!   reports per satellite the σ of its own error budget ([`crate::scenario::UereModel`]),
-//!   and solves its fix by weighted least squares from exactly those pseudoranges
-//!   ([`fusion::gnss_ls`]), with the covariance `(HᵀWH)⁻¹` of its budget, not of the truth.
+//!   and solves its fix by weighted least squares from exactly those pseudoranges, excluding
+//!   the ones its RAIM/FDE finds inconsistent ([`fusion::gnss_ls::solve_excluding_faults`]),
+//!   with the covariance `(HᵀWH)⁻¹` of its budget, not of the truth.
 //!   Its error therefore stays correlated for minutes, as a real receiver's does.
 //!
 //! Orbits are propagated in an inertial frame whose axes coincide with ECEF at the GPS epoch
@@ -144,6 +146,10 @@ pub const BROADCAST_KLOBUCHAR: corr::KlobucharCoefficients = corr::KlobucharCoef
     beta: [8.1920e+04, 9.8304e+04, -6.5536e+04, -5.2429e+05],
 };
 
+/// Probability of the receiver's fault detection test (a false exclusion in one epoch in
+/// 1000 of a consistent one).
+pub const RECEIVER_FDE_PROBABILITY: f64 = 0.999;
+
 /// Relative humidity of the receiver's standard atmosphere (RTKLIB's default, 0.7).
 pub const RECEIVER_HUMIDITY: f64 = 0.7;
 
@@ -192,7 +198,8 @@ pub struct GnssSim {
 
 impl GnssSim {
     /// The receiver of the scenario with its clock drawn from the `"gnss"` stream and, with a
-    /// `[world]`, the world's processes from the `"world"` stream.
+    /// `[world]`, the world's processes from the `"world"` stream (the echoes from
+    /// `"world_nlos"`).
     pub fn new(scn: &Scenario) -> Self {
         let mut rng = crate::sensor_rng(scn.spec.scenario.seed, "gnss");
         let g = scn.gnss;
@@ -210,8 +217,12 @@ impl GnssSim {
             .filter(|w| w.gnss_errors_on())
             .zip(g.uere)
             .map(|(w, u)| {
-                let rng_w = crate::sensor_rng(scn.spec.scenario.seed, "world");
-                (GnssWorld::new(w, constellation.len(), rng_w), u)
+                let seed = scn.spec.scenario.seed;
+                let (rng_w, rng_nlos) = (
+                    crate::sensor_rng(seed, "world"),
+                    crate::sensor_rng(seed, "world_nlos"),
+                );
+                (GnssWorld::new(w, constellation.len(), rng_w, rng_nlos), u)
             });
         // Its own stream: switching the effect changes no other realisation.
         let phase_tracking = PhaseTracking::new(
@@ -484,6 +495,11 @@ impl GnssSim {
             }
             let az = u_n.y.atan2(u_n.x).rem_euclid(std::f64::consts::TAU);
             let cn0 = g.cn0_horizon_dbhz + (g.cn0_zenith_dbhz - g.cn0_horizon_dbhz) * el.sin();
+            // Received through an echo only: late by the excess path, weaker by the loss.
+            let (nlos_excess_m, cn0) = match self.world.as_mut().and_then(|(w, _)| w.nlos(i, el)) {
+                Some((excess_m, loss_db)) => (excess_m, cn0 - loss_db),
+                None => (0.0, cn0),
+            };
             let Some((world, _)) = &self.world else {
                 unreachable!()
             };
@@ -504,7 +520,11 @@ impl GnssSim {
             let tropo = corr::slant_troposphere_m(&zenith, el);
             // A correction for a delay the world does not have is left out (`has_atmosphere`).
             let (iono_on, tropo_on) = world.has_atmosphere();
-            let pseudorange = range + self.clock.bias_m + errors.total_m() + sigma_code * draws[0]
+            let pseudorange = range
+                + self.clock.bias_m
+                + errors.total_m()
+                + nlos_excess_m
+                + sigma_code * draws[0]
                 - if iono_on { klobuchar } else { 0.0 }
                 - if tropo_on { tropo } else { 0.0 };
             let e_rr = g.range_rate_sigma_m_s * draws[1];
@@ -549,7 +569,17 @@ impl GnssSim {
                 initial_clock_bias_m: b0,
                 ..Default::default()
             };
-            if let Ok(fix) = fusion::gnss_ls::solve(&obs, &settings) {
+            // The receiver's RAIM/FDE: a χ² test of its residuals against its own σ, the
+            // worst range by Baarda's w-test excluded while six or more remain. The message
+            // keeps every pseudorange (tight coupling judges them itself).
+            if let Ok(fix) = fusion::gnss_ls::solve_excluding_faults(
+                &obs,
+                &settings,
+                RECEIVER_FDE_PROBABILITY,
+                5,
+            )
+            .map(|s| s.fix)
+            {
                 let p = fix.position.r_e_m;
                 out.fix_valid = 1;
                 out.pos_ecef_m = p.into();

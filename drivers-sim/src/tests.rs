@@ -530,8 +530,9 @@ fn static_site_in_the_world() -> Scenario {
 }
 
 /// The real receiver: its fix is the weighted least-squares solution of exactly the
-/// pseudoranges (and satellite positions) it publishes, at the antenna (lever arm from the
-/// IMU), and its error is correlated over minutes, unlike the matched receiver's.
+/// pseudoranges (and satellite positions) it publishes, after its own fault exclusion (the
+/// echoes of `[world.nlos]`), at the antenna (lever arm from the IMU), and its error is
+/// correlated over minutes, unlike the matched receiver's.
 #[test]
 fn real_receiver_fix_is_its_own_least_squares_and_correlated() {
     let scn = static_site_in_the_world();
@@ -550,7 +551,15 @@ fn real_receiver_fix_is_its_own_least_squares_and_correlated() {
         // Static: the antenna is the IMU plus C_e_b l (rate term ≈ Ω|l| = 1e-4 m/s only).
         let antenna = tp.r_e_m + tp.c_e_n * tp.c_n_b * lever;
         assert!((hidden.antenna_r_e_m - antenna).norm() < 1e-9);
-        let own = fusion::gnss_ls::solve_sample(&m).unwrap();
+        let obs = fusion::gnss_ls::Observations::from_sample(&m).unwrap();
+        let own = fusion::gnss_ls::solve_excluding_faults(
+            &obs,
+            &fusion::gnss_ls::LsSettings::default(),
+            crate::gnss::RECEIVER_FDE_PROBABILITY,
+            5,
+        )
+        .unwrap()
+        .fix;
         // Both iterate to a 1e-4 m step tolerance.
         let d = own.position.r_e_m - Vector3::from(m.pos_ecef_m);
         assert!(d.norm() < 1e-3, "fix differs from its own LS by {d}");

@@ -21,10 +21,14 @@
 //! (GDOP = √tr Q, PDOP = √(Q_xx+Q_yy+Q_zz), HDOP/VDOP from the position block rotated into NED,
 //! TDOP = √Q_bb); the covariances reported are the weighted `(HᵀWH)⁻¹`.
 //!
+//! [`solve_excluding_faults`] adds a receiver's snapshot fault detection and exclusion (a χ²
+//! test of the residuals, Baarda's w-test to pick the range to exclude).
+//!
 //! Pure, stack only: observations live in fixed arrays of [`MAX_SATELLITES`], the normal
 //! equations are 4×4.
 
 use crate::earth::{self, Ellipsoid, Geodetic};
+use crate::ekf::chi2_quantile;
 use msgs::{GnssSample, MAX_SATELLITES};
 use nalgebra::{Matrix3, Matrix4, Vector3, Vector4};
 
@@ -198,6 +202,15 @@ impl Observations {
     /// Whether there are none.
     pub fn is_empty(&self) -> bool {
         self.n == 0
+    }
+
+    /// Remove observation `i` (the later ones move up); out of range: nothing.
+    pub fn remove(&mut self, i: usize) {
+        if i < self.n {
+            self.sats.copy_within(i + 1..self.n, i);
+            self.n -= 1;
+            self.sats[self.n] = SatelliteObservation::default();
+        }
     }
 }
 
@@ -512,6 +525,64 @@ pub fn solve(obs: &Observations, settings: &LsSettings) -> Result<GnssFix, GnssL
     Ok(GnssFix { position, velocity })
 }
 
+/// A fix after snapshot fault detection and exclusion (a receiver's RAIM/FDE).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ScreenedFix {
+    /// The fix of the observations kept.
+    pub fix: GnssFix,
+    /// The observations kept.
+    pub kept: Observations,
+    /// How many were excluded.
+    pub excluded: usize,
+}
+
+/// [`solve`] with snapshot fault detection and exclusion: while the weighted post-fit
+/// residuals fail the χ² test (`n − 4` degrees of freedom at `probability`) and at least
+/// `min_used + 1` pseudoranges remain, exclude the one with the largest Baarda w-statistic
+/// `|r_i| / (σ_i·√(1 − h_ii))` — `h_ii = σ_i⁻²·H_i (HᵀWH)⁻¹ H_iᵀ`, the weighted hat matrix's
+/// diagonal (Baarda, "A testing procedure for use in geodetic networks", 1968; Kaplan &
+/// Hegarty, 3rd ed., §11.3.2 RAIM/FDE) — and solve again. One bad range among many is found;
+/// where most of the few satellites are bad, the largest residual may point at a good one.
+pub fn solve_excluding_faults(
+    obs: &Observations,
+    settings: &LsSettings,
+    probability: f64,
+    min_used: usize,
+) -> Result<ScreenedFix, GnssLsError> {
+    let mut kept = *obs;
+    let mut excluded = 0;
+    loop {
+        let fix = solve(&kept, settings)?;
+        let p = &fix.position;
+        let n = kept.len();
+        if n <= min_used.max(4) || p.chi2 <= chi2_quantile((n - 4) as u32, probability) {
+            return Ok(ScreenedFix {
+                fix,
+                kept,
+                excluded,
+            });
+        }
+        let mut q = Matrix4::zeros();
+        q.fixed_view_mut::<3, 3>(0, 0).copy_from(&p.cov_r_e_m2);
+        q.fixed_view_mut::<3, 1>(0, 3).copy_from(&p.cov_r_clock_m2);
+        q.fixed_view_mut::<1, 3>(3, 0)
+            .copy_from(&p.cov_r_clock_m2.transpose());
+        q[(3, 3)] = p.var_clock_bias_m2;
+        let mut worst = (f64::NEG_INFINITY, 0usize);
+        for (i, o) in kept.as_slice().iter().enumerate() {
+            let (h, _, _) = row(&o.sat_pos_ecef_m, &p.r_e_m);
+            let var = o.sigma_pseudorange_m.powi(2);
+            let hii = (h.transpose() * q * h)[(0, 0)] / var;
+            let w = p.residuals_m[i].abs() / (var * (1.0 - hii).max(1e-9)).sqrt();
+            if w > worst.0 {
+                worst = (w, i);
+            }
+        }
+        kept.remove(worst.1);
+        excluded += 1;
+    }
+}
+
 /// [`solve`] on a receiver message with default settings.
 pub fn solve_sample(sample: &GnssSample) -> Result<GnssFix, GnssLsError> {
     solve(&Observations::from_sample(sample)?, &LsSettings::default())
@@ -569,6 +640,58 @@ mod tests {
             .unwrap();
         }
         obs
+    }
+
+    /// Seven satellites with 1.5 m white noise: nothing is excluded from a consistent epoch
+    /// (noise-free here, χ² = 0), and a 40 m echo on one of them (≈ 27σ) is found and
+    /// excluded, leaving the fix within a few σ of the truth; a second bad range with only
+    /// the minimum left is kept (no exclusion below `min_used + 1`).
+    #[test]
+    fn a_bad_range_is_excluded_and_a_clean_epoch_kept() {
+        let (r, c) = site();
+        let b = 1234.0;
+        let clean = synth(&r, &c, &sky(), &Vector3::zeros(), b, 0.0);
+        let s = LsSettings::default();
+        let kept = solve_excluding_faults(&clean, &s, 0.999, 5).unwrap();
+        assert_eq!(kept.excluded, 0);
+        assert_eq!(kept.kept, clean);
+        for bad in 0..clean.len() {
+            let mut obs = clean;
+            obs.sats[bad].pseudorange_m += 40.0;
+            let f = solve_excluding_faults(&obs, &s, 0.999, 5).unwrap();
+            assert_eq!(f.excluded, 1, "satellite {bad}");
+            assert!(
+                f.kept.as_slice().iter().all(|o| o.prn != obs.sats[bad].prn),
+                "satellite {bad}: the bad one is out"
+            );
+            assert!((f.fix.position.r_e_m - r).norm() < 1e-6, "satellite {bad}");
+            // Plain least squares keeps it: the fix is metres off.
+            let plain = solve(&obs, &s).unwrap();
+            assert!((plain.position.r_e_m - r).norm() > 1.0, "satellite {bad}");
+        }
+        // Five satellites, min_used 5: detection without exclusion.
+        let mut five = clean;
+        five.remove(6);
+        five.remove(5);
+        assert_eq!(five.len(), 5);
+        five.sats[0].pseudorange_m += 40.0;
+        assert_eq!(
+            solve_excluding_faults(&five, &s, 0.999, 5)
+                .unwrap()
+                .excluded,
+            0
+        );
+    }
+
+    #[test]
+    fn observations_remove_keeps_the_order() {
+        let (r, c) = site();
+        let mut obs = synth(&r, &c, &sky(), &Vector3::zeros(), 0.0, 0.0);
+        let prns: Vec<u32> = obs.as_slice().iter().map(|o| o.prn).collect();
+        obs.remove(2);
+        obs.remove(99);
+        let after: Vec<u32> = obs.as_slice().iter().map(|o| o.prn).collect();
+        assert_eq!(after, [&prns[..2], &prns[3..]].concat());
     }
 
     fn sky() -> Vec<(f64, f64)> {

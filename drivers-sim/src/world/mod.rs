@@ -6,8 +6,8 @@
 //! receiver reports — a fixture for the filter's algebra, not a test of navigation.
 //!
 //! With it, the GNSS receiver ([`crate::gnss`]) sees, per satellite: the ionosphere
-//! ([`ionosphere`]), the troposphere ([`troposphere`]), multipath ([`multipath`]), broadcast
-//! clock and orbit errors ([`satellite`]), code tracking noise by C/N0 ([`CodeNoiseSpec`]),
+//! ([`ionosphere`]), the troposphere ([`troposphere`]), multipath ([`multipath`]), echoes of
+//! satellites hidden by buildings ([`nlos`]), broadcast clock and orbit errors ([`satellite`]), code tracking noise by C/N0 ([`CodeNoiseSpec`]),
 //! its own oscillator ([`receiver_clock`]) and the antenna's lever arm and time-tag latency
 //! ([`antenna`]); its baseline carrier-phase differences carry an unknown integer per
 //! satellite and baseline, cycle slips and a lock indicator ([`carrier_phase`]); it corrects the pseudoranges with its own broadcast models and reports a
@@ -41,6 +41,7 @@ pub mod gravity;
 pub mod imu_unit;
 pub mod ionosphere;
 pub mod multipath;
+pub mod nlos;
 pub mod receiver_clock;
 pub mod satellite;
 pub mod spectral;
@@ -57,6 +58,7 @@ use gravity::{GravityField, GravitySpec};
 use ionosphere::{Ionosphere, IonosphereSpec};
 use multipath::{Multipath, MultipathSpec};
 use nalgebra::Vector3;
+use nlos::{Nlos, NlosSpec};
 use rand_chacha::ChaCha20Rng;
 use receiver_clock::ReceiverClockSpec;
 use satellite::{EphemerisSpec, SatelliteClockSpec, SignalInSpace};
@@ -103,6 +105,8 @@ pub struct WorldSection {
     pub troposphere: Option<TroposphereSpec>,
     /// Code multipath.
     pub multipath: Option<MultipathSpec>,
+    /// Non-line-of-sight reception (echoes off buildings).
+    pub nlos: Option<NlosSpec>,
     /// Broadcast satellite clock error.
     pub satellite_clock: Option<SatelliteClockSpec>,
     /// Broadcast orbit error.
@@ -133,10 +137,11 @@ pub struct WorldSection {
 
 /// The GNSS part of `[world]`: every effect on the pseudoranges, the receiver's oscillator,
 /// the antenna and the carrier phases, by table name (the first entries of [`EFFECTS`]).
-pub const GNSS_EFFECTS: [&str; 9] = [
+pub const GNSS_EFFECTS: [&str; 10] = [
     "ionosphere",
     "troposphere",
     "multipath",
+    "nlos",
     "satellite_clock",
     "ephemeris",
     "code_noise",
@@ -146,7 +151,7 @@ pub const GNSS_EFFECTS: [&str; 9] = [
 ];
 
 /// Every effect of `[world]`, by its table name.
-pub const EFFECTS: [&str; 15] = [
+pub const EFFECTS: [&str; 16] = [
     GNSS_EFFECTS[0],
     GNSS_EFFECTS[1],
     GNSS_EFFECTS[2],
@@ -156,6 +161,7 @@ pub const EFFECTS: [&str; 15] = [
     GNSS_EFFECTS[6],
     GNSS_EFFECTS[7],
     GNSS_EFFECTS[8],
+    GNSS_EFFECTS[9],
     "vehicle",
     "vibration",
     "gravity",
@@ -164,18 +170,14 @@ pub const EFFECTS: [&str; 15] = [
     "baro",
 ];
 
-impl WorldSection {
-    /// Each table of [`EFFECTS`], in that order: (present, present and enabled).
-    fn tables(&self) -> [(bool, bool); EFFECTS.len()] {
-        macro_rules! flags {
-            ($($field:ident),*) => {
-                [$((self.$field.is_some(), self.$field.is_some_and(|s| s.enabled)),)*]
-            };
-        }
-        flags!(
+/// Calls macro `$m` with every table's field of [`WorldSection`], in the order of [`EFFECTS`].
+macro_rules! every_table {
+    ($m:ident) => {
+        $m!(
             ionosphere,
             troposphere,
             multipath,
+            nlos,
             satellite_clock,
             ephemeris,
             code_noise,
@@ -189,6 +191,18 @@ impl WorldSection {
             star_tracker,
             baro
         )
+    };
+}
+
+impl WorldSection {
+    /// Each table of [`EFFECTS`], in that order: (present, present and enabled).
+    fn tables(&self) -> [(bool, bool); EFFECTS.len()] {
+        macro_rules! flags {
+            ($($field:ident),*) => {
+                [$((self.$field.is_some(), self.$field.is_some_and(|s| s.enabled)),)*]
+            };
+        }
+        every_table!(flags)
     }
 
     /// The effects whose tables are present (enabled or not), in the order of [`EFFECTS`].
@@ -230,23 +244,7 @@ impl WorldSection {
                 }
             };
         }
-        Ok(keep_on!(
-            ionosphere,
-            troposphere,
-            multipath,
-            satellite_clock,
-            ephemeris,
-            code_noise,
-            receiver_clock,
-            gnss_antenna,
-            carrier_phase,
-            vehicle,
-            vibration,
-            gravity,
-            imu,
-            star_tracker,
-            baro
-        ))
+        Ok(every_table!(keep_on))
     }
 }
 
@@ -262,6 +260,7 @@ impl WorldSection {
         on(self.ionosphere, |s| s.enabled).is_some()
             || on(self.troposphere, |s| s.enabled).is_some()
             || on(self.multipath, |s| s.enabled).is_some()
+            || on(self.nlos, |s| s.enabled).is_some()
             || on(self.satellite_clock, |s| s.enabled).is_some()
             || on(self.ephemeris, |s| s.enabled).is_some()
             || on(self.code_noise, |s| s.enabled).is_some()
@@ -389,6 +388,20 @@ impl WorldSection {
             nonneg("multipath.sigma_horizon_m", s.sigma_horizon_m)?;
             positive("multipath.elevation_scale_deg", s.elevation_scale_deg)?;
             positive("multipath.tau_s", s.tau_s)?;
+        }
+        if let Some(s) = &self.nlos {
+            for (key, p) in [
+                ("nlos.probability_zenith", s.probability_zenith),
+                ("nlos.probability_horizon", s.probability_horizon),
+            ] {
+                if !(p.is_finite() && (0.0..=0.9).contains(&p)) {
+                    return Err(bad(key, format!("{p} is outside 0..0.9")));
+                }
+            }
+            positive("nlos.elevation_scale_deg", s.elevation_scale_deg)?;
+            positive("nlos.mean_duration_s", s.mean_duration_s)?;
+            nonneg("nlos.excess_path_mean_m", s.excess_path_mean_m)?;
+            nonneg("nlos.cn0_loss_db", s.cn0_loss_db)?;
         }
         if let Some(s) = &self.satellite_clock {
             nonneg("satellite_clock.sigma_m", s.sigma_m)?;
@@ -640,6 +653,7 @@ pub struct GnssWorld {
     ionosphere: Option<Ionosphere>,
     troposphere: Option<Troposphere>,
     multipath: Option<Multipath>,
+    nlos: Option<Nlos>,
     signal_in_space: SignalInSpace,
 }
 
@@ -664,8 +678,14 @@ impl RangeErrors {
 }
 
 impl GnssWorld {
-    /// The world of `spec` for `n_sats` satellites, drawing from `rng` (the `"world"` stream).
-    pub fn new(spec: WorldSection, n_sats: usize, mut rng: ChaCha20Rng) -> Self {
+    /// The world of `spec` for `n_sats` satellites, drawing from `rng` (the `"world"` stream)
+    /// and, for the echoes, from `nlos_rng` (the `"world_nlos"` stream).
+    pub fn new(
+        spec: WorldSection,
+        n_sats: usize,
+        mut rng: ChaCha20Rng,
+        nlos_rng: ChaCha20Rng,
+    ) -> Self {
         let ionosphere =
             on(spec.ionosphere, |s| s.enabled).map(|s| Ionosphere::new(s, n_sats, &mut rng));
         let troposphere =
@@ -674,12 +694,14 @@ impl GnssWorld {
             on(spec.multipath, |s| s.enabled).map(|s| Multipath::new(s, n_sats, &mut rng));
         let signal_in_space =
             SignalInSpace::new(spec.satellite_clock, spec.ephemeris, n_sats, &mut rng);
+        let nlos = on(spec.nlos, |s| s.enabled).map(|s| Nlos::new(s, n_sats, nlos_rng));
         Self {
             spec,
             rng,
             ionosphere,
             troposphere,
             multipath,
+            nlos,
             signal_in_space,
         }
     }
@@ -701,6 +723,17 @@ impl GnssWorld {
             m.step(dt_s, &mut self.rng);
         }
         self.signal_in_space.step(dt_s, &mut self.rng);
+        if let Some(n) = &mut self.nlos {
+            n.step(dt_s);
+        }
+    }
+
+    /// Satellite `i` at elevation `el_rad` this epoch: `Some((excess path m, C/N0 loss dB))`
+    /// when it is received only through an echo ([`nlos`]), `None` in line of sight or without
+    /// the effect. Advances its NLOS chain once per epoch.
+    pub fn nlos(&mut self, i: usize, el_rad: f64) -> Option<(f64, f64)> {
+        let n = self.nlos.as_mut()?;
+        n.update(i, el_rad).map(|d| (d, n.cn0_loss_db()))
     }
 
     /// Whether the world delays the signals in the ionosphere and in the troposphere. The

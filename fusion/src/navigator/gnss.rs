@@ -367,11 +367,12 @@ impl Navigator {
     ///
     /// Why `S` has no cross term: the filter's error before this update depends on the IMU,
     /// on earlier epochs' measurement noise and on the clock model; the fix's error is
-    /// `(HᵀWH)⁻¹HᵀWε` of THIS epoch's pseudorange noise, which the simulator draws white
-    /// (independent between epochs) — so the two errors are independent. In a real receiver
+    /// `(HᵀWH)⁻¹HᵀWε` of THIS epoch's pseudorange errors — independent of the filter's when
+    /// they are white (the matched simulator). In a real receiver (and the simulator's world)
     /// they share slowly varying satellite-orbit/clock and atmosphere errors that the filter
-    /// has absorbed from earlier epochs (the sim does not model them); there `S` would need
-    /// their covariance subtracted twice, and the NIS here would read high.
+    /// has absorbed from earlier epochs; there `S` would need their covariance subtracted
+    /// twice, and the NIS here reads high. An echo of a hidden satellite (metres, one epoch
+    /// to the next) makes the fix disagree: that is what the count is for.
     ///
     /// What a disagreement does: it is counted (`gnss_ls_disagreements`, with
     /// `gnss_ls_last_nis` and `gnss_ls_pdop` on `msgs::Status`) and nothing else. The epoch's

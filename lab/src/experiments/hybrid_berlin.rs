@@ -40,15 +40,15 @@
 use super::consistency::filter_config;
 use super::plot::{Chart, Line, color, line_chart};
 use super::{ExperimentError, fmt_f64, measurement, progress_bar, scenario_file};
-use crate::smartloc::{self, DriveSamples, SmartLoc, StartFix, wls};
+use crate::smartloc::{self, DriveSamples, SmartLoc, StartFix};
 use drivers_sim::offline::{OfflineSim, run_navigator};
 use drivers_sim::reference_trajectory::ReferenceTrajectory;
 use drivers_sim::scenario::Scenario;
 use fusion::earth::{self, WGS84};
-use fusion::ekf::chi2_quantile;
+use fusion::gnss_ls::{self, LsSettings, Observations};
 use fusion::navigator::{Navigator, NavigatorConfig};
 use msgs::{Channel, GnssSample, GnssSatellite, OdometerSample, Record};
-use nalgebra::{Matrix3, Matrix4, Vector3, Vector4};
+use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::fmt::Write as _;
@@ -250,45 +250,28 @@ fn load(settings: &Settings) -> Result<Drive, ExperimentError> {
     Ok(Drive { data, source })
 }
 
-/// Snapshot fault detection and exclusion: while the weighted residuals fail the χ² test
-/// (n − 4 dof, [`FDE_PROBABILITY`]) and at least six satellites remain, exclude the one with
-/// the largest Baarda w-statistic `|r_i| / (σ_i·√(1 − h_ii))`, `h_ii = σ_i⁻²·H_i N⁻¹ H_iᵀ` the
-/// weighted hat matrix's diagonal. Returns the excluded count.
+/// Snapshot fault detection and exclusion ([`fusion::gnss_ls::solve_excluding_faults`] at
+/// [`FDE_PROBABILITY`], while at least six satellites remain): the excluded satellites are
+/// removed from `s`. Returns the excluded count.
 fn exclude_faults(s: &mut GnssSample) -> usize {
-    let mut excluded = 0;
-    loop {
-        let n = s.n_satellites as usize;
-        let Some(fix) = wls(s) else {
-            return excluded;
-        };
-        let p = &fix.position;
-        if n < 5 || p.chi2 <= chi2_quantile((n - 4) as u32, FDE_PROBABILITY) || n < 6 {
-            return excluded;
-        }
-        let mut q = Matrix4::zeros();
-        q.fixed_view_mut::<3, 3>(0, 0).copy_from(&p.cov_r_e_m2);
-        q.fixed_view_mut::<3, 1>(0, 3).copy_from(&p.cov_r_clock_m2);
-        q.fixed_view_mut::<1, 3>(3, 0)
-            .copy_from(&p.cov_r_clock_m2.transpose());
-        q[(3, 3)] = p.var_clock_bias_m2;
-        let mut worst = (0.0, 0usize);
-        for i in 0..n {
-            let sat = &s.satellites[i];
-            let d = Vector3::from(sat.sat_pos_ecef_m) - p.r_e_m;
-            let u = d / d.norm();
-            let h = Vector4::new(-u.x, -u.y, -u.z, 1.0);
-            let var = sat.sigma_pseudorange_m.powi(2);
-            let hii = (h.transpose() * q * h)[(0, 0)] / var;
-            let w = p.residuals_m[i].abs() / (var * (1.0 - hii).max(1e-9)).sqrt();
-            if w > worst.0 {
-                worst = (w, i);
-            }
-        }
-        s.satellites.copy_within(worst.1 + 1..n, worst.1);
-        s.satellites[n - 1] = GnssSatellite::default();
-        s.n_satellites -= 1;
-        excluded += 1;
-    }
+    let Ok(obs) = Observations::from_sample(s) else {
+        return 0;
+    };
+    let Ok(screened) =
+        gnss_ls::solve_excluding_faults(&obs, &LsSettings::default(), FDE_PROBABILITY, 5)
+    else {
+        return 0;
+    };
+    let n = s.n_satellites as usize;
+    let kept: Vec<GnssSatellite> = s.satellites[..n]
+        .iter()
+        .filter(|sat| screened.kept.as_slice().iter().any(|o| o.prn == sat.prn))
+        .copied()
+        .collect();
+    s.satellites[..n].fill(GnssSatellite::default());
+    s.satellites[..kept.len()].copy_from_slice(&kept);
+    s.n_satellites = kept.len() as u32;
+    screened.excluded
 }
 
 /// Horizontal error of `p` against `reference` (north/east at the reference), m, and up.
