@@ -549,18 +549,16 @@ pub fn solve_excluding_faults(
     probability: f64,
     min_used: usize,
 ) -> Result<ScreenedFix, GnssLsError> {
-    let mut kept = *obs;
-    let mut excluded = 0;
+    let mut best = ScreenedFix {
+        fix: solve(obs, settings)?,
+        kept: *obs,
+        excluded: 0,
+    };
     loop {
-        let fix = solve(&kept, settings)?;
-        let p = &fix.position;
-        let n = kept.len();
+        let p = &best.fix.position;
+        let n = best.kept.len();
         if n <= min_used.max(4) || p.chi2 <= chi2_quantile((n - 4) as u32, probability) {
-            return Ok(ScreenedFix {
-                fix,
-                kept,
-                excluded,
-            });
+            return Ok(best);
         }
         let mut q = Matrix4::zeros();
         q.fixed_view_mut::<3, 3>(0, 0).copy_from(&p.cov_r_e_m2);
@@ -569,7 +567,7 @@ pub fn solve_excluding_faults(
             .copy_from(&p.cov_r_clock_m2.transpose());
         q[(3, 3)] = p.var_clock_bias_m2;
         let mut worst = (f64::NEG_INFINITY, 0usize);
-        for (i, o) in kept.as_slice().iter().enumerate() {
+        for (i, o) in best.kept.as_slice().iter().enumerate() {
             let (h, _, _) = row(&o.sat_pos_ecef_m, &p.r_e_m);
             let var = o.sigma_pseudorange_m.powi(2);
             let hii = (h.transpose() * q * h)[(0, 0)] / var;
@@ -578,8 +576,17 @@ pub fn solve_excluding_faults(
                 worst = (w, i);
             }
         }
+        let mut kept = best.kept;
         kept.remove(worst.1);
-        excluded += 1;
+        // A geometry the exclusion leaves singular keeps the fix it had.
+        let Ok(fix) = solve(&kept, settings) else {
+            return Ok(best);
+        };
+        best = ScreenedFix {
+            fix,
+            kept,
+            excluded: best.excluded + 1,
+        };
     }
 }
 
