@@ -676,6 +676,18 @@ fn world_section_is_validated() {
     assert!(e.contains("world.carrier_phase.unflagged_fraction"), "{e}");
     let e = err("[world.code_noise]\nsigma_at_45_dbhz_m = 0.3\nbogus = 1\n");
     assert!(e.contains("bogus"), "{e}");
+    let nlos = |p_h: f64, t: f64| {
+        format!(
+            "[world.nlos]\nprobability_zenith = 0.0\nprobability_horizon = {p_h}\n\
+             elevation_scale_deg = 10.0\nmean_duration_s = {t}\nexcess_path_mean_m = 10.0\n\
+             cn0_loss_db = 6.0\n"
+        )
+    };
+    let e = err(&nlos(1.5, 5.0));
+    assert!(e.contains("world.nlos.probability_horizon"), "{e}");
+    let e = err(&nlos(0.1, 0.0));
+    assert!(e.contains("world.nlos.mean_duration_s"), "{e}");
+    assert_eq!(err(&nlos(0.1, 5.0)), "accepted");
     // The receiver's budget: the static site's grade has one; overriding it away is an error.
     let no_uere = base.replace("[gnss]", "[gnss]\noverrides = { uere = { sis_m = -1.0 } }");
     let e = match Scenario::from_toml_str(
