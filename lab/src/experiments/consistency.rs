@@ -140,6 +140,19 @@ pub(crate) fn installed(
     ))
 }
 
+/// `cfg` told the region's gravity class (`config/filter.toml`'s `[gravity_disturbance]`)
+/// where `scn`'s world has a gravity field, and nothing else of the car's installation: for a
+/// simulated IMU beside real GNSS, whose receiver model the experiment sets itself.
+pub(crate) fn with_gravity_class(
+    scn: &Scenario,
+    mut cfg: NavigatorConfig,
+) -> Result<NavigatorConfig, ExperimentError> {
+    if scn.spec.world.is_some_and(|w| w.gravity().is_some()) {
+        cfg.gravity_disturbance = car_filter()?.gravity_disturbance;
+    }
+    Ok(cfg)
+}
+
 /// Settings of the experiment.
 #[derive(Debug, Clone)]
 pub struct Settings {

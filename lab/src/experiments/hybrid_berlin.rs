@@ -424,13 +424,8 @@ fn config(
     if case.tight {
         o.push(("gnss_mode", toml::Value::String("tight".into())));
     }
-    let mut cfg = filter_config(&o)?;
-    // The simulated IMU moves in the world's gravity field (`[world.gravity]`): the filter is
-    // told the region's gravity class, `config/filter.toml`'s.
-    if scn.spec.world.is_some_and(|w| w.gravity().is_some()) {
-        cfg.gravity_disturbance = super::consistency::car_filter()?.gravity_disturbance;
-    }
-    Ok(cfg)
+    // The simulated IMU moves in the world's gravity field.
+    super::consistency::with_gravity_class(scn, filter_config(&o)?)
 }
 
 /// What one run produces for the plots: (t, horizontal error, 3·σ_h) at the reference epochs.

@@ -295,13 +295,9 @@ fn one_run(
     tight: bool,
     gm: bool,
 ) -> Result<(Run, Series), ExperimentError> {
-    let mut cfg = config(tight, gm)?;
-    // The simulated IMU stands in the world's gravity field (`[world.gravity]`): the filter
-    // is told the region's gravity class, `config/filter.toml`'s (of the car's installation
+    // The simulated IMU stands in the world's gravity field (of the car's installation
     // nothing else applies to a static bench).
-    if scn.spec.world.is_some_and(|w| w.gravity().is_some()) {
-        cfg.gravity_disturbance = super::consistency::car_filter()?.gravity_disturbance;
-    }
+    let cfg = super::consistency::with_gravity_class(scn, config(tight, gm)?)?;
     let mut nav = Navigator::new(cfg).map_err(|e| measurement(format!("navigator: {e}")))?;
     let sim = OfflineSim::with_channels(scn, &[Channel::Imu, Channel::Truth]);
     let epoch = sim.epoch_ns();
