@@ -377,6 +377,41 @@ impl AxisErrors {
     }
 }
 
+/// 1-σ of one interval's output error from white noise `white_per_rt_s` and an ADC step
+/// `lsb` (uniform quantisation error, variance LSB²/12) over `dt_s`.
+fn interval_sigma(white_per_rt_s: f64, lsb: f64, dt_s: f64) -> f64 {
+    let w = white_per_rt_s * dt_s.sqrt();
+    let q = lsb * dt_s / 12f64.sqrt();
+    (w * w + q * q).sqrt()
+}
+
+/// One redundant channel's share of its actual unit (`[world.imu]`), SI units.
+#[derive(Debug, Clone, Copy)]
+struct ChannelUnit {
+    /// Gyro g-sensitivity along the channel's axis, (rad/s) per (m/s²), body frame.
+    gyro_g_sensitivity: Vector3<f64>,
+    /// Gyro warm-up bias at power-on, rad/s.
+    gyro_warmup_rad_s: f64,
+    /// Accelerometer warm-up bias at power-on, m/s².
+    accel_warmup_m_s2: f64,
+    /// Warm-up time constant, s.
+    warmup_tau_s: f64,
+}
+
+impl ChannelUnit {
+    /// At `t_s` after power-on, over an interval with body velocity increment `dv_b_m_s`:
+    /// gyro warm-up bias (rad/s), accelerometer warm-up bias (m/s²) and the g-sensitive
+    /// drift's delta-angle `∫gᵀf dt = gᵀΔv` (rad).
+    fn errors(&self, t_s: f64, dv_b_m_s: &Vector3<f64>) -> (f64, f64, f64) {
+        let d = (-t_s.max(0.0) / self.warmup_tau_s).exp();
+        (
+            self.gyro_warmup_rad_s * d,
+            self.accel_warmup_m_s2 * d,
+            self.gyro_g_sensitivity.dot(dv_b_m_s),
+        )
+    }
+}
+
 /// Per-interval outputs of the redundant channels.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct ChannelOutputs {
@@ -407,12 +442,20 @@ pub struct ChannelOutputs {
 ///
 /// Draws come from the stream `"imu_channels"`, so the orthogonal triad's stream `"imu"` and
 /// every default run are unchanged.
+///
+/// With `[world.imu]` each channel is an actual unit, not its data sheet
+/// ([`ChannelErrorModel::set_units`]): every single-axis sensor is a separate part, so each
+/// channel draws its own unit (stream `"world_imu_channels"`).
 #[derive(Debug, Clone)]
 pub struct ChannelErrorModel {
     rng: ChaCha20Rng,
     axes: Vec<[f64; 3]>,
     gyro: Vec<AxisErrors>,
     accel: Vec<AxisErrors>,
+    /// The grade's per-axis values, as the data sheet states them.
+    data_sheet: (SensorSigmas, SensorSigmas),
+    /// Per channel, the world's actual unit (empty without `[world.imu]`).
+    units: Vec<ChannelUnit>,
     temperature: TemperatureProfile,
     temperature_offsets_c: Vec<f64>,
     reference_temperature_c: f64,
@@ -423,17 +466,51 @@ pub struct ChannelErrorModel {
 }
 
 impl ChannelErrorModel {
-    /// The channels of the scenario, or None if `[imu.channels]` is absent.
+    /// The channels of the scenario, or None if `[imu.channels]` is absent; with
+    /// `[world.imu]`, each channel its own actual unit.
     pub fn new(scn: &Scenario) -> Option<Self> {
         let ch = scn.spec.imu.channels.as_ref()?;
-        Some(Self::from_grade(
+        let mut m = Self::from_grade(
             &ch.unit_axes(),
             &scn.imu,
             scn.spec.imu.temperature,
             &ch.temperature_offsets_c,
             &ch.failures,
             crate::sensor_rng(scn.spec.scenario.seed, "imu_channels"),
-        ))
+        );
+        m.set_world_units(scn, scn.spec.scenario.seed);
+        Some(m)
+    }
+
+    /// When `scn` has `[world.imu]`, make every channel an actual unit drawn for `seed`
+    /// ([`ChannelErrorModel::set_units`] from the stream `"world_imu_channels"`).
+    pub fn set_world_units(&mut self, scn: &Scenario, seed: u64) {
+        if let Some(spec) = scn.spec.world.and_then(|w| w.imu()) {
+            self.set_units(&spec, crate::sensor_rng(seed, "world_imu_channels"));
+        }
+    }
+
+    /// Make each channel an actual unit of `spec`, drawn in channel order from `rng`: its
+    /// gyro's and accelerometer's noise densities and bias random walks scaled by the unit's
+    /// factors, the gyro's g-sensitivity `e_iᵀ·G` (the unit's matrix seen along the channel's
+    /// nominal axis `e_i`, so each element keeps its 1-σ) and both warm-up transients
+    /// projected on `e_i`.
+    pub fn set_units(&mut self, spec: &crate::world::imu_unit::ImuUnitSpec, mut rng: ChaCha20Rng) {
+        self.units.clear();
+        for (i, ax) in self.axes.iter().enumerate() {
+            let u = crate::world::imu_unit::ImuUnit::new(spec, &mut rng);
+            let e = Vector3::from(*ax);
+            self.gyro[i].white_per_rt_s *= u.gyro_noise_factor;
+            self.accel[i].white_per_rt_s *= u.accel_noise_factor;
+            self.gyro[i].bias_rw_per_rt_s *= u.gyro_bias_rw_factor;
+            self.accel[i].bias_rw_per_rt_s *= u.accel_bias_rw_factor;
+            self.units.push(ChannelUnit {
+                gyro_g_sensitivity: u.gyro_g_sensitivity.transpose() * e,
+                gyro_warmup_rad_s: e.dot(&u.gyro_warmup_rad_s),
+                accel_warmup_m_s2: e.dot(&u.accel_warmup_m_s2),
+                warmup_tau_s: u.warmup_tau_s,
+            });
+        }
     }
 
     /// Channels on unit `axes` with the per-axis errors of `grade`, drawn from `rng`.
@@ -458,6 +535,8 @@ impl ChannelErrorModel {
             axes: axes.to_vec(),
             gyro,
             accel,
+            data_sheet: (g, a),
+            units: Vec::new(),
             temperature,
             temperature_offsets_c: temperature_offsets_c.to_vec(),
             reference_temperature_c: grade.reference_temperature_c,
@@ -473,18 +552,26 @@ impl ChannelErrorModel {
     }
 
     /// 1-σ white noise of one gyro channel's delta-angle over `dt_s` (ARW and quantisation),
-    /// rad, and of one accelerometer channel's delta-velocity, m/s. The quantisation error is
-    /// taken as uniform over one LSB (variance LSB²/12), which holds when the noise dithers.
+    /// rad, and of one accelerometer channel's delta-velocity, m/s, as the data sheet states
+    /// them: what a user configuring the FDI knows. The quantisation error is taken as
+    /// uniform over one LSB (variance LSB²/12), which holds when the noise dithers.
     pub fn interval_sigmas(&self, dt_s: f64) -> (f64, f64) {
-        let s = |e: &AxisErrors| {
-            let w = e.white_per_rt_s * dt_s.sqrt();
-            let q = e.lsb * dt_s / 12f64.sqrt();
-            (w * w + q * q).sqrt()
-        };
+        let (g, a) = &self.data_sheet;
         (
-            self.gyro.first().map_or(0.0, s),
-            self.accel.first().map_or(0.0, s),
+            interval_sigma(g.white_per_rt_s, g.lsb, dt_s),
+            interval_sigma(a.white_per_rt_s, a.lsb, dt_s),
         )
+    }
+
+    /// The same as [`ChannelErrorModel::interval_sigmas`] for channel `i` as the world made
+    /// it (its unit's noise densities; the data sheet's without `[world.imu]`), or None when
+    /// there is no channel `i`. Truth: for tests and analysis, never for configuring a filter.
+    pub fn actual_interval_sigmas(&self, i: usize, dt_s: f64) -> Option<(f64, f64)> {
+        let (g, a) = (self.gyro.get(i)?, self.accel.get(i)?);
+        Some((
+            interval_sigma(g.white_per_rt_s, g.lsb, dt_s),
+            interval_sigma(a.white_per_rt_s, a.lsb, dt_s),
+        ))
     }
 
     /// Channel outputs of the interval `(t_end_s − dt, t_end_s]` with true body increments
@@ -523,11 +610,15 @@ impl ChannelErrorModel {
                 out.delta_velocity_m_s[i] = e.dot(&inc.delta_velocity_b_m_s);
                 continue;
             }
-            let gb = g.bias0 + g.bias_rw + g.temp_coeff * dtemp;
-            let ab = a.bias0 + a.bias_rw + a.temp_coeff * dtemp;
+            let (warm_g, warm_a, g_sens) = self.units.get(i).map_or((0.0, 0.0, 0.0), |u| {
+                u.errors(t_mid, &inc.delta_velocity_b_m_s)
+            });
+            let gb = g.bias0 + g.bias_rw + g.temp_coeff * dtemp + warm_g;
+            let ab = a.bias0 + a.bias_rw + a.temp_coeff * dtemp + warm_a;
             out.gyro_bias_rad_s[i] = gb;
             out.accel_bias_m_s2[i] = ab;
             let yg = (1.0 + g.scale) * g.true_axis.dot(&inc.delta_angle_b_rad)
+                + g_sens
                 + gb * dt
                 + g.white_per_rt_s * sq * wg;
             let ya = (1.0 + a.scale) * a.true_axis.dot(&inc.delta_velocity_b_m_s)
@@ -589,5 +680,134 @@ impl ChannelErrorModel {
         }
         self.last_healthy = healthy;
         out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::world::imu_unit::{ImuUnit, ImuUnitSpec};
+    use std::path::Path;
+
+    fn uav() -> Scenario {
+        let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../config/scenarios/uav.toml");
+        Scenario::load(&p).unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    /// `[world.imu]` on the redundant channels: each channel is its own part. Against the
+    /// data sheet's model of the same seed (same `"imu_channels"` draws), the world's differs
+    /// by exactly each channel's unit, re-drawn here from `"world_imu_channels"`: noise
+    /// densities and bias random walks scaled by its factors; at power-on, over an interval
+    /// with specific force, its gyro output offset by `e_iᵀ·G·Δv + e_iᵀ·b_w·dt` and its
+    /// accelerometer's by `e_iᵀ·a_w·dt`. The σ a user configures the FDI with stays the data
+    /// sheet's.
+    #[test]
+    fn redundant_channels_are_each_their_own_unit() {
+        let scn = uav();
+        let spec = scn
+            .spec
+            .world
+            .and_then(|w| w.imu())
+            .expect("uav's [world.imu]");
+        let seed = scn.spec.scenario.seed;
+        let mut world = ChannelErrorModel::new(&scn).expect("channels");
+        let mut sheet = ChannelErrorModel::new(&crate::matched::scenario(scn.clone())).unwrap();
+        let n = world.axes().len();
+        let mut rng = crate::sensor_rng(seed, "world_imu_channels");
+        let units: Vec<ImuUnit> = (0..n).map(|_| ImuUnit::new(&spec, &mut rng)).collect();
+        for (i, u) in units.iter().enumerate() {
+            let (w, s) = (&world.gyro[i], &sheet.gyro[i]);
+            assert_eq!(w.white_per_rt_s, s.white_per_rt_s * u.gyro_noise_factor);
+            assert_eq!(
+                w.bias_rw_per_rt_s,
+                s.bias_rw_per_rt_s * u.gyro_bias_rw_factor
+            );
+            let (w, s) = (&world.accel[i], &sheet.accel[i]);
+            assert_eq!(w.white_per_rt_s, s.white_per_rt_s * u.accel_noise_factor);
+            assert_eq!(
+                w.bias_rw_per_rt_s,
+                s.bias_rw_per_rt_s * u.accel_bias_rw_factor
+            );
+            assert_ne!(
+                world.actual_interval_sigmas(i, 0.01),
+                sheet.actual_interval_sigmas(i, 0.01)
+            );
+        }
+        assert_eq!(world.interval_sigmas(0.01), sheet.interval_sigmas(0.01));
+
+        // The deterministic terms, without noise and quantisation: 1.5 g along a tilted
+        // direction for one 10 ms interval at power-on.
+        for m in [&mut world, &mut sheet] {
+            for e in m.gyro.iter_mut().chain(m.accel.iter_mut()) {
+                e.white_per_rt_s = 0.0;
+                e.lsb = 0.0;
+            }
+        }
+        let dt = 0.01;
+        let inc = Increments {
+            dt_s: dt,
+            delta_angle_b_rad: Vector3::new(1e-4, -2e-4, 3e-4),
+            delta_velocity_b_m_s: Vector3::new(3.0, -4.0, -12.0).normalize() * 1.5 * G0_M_S2 * dt,
+            distance_x_m: 0.0,
+            odometer_distance_m: 0.0,
+        };
+        let (w, s) = (world.sample(dt, &inc), sheet.sample(dt, &inc));
+        for (i, u) in units.iter().enumerate() {
+            let e = Vector3::from(world.axes()[i]);
+            let (gw, aw) = u.warmup(0.5 * dt);
+            let want_g =
+                e.dot(&(u.gyro_g_sensitivity * inc.delta_velocity_b_m_s)) + e.dot(&gw) * dt;
+            let got_g = w.delta_angle_rad[i] - s.delta_angle_rad[i];
+            assert!(
+                (got_g - want_g).abs() < 1e-18,
+                "gyro {i}: {got_g} vs {want_g}"
+            );
+            assert!(
+                want_g.abs() > 1e-9,
+                "gyro {i}: the unit's terms are visible"
+            );
+            let got_a = w.delta_velocity_m_s[i] - s.delta_velocity_m_s[i];
+            assert!((got_a - e.dot(&aw) * dt).abs() < 1e-15, "accel {i}");
+            assert!((w.gyro_bias_rad_s[i] - s.gyro_bias_rad_s[i] - e.dot(&gw)).abs() < 1e-20);
+        }
+    }
+
+    /// A unit axis sees each element of the unit's g-sensitivity matrix, and each warm-up
+    /// axis, with its 1-σ: over 4000 single-channel parts on e = (0.6, 0, 0.8), E[g_x²] = σ_G²
+    /// and E[b_w²] = σ_w² within 4 standard errors.
+    #[test]
+    fn channel_projection_keeps_the_unit_sigmas() {
+        let scn = uav();
+        let spec = ImuUnitSpec {
+            warmup_tau_s: 1e9,
+            ..scn.spec.world.and_then(|w| w.imu()).unwrap()
+        };
+        let deg_h_per_g = DEG_H_TO_RAD_S / G0_M_S2;
+        let (mut g2, mut w2) = (Vec::new(), Vec::new());
+        for seed in 0..4000u64 {
+            let mut m = ChannelErrorModel::from_grade(
+                &[[0.6, 0.0, 0.8]],
+                &scn.imu,
+                scn.spec.imu.temperature,
+                &[],
+                &[],
+                crate::sensor_rng(seed, "imu_channels"),
+            );
+            m.set_units(&spec, crate::sensor_rng(seed, "world_imu_channels"));
+            g2.push(m.units[0].gyro_g_sensitivity.x.powi(2));
+            w2.push(m.units[0].gyro_warmup_rad_s.powi(2));
+        }
+        let checks = [
+            (g2, spec.gyro_g_sensitivity_deg_h_per_g * deg_h_per_g),
+            (w2, spec.gyro_warmup_deg_h * DEG_H_TO_RAD_S),
+        ];
+        for (sq, sigma) in checks {
+            let (v, se) = crate::world::gauss_markov::mean_and_standard_error(&sq);
+            assert!(
+                (v - sigma * sigma).abs() < 4.0 * se,
+                "{v} vs {}",
+                sigma * sigma
+            );
+        }
     }
 }

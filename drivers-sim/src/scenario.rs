@@ -615,6 +615,11 @@ pub struct ImuGrade {
     /// Temperature at which the bias is specified, °C.
     #[serde(default = "default_ref_temp")]
     pub reference_temperature_c: f64,
+    /// Time after power-on within which the data sheet says the biases settle, s (0: not
+    /// stated). What a user configures the redundant channels' FDI warm-up from; the
+    /// world's actual transient is `[world.imu]`'s.
+    #[serde(default)]
+    pub warmup_time_s: f64,
     /// Gyros.
     pub gyro: GyroGrade,
     /// Accelerometers.
@@ -1180,6 +1185,7 @@ impl Scenario {
                 imu.accel.temp_coeff_ug_per_c,
             ),
             ("imu.accel.full_scale_g", imu.accel.full_scale_g),
+            ("imu.warmup_time_s", imu.warmup_time_s),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(invalid(&gf, k, format!("must be finite and ≥ 0, got {v}")));

@@ -28,6 +28,14 @@ pub struct FdiConfig {
     /// blocks (follows temperature and random-walk bias drift; 0 = frozen). A drift-ramp
     /// fault of slope `r` still shows as a lag `r · track_blocks · block length`.
     pub track_blocks: u32,
+    /// Blocks after learning during which the channels are still warming up (the parts'
+    /// warm-up time from their data sheet; 0 = none): the offset tracks with
+    /// `warmup_track_blocks` instead of `track_blocks`, the tests stay on.
+    pub warmup_blocks: u32,
+    /// Time constant of the offset tracking during the warm-up, blocks. A first-order
+    /// tracker of time constant `T` follows a bias transient `b·e^{−t/τ}` with a lag
+    /// `b·T/(τ − T)` (T < τ): a tenth of the warm-up's τ leaves a ninth of the transient.
+    pub warmup_track_blocks: u32,
     /// Exclude an isolated channel (false: detect and report only).
     pub exclude: bool,
 }
@@ -44,6 +52,8 @@ impl Default for FdiConfig {
             persistence_blocks: 2,
             learn_blocks: 30,
             track_blocks: 600,
+            warmup_blocks: 0,
+            warmup_track_blocks: 30,
             exclude: true,
         }
     }
@@ -82,6 +92,11 @@ impl FdiConfig {
         if self.block_samples == 0 || self.persistence_blocks == 0 {
             return Err(ConfigError(
                 "redundancy.block_samples and persistence_blocks must be ≥ 1".into(),
+            ));
+        }
+        if self.warmup_blocks > 0 && self.warmup_track_blocks == 0 {
+            return Err(ConfigError(
+                "redundancy.warmup_track_blocks must be ≥ 1 when warmup_blocks is set".into(),
             ));
         }
         Ok(())
@@ -127,6 +142,11 @@ pub struct RedundancyConfig {
     pub learn_blocks: u32,
     /// Time constant of the offset tracking after learning, blocks (0 = frozen).
     pub track_blocks: u32,
+    /// Blocks after learning during which the channels warm up (0 = none): the offset
+    /// tracks with `warmup_track_blocks` (see [`FdiConfig::warmup_blocks`]).
+    pub warmup_blocks: u32,
+    /// Time constant of the offset tracking during the warm-up, blocks.
+    pub warmup_track_blocks: u32,
 }
 
 impl Default for RedundancyConfig {
@@ -143,6 +163,8 @@ impl Default for RedundancyConfig {
             persistence_blocks: f.persistence_blocks,
             learn_blocks: f.learn_blocks,
             track_blocks: f.track_blocks,
+            warmup_blocks: f.warmup_blocks,
+            warmup_track_blocks: f.warmup_track_blocks,
         }
     }
 }
@@ -167,6 +189,8 @@ impl RedundancyConfig {
             persistence_blocks: self.persistence_blocks,
             learn_blocks: self.learn_blocks,
             track_blocks: self.track_blocks,
+            warmup_blocks: self.warmup_blocks,
+            warmup_track_blocks: self.warmup_track_blocks,
             exclude: self.exclude,
         }
     }
@@ -196,6 +220,12 @@ impl RedundancyConfig {
         }
         if self.persistence_blocks == 0 {
             return bad("persistence_blocks", "must be >= 1");
+        }
+        if self.warmup_blocks > 0 && self.warmup_track_blocks == 0 {
+            return bad(
+                "warmup_track_blocks",
+                "must be >= 1 when warmup_blocks is set",
+            );
         }
         Ok(())
     }

@@ -26,6 +26,11 @@
 //! over the first `learn_blocks` blocks (when the sensor is assumed healthy, e.g. on the
 //! ground) and subtracted; after an exclusion the offset is re-projected: with `m` the mask of
 //! remaining channels, `P' m(b) = P' m(P b)` because `P'` annihilates `m(H c)`.
+//! The offset then follows slow bias drift (temperature, random walk) through a first-order
+//! tracker of time constant `track_blocks`; while the parts warm up after power-on
+//! (`warmup_blocks`) with the shorter `warmup_track_blocks`, since a warm-up transient learnt
+//! into the offset at power-on would otherwise stay in it for `track_blocks` and read as a
+//! fault.
 //!
 
 use super::least_squares::{ls_covariance_per_unit_variance, measurement_matrix};
@@ -329,8 +334,15 @@ impl RedundantImu {
         }
         let g = self.test(&self.gyro);
         let a = self.test(&self.accel);
-        if !(g.over || a.over) && self.config.track_blocks > 0 {
-            let w = 1.0 / f64::from(self.config.track_blocks);
+        // During the parts' warm-up the offset follows their bias transient with the shorter
+        // time constant; after it, slowly enough that a drift-ramp fault still shows.
+        let track = if self.blocks - learn <= u64::from(self.config.warmup_blocks) {
+            self.config.warmup_track_blocks
+        } else {
+            self.config.track_blocks
+        };
+        if !(g.over || a.over) && track > 0 {
+            let w = 1.0 / f64::from(track);
             for st in [&mut self.gyro, &mut self.accel] {
                 let r = self.projector * st.sum_z;
                 st.offset += (r - st.offset) * w;

@@ -253,6 +253,66 @@ fn learnt_offset_removes_constant_biases() {
     assert!(st.blocks_over_threshold <= 5, "{st:?}");
 }
 
+/// A warm-up transient `b_i·e^{−t/τ}` on each gyro channel (b of 5 block σ, τ = 300
+/// blocks), learnt into the offset at power-on. With the slow tracker alone (600 blocks) the
+/// offset keeps most of it for the first ~τ after learning, so the statistic is far above its
+/// χ² mean and blocks cross the threshold. With the warm-up configured (3τ, tracked with
+/// τ/10) the lag is b/9 ≤ 0.6 block σ, decaying as the transient: over blocks 300–1500 the
+/// mean statistic per dof is 1 ± 4·√(2/1200) = ± 0.16.
+#[test]
+fn warmup_tracking_follows_a_bias_transient() {
+    let tau_blocks = 300.0;
+    let run = |warmup_blocks: u32| {
+        let cfg = FdiConfig {
+            gyro_relative_sigma: 0.0,
+            accel_relative_sigma: 0.0,
+            learn_blocks: 30,
+            track_blocks: 600,
+            warmup_blocks,
+            warmup_track_blocks: 30,
+            exclude: false,
+            ..Default::default()
+        };
+        let n = 4;
+        let axes = pyramid_axes(n, 0.5);
+        let mut imu = RedundantImu::new(&axes_slice(&axes, n), cfg).unwrap();
+        let mut rng = ChaCha20Rng::seed_from_u64(17);
+        let b = [1.0, -0.6, 0.3, -0.9].map(|v| v * 5.0 * 10.0 * cfg.gyro_sigma_rad / 100.0);
+        let m = f64::from(cfg.block_samples);
+        let (mut sum, mut blocks, mut tested) = (0.0, 0, 0);
+        let steps = 1500 * cfg.block_samples as usize;
+        let x = Vector3::new(1e-4, -2e-4, 5e-5);
+        let xa = Vector3::new(0.0, 0.0, -0.098);
+        for k in 0..steps {
+            let d = (-(k as f64) / m / tau_blocks).exp();
+            let mut zg = channels(&axes, n, &x);
+            let mut za = channels(&axes, n, &xa);
+            for i in 0..n {
+                let (u, v): (f64, f64) = (rng.sample(StandardNormal), rng.sample(StandardNormal));
+                zg[i] += cfg.gyro_sigma_rad * u + b[i] * d;
+                za[i] += cfg.accel_sigma_m_s * v;
+            }
+            imu.step_vectors(&zg, &za);
+            let st = imu.status();
+            if st.blocks_tested > tested {
+                tested = st.blocks_tested;
+                if k >= 300 * cfg.block_samples as usize {
+                    sum += st.last_gyro_statistic / f64::from(st.dof);
+                    blocks += 1;
+                }
+            }
+        }
+        (sum / f64::from(blocks), imu.status())
+    };
+    let (slow, st_slow) = run(0);
+    let (warm, st_warm) = run((3.0 * tau_blocks) as u32);
+    println!("mean statistic per dof: slow tracker {slow:.3}, warm-up configured {warm:.3}");
+    assert!(slow > 1.5, "slow tracker: mean {slow}");
+    assert!(st_slow.blocks_over_threshold > 0, "{st_slow:?}");
+    assert!((warm - 1.0).abs() < 0.16, "warm-up configured: mean {warm}");
+    assert_eq!(st_warm.faults_detected, 0, "{st_warm:?}");
+}
+
 #[test]
 fn rejects_bad_layouts() {
     let coplanar = [
