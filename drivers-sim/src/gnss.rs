@@ -206,8 +206,19 @@ impl GnssSim {
         let b: f64 = rng.sample(StandardNormal);
         let d: f64 = rng.sample(StandardNormal);
         let constellation = Constellation::new(scn.spec.gnss.constellation);
+        // This receiver as a unit of its model (`[world.units]`): its oscillator's Allan
+        // coefficients and its code tracking noise scattered about their class.
+        let unit = scn
+            .spec
+            .world
+            .map_or(crate::world::units::AidingUnit::DATA_SHEET, |w| {
+                w.aiding_unit(scn.spec.scenario.seed, "gnss")
+            });
         let (q_b_m2_s, q_d_m2_s3) = match scn.spec.world.and_then(|w| w.receiver_clock()) {
-            Some(osc) => (osc.phase_psd_m2_s(), osc.frequency_psd_m2_s3()),
+            Some(osc) => (
+                osc.phase_psd_m2_s() * unit.oscillator_factors[0],
+                osc.frequency_psd_m2_s3() * unit.oscillator_factors[1],
+            ),
             None => (g.clock_bias_psd_m2_s, g.clock_drift_psd_m2_s3),
         };
         // Scenario validation guarantees the budget exists when the world's errors are on.
@@ -216,7 +227,10 @@ impl GnssSim {
             .world
             .filter(|w| w.gnss_errors_on())
             .zip(g.uere)
-            .map(|(w, u)| {
+            .map(|(mut w, u)| {
+                if let Some(c) = &mut w.code_noise {
+                    c.sigma_at_45_dbhz_m *= unit.noise_factors[0];
+                }
                 let seed = scn.spec.scenario.seed;
                 let (rng_w, rng_nlos) = (
                     crate::sensor_rng(seed, "world"),

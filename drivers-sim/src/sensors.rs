@@ -1,6 +1,6 @@
 //! Star tracker, odometer and barometer error models.
 
-use crate::scenario::{BaroGrade, OdometerGrade, Scenario, StarTrackerGrade, Window};
+use crate::scenario::{BaroGrade, Scenario, StarTrackerGrade, Window};
 use crate::truth::{Increments, TruthPoint};
 use fusion::celestial::EarthOrientation;
 use fusion::time::GpsTime;
@@ -40,11 +40,14 @@ pub struct StarTrackerSim {
     rng: ChaCha20Rng,
     /// Thermal error and boresight bias of `[world.star_tracker]`.
     world: Option<crate::world::aiding::StarTrackerWorld>,
+    /// This unit's white noise over the data sheet's, cross and roll (`[world.units]`).
+    noise_factors: [f64; 2],
 }
 
 impl StarTrackerSim {
     /// The star tracker of the scenario (stream `"star_tracker"`).
     pub fn new(scn: &Scenario) -> Self {
+        let unit = unit(scn, "star_tracker");
         let k = scn.spec.star_tracker.mounting_kappa_deg;
         let kappa = [k[0].to_radians(), k[1].to_radians(), k[2].to_radians()];
         Self {
@@ -59,6 +62,7 @@ impl StarTrackerSim {
                     crate::sensor_rng(scn.spec.scenario.seed, "world_star"),
                 )
             }),
+            noise_factors: [unit.noise_factors[0], unit.noise_factors[1]],
         }
     }
 
@@ -69,11 +73,13 @@ impl StarTrackerSim {
         self.c_s_b * truth.c_n_b.transpose() * truth.c_e_n.transpose() * c_e_i
     }
 
-    /// Sample at `t_s` since the epoch (GPS `t_gps_ns`).
+    /// Sample at `t_s` since the epoch (GPS `t_gps_ns`). The sample reports the data sheet's
+    /// σ, as a star tracker does; its error has this unit's.
     pub fn sample(&mut self, t_s: f64, t_gps_ns: i64, truth: &TruthPoint) -> StarTrackerSample {
         let g = self.grade;
         let sc = g.sigma_cross_arcsec * ARCSEC_TO_RAD;
         let sr = g.sigma_roll_arcsec * ARCSEC_TO_RAD;
+        let (uc, ur) = (sc * self.noise_factors[0], sr * self.noise_factors[1]);
         let n: [f64; 3] = [
             self.rng.sample(StandardNormal),
             self.rng.sample(StandardNormal),
@@ -95,7 +101,7 @@ impl StarTrackerSim {
         let c = self.c_s_i_true(t_gps_ns, truth);
         let q_true = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(c));
         // Attitude error: a small rotation about the sensor axes (z = optical axis).
-        let err = UnitQuaternion::from_scaled_axis(Vector3::new(sc * n[0], sc * n[1], sr * n[2]));
+        let err = UnitQuaternion::from_scaled_axis(Vector3::new(uc * n[0], uc * n[1], ur * n[2]));
         let mut q = match world_err {
             Some(e) => err * UnitQuaternion::from_scaled_axis(Vector3::from(e)) * q_true,
             None => err * q_true,
@@ -110,28 +116,48 @@ impl StarTrackerSim {
     }
 }
 
+/// This scenario's unit of `sensor` (`[world.units]`), or its data sheet.
+fn unit(scn: &Scenario, sensor: &str) -> crate::world::units::AidingUnit {
+    scn.spec
+        .world
+        .map_or(crate::world::units::AidingUnit::DATA_SHEET, |w| {
+            w.aiding_unit(scn.spec.scenario.seed, sensor)
+        })
+}
+
 /// Odometer simulator: the wheel's rolling distance (body x, or the world's wheel) with a
 /// scale-factor error and white speed noise.
 #[derive(Debug, Clone)]
 pub struct OdometerSim {
-    grade: OdometerGrade,
+    /// This unit's scale-factor error, ppm: the data sheet's value, or with `[world.units]`
+    /// a draw with it as 1-σ.
+    scale_factor_error_ppm: f64,
+    /// This unit's white speed noise, m/s.
+    speed_noise_m_s: f64,
     rng: ChaCha20Rng,
 }
 
 impl OdometerSim {
     /// The odometer of the scenario (stream `"odometer"`).
     pub fn new(scn: &Scenario) -> Self {
+        let u = unit(scn, "odometer");
         Self {
-            grade: scn.odometer,
+            scale_factor_error_ppm: scn.odometer.scale_factor_error_ppm * u.constant_normals[0],
+            speed_noise_m_s: scn.odometer.speed_noise_m_s * u.noise_factors[0],
             rng: crate::sensor_rng(scn.spec.scenario.seed, "odometer"),
         }
+    }
+
+    /// This unit's scale-factor error, ppm.
+    pub fn scale_factor_error_ppm(&self) -> f64 {
+        self.scale_factor_error_ppm
     }
 
     /// Sample for the interval integrals `inc` ending at GPS `t_gps_ns`.
     pub fn sample(&mut self, t_gps_ns: i64, inc: &Increments) -> OdometerSample {
         let n: f64 = self.rng.sample(StandardNormal);
-        let dist = (1.0 + self.grade.scale_factor_error_ppm * 1e-6) * inc.odometer_distance_m
-            + self.grade.speed_noise_m_s * n * inc.dt_s;
+        let dist = (1.0 + self.scale_factor_error_ppm * 1e-6) * inc.odometer_distance_m
+            + self.speed_noise_m_s * n * inc.dt_s;
         let mut out = OdometerSample {
             dt_s: inc.dt_s,
             distance_m: dist,
@@ -148,6 +174,11 @@ impl OdometerSim {
 #[derive(Debug, Clone)]
 pub struct BaroSim {
     grade: BaroGrade,
+    /// This unit's constant bias, Pa: the data sheet's value, or with `[world.units]` a draw
+    /// with it as 1-σ.
+    bias_pa: f64,
+    /// This unit's white noise, Pa.
+    noise_pa: f64,
     bias_rw_pa: f64,
     last_t_s: Option<f64>,
     rng: ChaCha20Rng,
@@ -161,8 +192,11 @@ pub struct BaroSim {
 impl BaroSim {
     /// The barometer of the scenario (stream `"baro"`).
     pub fn new(scn: &Scenario) -> Self {
+        let u = unit(scn, "baro");
         Self {
             grade: scn.baro,
+            bias_pa: scn.baro.bias_pa * u.constant_normals[0],
+            noise_pa: scn.baro.noise_pa * u.noise_factors[0],
             bias_rw_pa: 0.0,
             last_t_s: None,
             rng: crate::sensor_rng(scn.spec.scenario.seed, "baro"),
@@ -199,7 +233,7 @@ impl BaroSim {
             ),
         };
         let mut out = BaroSample {
-            pressure_pa: air_pa + self.grade.bias_pa + self.bias_rw_pa + self.grade.noise_pa * n,
+            pressure_pa: air_pa + self.bias_pa + self.bias_rw_pa + self.noise_pa * n,
             temperature_c: air_k - 273.15,
             ..Default::default()
         };

@@ -683,6 +683,14 @@ fn world_section_is_validated() {
              cn0_loss_db = 6.0\n"
         )
     };
+    let units = |n: f64, o: f64| {
+        format!("[world.units]\nnoise_log_sigma = {n}\noscillator_log_sigma = {o}\n")
+    };
+    let e = err(&units(1.5, 0.5));
+    assert!(e.contains("world.units.noise_log_sigma"), "{e}");
+    let e = err(&units(0.2, -0.1));
+    assert!(e.contains("world.units.oscillator_log_sigma"), "{e}");
+    assert_eq!(err(&units(0.2, 0.5)), "accepted");
     let e = err(&nlos(1.5, 5.0));
     assert!(e.contains("world.nlos.probability_horizon"), "{e}");
     let e = err(&nlos(0.1, 0.0));

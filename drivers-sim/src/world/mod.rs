@@ -26,7 +26,8 @@
 //! INS's normal gravity, as the real field does. The sensors' own worlds: the actual IMU unit
 //! ([`imu_unit`]: its noise and bias instability scattered about the data sheet, g-sensitive
 //! gyro drift, warm-up), the star tracker's thermal error, boresight bias and time-tag latency
-//! and the barometer's day of weather ([`aiding`]). Off unless a table is present and enabled;
+//! and the barometer's day of weather ([`aiding`]), and every aiding sensor as a unit of its
+//! model ([`units`]: noise and oscillator scattered about the data sheet, constant errors drawn). Off unless a table is present and enabled;
 //! every table is on in `config/scenarios/vehicle.toml`, the default scenario.
 //!
 //! These models are the world's own: none calls `fusion`'s ionosphere, troposphere or gravity
@@ -46,6 +47,7 @@ pub mod receiver_clock;
 pub mod satellite;
 pub mod spectral;
 pub mod troposphere;
+pub mod units;
 pub mod vehicle;
 
 #[cfg(test)]
@@ -133,6 +135,9 @@ pub struct WorldSection {
     /// The barometer's air (day's pressure, temperature, tendency) and its sensor's
     /// temperature coefficient.
     pub baro: Option<aiding::BaroWorldSpec>,
+    /// The aiding sensors as units of their model: noise and oscillator scatter, constant
+    /// errors drawn per unit.
+    pub units: Option<units::UnitsSpec>,
 }
 
 /// The GNSS part of `[world]`: every effect on the pseudoranges, the receiver's oscillator,
@@ -151,7 +156,7 @@ pub const GNSS_EFFECTS: [&str; 10] = [
 ];
 
 /// Every effect of `[world]`, by its table name.
-pub const EFFECTS: [&str; 16] = [
+pub const EFFECTS: [&str; 17] = [
     GNSS_EFFECTS[0],
     GNSS_EFFECTS[1],
     GNSS_EFFECTS[2],
@@ -168,6 +173,7 @@ pub const EFFECTS: [&str; 16] = [
     "imu",
     "star_tracker",
     "baro",
+    "units",
 ];
 
 /// Calls macro `$m` with every table's field of [`WorldSection`], in the order of [`EFFECTS`].
@@ -189,7 +195,8 @@ macro_rules! every_table {
             gravity,
             imu,
             star_tracker,
-            baro
+            baro,
+            units
         )
     };
 }
@@ -291,6 +298,17 @@ impl WorldSection {
     /// The barometer's world when enabled.
     pub fn baro(&self) -> Option<aiding::BaroWorldSpec> {
         on(self.baro, |s| s.enabled)
+    }
+    /// The aiding sensors' unit scatter when enabled.
+    pub fn units(&self) -> Option<units::UnitsSpec> {
+        on(self.units, |s| s.enabled)
+    }
+    /// `sensor`'s unit for scenario seed `seed` ([`units::AidingUnit::draw`]), or the data
+    /// sheet itself without `[world.units]`.
+    pub fn aiding_unit(&self, seed: u64, sensor: &str) -> units::AidingUnit {
+        self.units().map_or(units::AidingUnit::DATA_SHEET, |u| {
+            units::AidingUnit::draw(&u, seed, sensor)
+        })
     }
 
     /// The IMU unit spec when enabled.
@@ -554,6 +572,17 @@ impl WorldSection {
             nonneg("imu.gyro_warmup_deg_h", s.gyro_warmup_deg_h)?;
             nonneg("imu.accel_warmup_ug", s.accel_warmup_ug)?;
             positive("imu.warmup_tau_s", s.warmup_tau_s)?;
+        }
+        if let Some(s) = &self.units {
+            for (key, v, max) in [
+                ("noise_log_sigma", s.noise_log_sigma, 1.0),
+                ("oscillator_log_sigma", s.oscillator_log_sigma, 2.0),
+            ] {
+                nonneg(&format!("units.{key}"), v)?;
+                if v > max {
+                    return Err(bad(&format!("units.{key}"), format!("{v} is above {max}")));
+                }
+            }
         }
         if let Some(s) = &self.star_tracker {
             nonneg("star_tracker.thermal_sigma_arcsec", s.thermal_sigma_arcsec)?;
