@@ -208,12 +208,7 @@ impl GnssSim {
         let constellation = Constellation::new(scn.spec.gnss.constellation);
         // This receiver as a unit of its model (`[world.units]`): its oscillator's Allan
         // coefficients and its code tracking noise scattered about their class.
-        let unit = scn
-            .spec
-            .world
-            .map_or(crate::world::units::AidingUnit::DATA_SHEET, |w| {
-                w.aiding_unit(scn.spec.scenario.seed, "gnss")
-            });
+        let unit = scn.aiding_unit("gnss");
         let (q_b_m2_s, q_d_m2_s3) = match scn.spec.world.and_then(|w| w.receiver_clock()) {
             Some(osc) => (
                 osc.phase_psd_m2_s() * unit.oscillator_factors[0],

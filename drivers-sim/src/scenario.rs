@@ -630,6 +630,21 @@ fn default_ref_temp() -> f64 {
     20.0
 }
 
+impl ImuGrade {
+    /// What the data sheet's settling time `warmup_time_s` means for a redundant-channel FDI
+    /// with test blocks of `block_s` seconds: (blocks from power-on until the parts have
+    /// settled, the offset tracker's time constant during that time, blocks). The settling
+    /// time is read as 3τ (95 % settled) and the tracker set to τ/10, which lags an
+    /// exponential transient by a ninth of it (`b·T/(τ − T)`). (0, 1) without a stated time.
+    pub fn fdi_warmup_blocks(&self, block_s: f64) -> (u32, u32) {
+        let settle = self.warmup_time_s;
+        (
+            (settle / block_s).ceil() as u32,
+            ((settle / 3.0 / 10.0 / block_s).round() as u32).max(1),
+        )
+    }
+}
+
 /// Star-tracker grade.
 #[derive(Debug, Clone, Copy, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -1380,6 +1395,16 @@ impl Scenario {
     /// GPS time of the scenario epoch (needs `fusion::time`).
     pub fn epoch_gps(&self) -> fusion::time::GpsTime {
         fusion::time::GpsTime::from_utc_datetime(&self.start)
+    }
+
+    /// This scenario's unit of aiding `sensor` (`"star_tracker"`, `"odometer"`, `"baro"`,
+    /// `"gnss"`; `[world.units]`), or its data sheet without that table.
+    pub fn aiding_unit(&self, sensor: &str) -> crate::world::units::AidingUnit {
+        self.spec
+            .world
+            .map_or(crate::world::units::AidingUnit::DATA_SHEET, |w| {
+                w.aiding_unit(self.spec.scenario.seed, sensor)
+            })
     }
 
     /// The world's gravity disturbance at the site, NED, m/s² (true gravity minus the normal

@@ -47,7 +47,7 @@ pub struct StarTrackerSim {
 impl StarTrackerSim {
     /// The star tracker of the scenario (stream `"star_tracker"`).
     pub fn new(scn: &Scenario) -> Self {
-        let unit = unit(scn, "star_tracker");
+        let unit = scn.aiding_unit("star_tracker");
         let k = scn.spec.star_tracker.mounting_kappa_deg;
         let kappa = [k[0].to_radians(), k[1].to_radians(), k[2].to_radians()];
         Self {
@@ -116,15 +116,6 @@ impl StarTrackerSim {
     }
 }
 
-/// This scenario's unit of `sensor` (`[world.units]`), or its data sheet.
-fn unit(scn: &Scenario, sensor: &str) -> crate::world::units::AidingUnit {
-    scn.spec
-        .world
-        .map_or(crate::world::units::AidingUnit::DATA_SHEET, |w| {
-            w.aiding_unit(scn.spec.scenario.seed, sensor)
-        })
-}
-
 /// Odometer simulator: the wheel's rolling distance (body x, or the world's wheel) with a
 /// scale-factor error and white speed noise.
 #[derive(Debug, Clone)]
@@ -140,7 +131,7 @@ pub struct OdometerSim {
 impl OdometerSim {
     /// The odometer of the scenario (stream `"odometer"`).
     pub fn new(scn: &Scenario) -> Self {
-        let u = unit(scn, "odometer");
+        let u = scn.aiding_unit("odometer");
         Self {
             scale_factor_error_ppm: scn.odometer.scale_factor_error_ppm * u.constant_normals[0],
             speed_noise_m_s: scn.odometer.speed_noise_m_s * u.noise_factors[0],
@@ -192,7 +183,7 @@ pub struct BaroSim {
 impl BaroSim {
     /// The barometer of the scenario (stream `"baro"`).
     pub fn new(scn: &Scenario) -> Self {
-        let u = unit(scn, "baro");
+        let u = scn.aiding_unit("baro");
         Self {
             grade: scn.baro,
             bias_pa: scn.baro.bias_pa * u.constant_normals[0],

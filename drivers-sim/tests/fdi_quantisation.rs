@@ -26,7 +26,7 @@ fn uav_with(edit: impl Fn(String) -> String) -> Scenario {
 /// with the `[imu]` white noise and biases of the grade and, when `quantised`, the
 /// `[redundancy]` quantisation steps of its ADC (2·full scale / 2^bits), parsed from TOML.
 /// With `warmup`, the `[redundancy]` warm-up from the data sheet's settling time
-/// (`warmup_time_s` = 3τ): blocks until then after learning, tracked with τ/10.
+/// (`ImuGrade::fdi_warmup_blocks`): blocks until then after the 30 learning blocks.
 fn mems_config(scn: &Scenario, quantised: bool, warmup: bool) -> NavigatorConfig {
     let g = &scn.imu.gyro;
     let a = &scn.imu.accel;
@@ -53,14 +53,9 @@ fn mems_config(scn: &Scenario, quantised: bool, warmup: bool) -> NavigatorConfig
         t = set(t, "accel_quantum_mg", qa);
     }
     if warmup {
-        let block_s = 100.0 / scn.spec.imu.rate_hz;
-        let settle = scn.imu.warmup_time_s;
-        t = set(t, "warmup_blocks", (settle / block_s).ceil() - 30.0);
-        t = set(
-            t,
-            "warmup_track_blocks",
-            (settle / 3.0 / 10.0 / block_s).round(),
-        );
+        let (settled, track) = scn.imu.fdi_warmup_blocks(100.0 / scn.spec.imu.rate_hz);
+        t = set(t, "warmup_blocks", f64::from(settled.saturating_sub(30)));
+        t = set(t, "warmup_track_blocks", f64::from(track));
     }
     let cfg: NavigatorConfig = toml::from_str(&t).unwrap_or_else(|e| panic!("{e}\n{t}"));
     cfg.validate().unwrap_or_else(|e| panic!("{e}"));

@@ -230,16 +230,13 @@ struct RunResult {
 
 /// FDI settings for the channels of `model` at interval `dt_s`, all from the grade's data
 /// sheet: noise (the data sheet's, not the parts'), κ from the scale factor and axis
-/// misalignment (√(sf² + 2·mis²)), and the warm-up: the data sheet's settling time
-/// `warmup_time_s` taken as 3τ (95 % settled), tracked with τ/10 (lag a ninth of the
-/// transient) until then.
+/// misalignment (√(sf² + 2·mis²)), and the warm-up from its settling time
+/// (`ImuGrade::fdi_warmup_blocks`).
 fn fdi_config(model: &ChannelErrorModel, scn: &Scenario, dt_s: f64, exclude: bool) -> FdiConfig {
     const BLOCK_SAMPLES: u32 = 100;
     const LEARN_BLOCKS: u32 = 100;
     let block_s = f64::from(BLOCK_SAMPLES) * dt_s;
-    let warmup_blocks = (scn.imu.warmup_time_s / block_s).ceil() as u32;
-    let warmup_track_blocks =
-        ((scn.imu.warmup_time_s / 3.0 / 10.0 / block_s).round() as u32).max(1);
+    let (warmup_blocks, warmup_track_blocks) = scn.imu.fdi_warmup_blocks(block_s);
     let (sg, sa) = model.interval_sigmas(dt_s);
     let arcsec = std::f64::consts::PI / 180.0 / 3600.0;
     let g = &scn.imu.gyro;
