@@ -28,7 +28,7 @@ pub fn filter(cfg: NavigatorConfig) -> NavigatorConfig {
 /// `cfg` (a tuning) installed like the car `car` (`config/filter.toml`) for a world that has
 /// only some of the car's effects: the antenna's lever arm and time tag where the world has the
 /// antenna, the receiver's error correlation where it has pseudorange errors, the wheel's lever
-/// arm where it has the car, the star tracker's time tag and low-frequency error where it has
+/// arm where it has the car, the star tracker's time tag, low-frequency error and roll bias where it has
 /// the star tracker's world, the weather's drift where it has the barometer's air, the
 /// region's gravity class where it has a gravity disturbance, the oscillator's class where it
 /// has a real receiver clock; the matched
@@ -56,6 +56,7 @@ pub fn installed_for(
         cfg.aiding.star_low_frequency_sigma_arcsec = car.aiding.star_low_frequency_sigma_arcsec;
         cfg.aiding.star_low_frequency_correlation_time_s =
             car.aiding.star_low_frequency_correlation_time_s;
+        cfg.aiding.star_roll_bias_sigma_arcsec = car.aiding.star_roll_bias_sigma_arcsec;
     }
     if w.baro().is_some() {
         cfg.aiding.baro_bias_rw_m_sqrt_s = car.aiding.baro_bias_rw_m_sqrt_s;
@@ -80,6 +81,7 @@ mod tests {
     fn the_matched_pair_has_no_world_and_the_car_is_installed_per_effect() {
         let root = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../config"));
         let shipped = Scenario::load(&root.join("scenarios/vehicle.toml")).unwrap();
+        let shipped_star = shipped.star_tracker;
         let world = shipped.spec.world.expect("the car's world is described");
         assert!(scenario(shipped).spec.world.is_none());
         let text = std::fs::read_to_string(root.join("filter.toml")).unwrap();
@@ -93,6 +95,11 @@ mod tests {
         assert_eq!(m.latency, Latency::default());
         assert_eq!(m.vehicle.wheel_lever_arm_b_m, [0.0; 3]);
         assert_eq!(m.aiding.star_low_frequency_sigma_arcsec, 0.0);
+        assert_eq!(m.aiding.star_roll_bias_sigma_arcsec, 0.0);
+        assert_eq!(
+            car.aiding.star_roll_bias_sigma_arcsec, shipped_star.roll_bias_arcsec,
+            "the filter's star roll bias is the class's data sheet"
+        );
         assert_eq!(m.gravity_disturbance, Default::default());
         m.validate().unwrap();
         let all = world.only(&crate::world::EFFECTS).unwrap();

@@ -653,6 +653,11 @@ pub struct StarTrackerGrade {
     pub sigma_cross_arcsec: f64,
     /// 1-σ attitude noise about the boresight, arcsec.
     pub sigma_roll_arcsec: f64,
+    /// 1-σ of a unit's constant error about the boresight after its maker's calibration,
+    /// arcsec (the filter's `aiding.star_roll_bias_sigma_arcsec`; what a unit of the class
+    /// actually has is its world's, `[world.star_tracker]`). 0 when the data sheet states none.
+    #[serde(default)]
+    pub roll_bias_arcsec: f64,
     /// Fewest stars identified in a valid frame.
     #[serde(default = "default_min_stars")]
     pub min_stars: u32,
@@ -1236,6 +1241,10 @@ impl Scenario {
             (
                 "star_tracker.sigma_roll_arcsec",
                 star_tracker.sigma_roll_arcsec,
+            ),
+            (
+                "star_tracker.roll_bias_arcsec",
+                star_tracker.roll_bias_arcsec,
             ),
         ] {
             if !(v.is_finite() && v >= 0.0) {

@@ -255,7 +255,8 @@ impl Navigator {
         ActiveStates {
             gyro_scale: s.gyro_scale,
             accel_scale: s.accel_scale,
-            boresight: s.boresight && self.config.updates.star_tracker,
+            boresight: (s.boresight || self.config.aiding.star_roll_bias_sigma_arcsec > 0.0)
+                && self.config.updates.star_tracker,
             clock: clock && s.clock && self.config.gnss_mode == GnssMode::Tight,
             gyro_misalignment: s.gyro_misalignment,
         }

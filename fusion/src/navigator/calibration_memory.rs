@@ -301,15 +301,15 @@ impl Navigator {
         let s_mis = imu.misalignment_arcsec / 3600.0 * DEG;
         let sg = imu.gyro_scale_ppm * 1e-6;
         let sa = imu.accel_scale_ppm * 1e-6;
-        let sk = self.config.aiding.boresight_sigma_deg * DEG;
         for k in 0..3 {
             p0[(idx::BG + k, idx::BG + k)] = sbg;
             p0[(idx::BA + k, idx::BA + k)] =
                 sba + s_mis * s_mis * (f_b.norm_squared() - f_b[k] * f_b[k]);
             p0[(idx::SG + k, idx::SG + k)] = sg * sg;
             p0[(idx::SA + k, idx::SA + k)] = sa * sa;
-            p0[(idx::KAPPA + k, idx::KAPPA + k)] = sk * sk;
         }
+        p0.fixed_view_mut::<3, 3>(idx::KAPPA, idx::KAPPA)
+            .copy_from(&self.boresight_prior_covariance());
         let mut ba = p0.fixed_view_mut::<3, 3>(idx::BA, idx::BA);
         ba += self
             .config
@@ -334,9 +334,9 @@ impl Navigator {
     /// is used for the boresight (estimate, covariance).
     pub(super) fn remembered_boresight(&self) -> Option<(Vector3<f64>, Matrix3<f64>)> {
         let (p0, x0) = self.sensor_prior(&Vector3::new(0.0, 0.0, -G0));
-        let sk = self.config.aiding.boresight_sigma_deg * DEG;
+        let prior = self.boresight_prior_covariance();
         let p_kk = p0.fixed_view::<3, 3>(idx::KAPPA, idx::KAPPA).into_owned();
-        (self.calibration.is_some() && (0..3).any(|k| p_kk[(k, k)] < sk * sk))
+        (self.calibration.is_some() && (0..3).any(|k| p_kk[(k, k)] < prior[(k, k)]))
             .then(|| (x0.fixed_rows::<3>(idx::KAPPA).into_owned(), p_kk))
     }
 }

@@ -115,7 +115,9 @@ pub struct StateSwitches {
     /// zero misalignment) estimating κ costs accuracy, because κ and the attitude error are
     /// only separable by turns and the IMU's own misalignment (measured, default vehicle run:
     /// horizontal RMS 0.19 → 0.21 m, attitude RMS 0.001° → 0.008°). Switch it on for an
-    /// uncalibrated or disturbed mount.
+    /// uncalibrated or disturbed mount. With it off, a star tracker whose class states a bias
+    /// about its boresight (`aiding.star_roll_bias_sigma_arcsec` > 0) still has the group
+    /// estimated, with that prior about the optical axis and none across it.
     pub boresight: bool,
     /// Receiver clock bias and drift (2 states; only with `gnss_mode = "tight"`, which
     /// requires them).
@@ -287,6 +289,12 @@ pub struct AidingNoise {
     pub star_low_frequency_sigma_arcsec: f64,
     /// Correlation time of the star tracker's low-frequency error, s.
     pub star_low_frequency_correlation_time_s: f64,
+    /// 1-σ of the star tracker's constant error about its boresight (optical axis), arcsec:
+    /// what its maker's calibration leaves about the least observable axis, the same for the
+    /// whole run. Estimated as the boresight angle about that axis (the boresight group is
+    /// active whenever this is above 0, see [`StateSwitches::boresight`]), so the attitude it
+    /// corrupts is known no better than this. 0: none.
+    pub star_roll_bias_sigma_arcsec: f64,
     /// Initial σ of each star-tracker boresight angle κ1..κ3, deg.
     pub boresight_sigma_deg: f64,
     /// Receiver clock bias PSD (white frequency noise), m²/s (tight coupling).
@@ -323,6 +331,7 @@ impl Default for AidingNoise {
             baseline_ratio_threshold: 3.0,
             star_low_frequency_sigma_arcsec: 0.0,
             star_low_frequency_correlation_time_s: 3600.0,
+            star_roll_bias_sigma_arcsec: 0.0,
             boresight_sigma_deg: 0.1,
             clock_bias_psd_m2_s: 0.1,
             clock_drift_psd_m2_s3: 0.01,
@@ -737,6 +746,7 @@ impl NavigatorConfig {
         a.baro_scale_sigma = d.aiding.baro_scale_sigma;
         a.star_low_frequency_sigma_arcsec = d.aiding.star_low_frequency_sigma_arcsec;
         a.star_low_frequency_correlation_time_s = d.aiding.star_low_frequency_correlation_time_s;
+        a.star_roll_bias_sigma_arcsec = d.aiding.star_roll_bias_sigma_arcsec;
         a.clock_bias_psd_m2_s = d.aiding.clock_bias_psd_m2_s;
         a.clock_drift_psd_m2_s3 = d.aiding.clock_drift_psd_m2_s3;
         self
@@ -926,6 +936,10 @@ impl NavigatorConfig {
             (
                 self.aiding.boresight_sigma_deg,
                 "aiding.boresight_sigma_deg",
+            ),
+            (
+                self.aiding.star_roll_bias_sigma_arcsec,
+                "aiding.star_roll_bias_sigma_arcsec",
             ),
             (
                 self.aiding.baseline_phase_sigma_cycles,

@@ -159,8 +159,7 @@ impl Navigator {
         if let Some(remembered) = self.remembered_boresight() {
             return remembered;
         }
-        let sk = self.config.aiding.boresight_sigma_deg * DEG;
-        (Vector3::zeros(), Matrix3::identity() * sk * sk)
+        (Vector3::zeros(), self.boresight_prior_covariance())
     }
 
     /// During alignment, at a GNSS epoch `ts` due at IMU epoch `t` (however late it arrived):

@@ -45,6 +45,27 @@ impl CelestialCache {
 }
 
 impl Navigator {
+    /// Prior covariance of the boresight angles κ1..κ3 (rad²): `aiding.boresight_sigma_deg`
+    /// about every axis when the boresight group is switched on (an uncalibrated mount), plus
+    /// the class's constant error about the optical axis (`aiding.star_roll_bias_sigma_arcsec`).
+    /// As a rotation in body axes that is `P_b = C_b_s · diag(σ², σ², σ² + σ_roll²) · C_s_b`
+    /// (the sensor's z axis is its boresight); the angles are Euler angles whose small
+    /// rotation is `B·δκ` ([`ekf::kappa_jacobian`] at κ = 0, a permutation: κ1 about body z),
+    /// so `P_κ = Bᵀ P_b B`.
+    pub(super) fn boresight_prior_covariance(&self) -> Matrix3<f64> {
+        let a = &self.config.aiding;
+        let mount = if self.config.states.boresight {
+            (a.boresight_sigma_deg * DEG).powi(2)
+        } else {
+            0.0
+        };
+        let roll = (a.star_roll_bias_sigma_arcsec / 3600.0 * DEG).powi(2);
+        let d = Matrix3::from_diagonal(&Vector3::new(mount, mount, mount + roll));
+        let p_b = self.c_s_b.transpose() * d * self.c_s_b;
+        let b = ekf::kappa_jacobian(&Vector3::zeros());
+        b.transpose() * p_b * b
+    }
+
     pub(super) fn fuse_star(&mut self, ts: GpsTime, obs: &StarObs, tally: Tally) {
         let id = sid(SensorId::StarTracker);
         if !self.config.updates.star_tracker {

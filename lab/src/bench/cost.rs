@@ -241,6 +241,10 @@ pub fn run(cfg_dir: &Path, base: &NavigatorConfig, quick: bool) -> anyhow::Resul
     for &step in &sz.state_steps {
         let mut cfg = base.clone();
         cfg.states = switches(step);
+        if !cfg.states.boresight {
+            // The star tracker's roll bias would keep the boresight group active.
+            cfg.aiding.star_roll_bias_sigma_arcsec = 0.0;
+        }
         let t = time_fusion(&cfg, &msgs, from(epoch), sz.repetitions)?;
         let n = state_count(&cfg.states) as f64;
         let mut p = point(n, &t);

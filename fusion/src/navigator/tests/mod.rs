@@ -208,6 +208,61 @@ fn filter_toml_is_the_car_and_its_idealised_vehicle_the_default() {
 }
 
 #[test]
+fn a_star_tracker_roll_bias_is_a_boresight_state_about_the_optical_axis_only() {
+    let car: NavigatorConfig =
+        toml::from_str(include_str!("../../../../config/filter.toml")).unwrap();
+    assert!(!car.states.boresight, "the car's mount is calibrated");
+    let roll = car.aiding.star_roll_bias_sigma_arcsec / 3600.0 * DEG;
+    assert!(roll > 0.0);
+    let nav = Navigator::new(car.clone()).unwrap();
+    assert!(nav.active_states(false).boresight, "the bias is estimated");
+    // The head looks up (sensor z = −body z): the prior is about body z alone, which is the
+    // first of the Euler angles (M(κ) = R_z(κ1)·R_x(κ2)·R_y(κ3)).
+    let p = nav.boresight_prior_covariance();
+    let expected = Matrix3::from_diagonal(&Vector3::new(roll * roll, 0.0, 0.0));
+    let b = ekf::kappa_jacobian(&Vector3::zeros());
+    let about_body = b * p * b.transpose();
+    assert!(
+        (about_body[(2, 2)] - roll * roll).abs() < 1e-30 && about_body[(0, 0)] == 0.0,
+        "{about_body}"
+    );
+    assert!((p - expected).abs().max() < 1e-30, "{p}");
+    let data_sheet = nav.data_sheet_prior(&Vector3::new(0.0, 0.0, -G0));
+    assert_eq!(
+        data_sheet.fixed_view::<3, 3>(idx::KAPPA, idx::KAPPA),
+        p,
+        "the start's prior"
+    );
+    // An uncalibrated mount adds its σ about every axis; the roll bias adds in variance.
+    let mut loose = car.clone();
+    loose.states.boresight = true;
+    let mount = loose.aiding.boresight_sigma_deg * DEG;
+    let p = Navigator::new(loose).unwrap().boresight_prior_covariance();
+    let expected = Matrix3::from_diagonal(&Vector3::new(
+        mount * mount + roll * roll,
+        mount * mount,
+        mount * mount,
+    ));
+    assert!((p - expected).abs().max() < 1e-24, "{p}");
+    // Without star-tracker updates there is nothing to estimate it from; without the bias
+    // (the built-in default, the matched world's star tracker) the group stays off.
+    let mut no_stars = car.clone();
+    no_stars.updates.star_tracker = false;
+    assert!(
+        !Navigator::new(no_stars)
+            .unwrap()
+            .active_states(false)
+            .boresight
+    );
+    let idealised = Navigator::new(car.clone().idealised()).unwrap();
+    assert!(!idealised.active_states(false).boresight);
+    let mut bad = car;
+    bad.aiding.star_roll_bias_sigma_arcsec = -1.0;
+    let e = bad.validate().unwrap_err().to_string();
+    assert!(e.contains("aiding.star_roll_bias_sigma_arcsec"), "{e}");
+}
+
+#[test]
 fn vehicle_violation_is_the_derived_class_figure() {
     // The figures of the `[vehicle]` comment in config/filter.toml: at 20 m/s with the arm
     // [-1.5, -0.8, 1.0] on a straight road, vertical 0.080 m/s, lateral and forward 0.021
