@@ -20,3 +20,4 @@ mod odometer_noise;
 mod redundant_channels;
 mod world_accuracy;
 mod world_consistency;
+mod zupt_vibration;

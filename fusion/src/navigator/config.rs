@@ -301,13 +301,15 @@ pub struct AidingNoise {
     pub clock_bias_psd_m2_s: f64,
     /// Receiver clock drift PSD (random-walk frequency noise), m²/s³ (tight coupling).
     pub clock_drift_psd_m2_s3: f64,
-    /// Minimum time between two zero-velocity updates, s.
+    /// Minimum time between two zero-velocity updates, s; also the block over which the
+    /// static test averages the IMU (the mount's vibration averages out, `navigator::zupt`).
     pub zupt_interval_s: f64,
     /// The IMU must look static this long before zero-velocity updates start, s.
     pub zupt_window_s: f64,
-    /// Static test: |angular rate| below this, rad/s.
+    /// Static test: |mean angular rate over a block| below this, rad/s.
     pub zupt_max_rate_rad_s: f64,
-    /// Static test: | |specific force| − g | below this, m/s².
+    /// Static test: |mean specific force over a block + g| below this (ECEF vectors, the
+    /// specific force turned with the solution's attitude), m/s².
     pub zupt_max_accel_dev_m_s2: f64,
     /// Static test: estimated speed below this, m/s (guards against constant-velocity motion,
     /// which an IMU cannot tell from rest).

@@ -20,6 +20,8 @@ pub(super) struct Core {
     pub(super) strapdown: Strapdown,
     /// Start of the current static period (ZUPT detector).
     pub(super) static_since: Option<GpsTime>,
+    /// The ZUPT detector's block of IMU increments being summed.
+    pub(super) static_block: super::zupt::StaticBlock,
     /// Time of the last zero-velocity update.
     pub(super) last_zupt: Option<GpsTime>,
     /// Time of validity of the last fused baro sample (`aiding.baro_min_interval_s`).
@@ -62,6 +64,7 @@ impl Core {
             ),
             strapdown: Strapdown::new(config.mechanization()),
             static_since: None,
+            static_block: Default::default(),
             last_zupt: None,
             last_baro_fused: None,
             baro_rejected_in_row: 0,
