@@ -58,6 +58,18 @@ pub enum SimError {
         /// What is wrong.
         reason: String,
     },
+    /// A scenario's `[world] include` names a world file that cannot be used.
+    #[error("{}: [world] include = {include:?} ({}): {reason}", file.display(), resolved.display())]
+    Include {
+        /// The scenario file.
+        file: PathBuf,
+        /// The include path as written in the scenario.
+        include: String,
+        /// Where it was looked for (relative paths start at the scenario file's directory).
+        resolved: PathBuf,
+        /// What is wrong.
+        reason: String,
+    },
     /// The driver could not join the bus.
     #[error(transparent)]
     Bus(#[from] msgs::ipc::NodeError),

@@ -447,6 +447,10 @@ mod tests {
     fn scenario(extra_duration_s: f64) -> Scenario {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../config/scenarios/vehicle.toml");
         let text = std::fs::read_to_string(&path).expect("vehicle scenario");
+        assert!(
+            text.contains("duration_s = 600.0"),
+            "vehicle.toml's duration"
+        );
         let text = text.replace(
             "duration_s = 600.0",
             &format!("duration_s = {extra_duration_s:.1}"),

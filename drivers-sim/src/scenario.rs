@@ -7,6 +7,13 @@
 //! `[star_tracker]`, `[gnss]`, `[odometer]`, `[baro]`) in `<sensors_dir>/G.toml`; the scenario's
 //! optional `overrides` table is deep-merged over the grade table before it is parsed.
 //!
+//! A scenario's `[world]` may name a shared world file, `include = "../worlds/car.toml"` (relative
+//! to the scenario file's directory; an absolute path is used as it is). That file holds only
+//! `[world.<effect>]` tables; the scenario's own `[world.*]` tables are deep-merged over them key
+//! by key (the scenario's keys win, a table the scenario adds is added), so a scenario names only
+//! what differs, e.g. `[world.nlos] enabled = false`. A world file cannot include another
+//! ([`SimError::Include`]). [`Scenario::resolved_toml`] gives the merged document.
+//!
 //! Units are in the key names (`_deg`, `_m`, `_s`, `_hz`, `_ppm`, …); every model converts to SI
 //! radians/metres/seconds internally.
 
@@ -906,7 +913,154 @@ fn load_grade<T: DeserializeOwned>(
         })
 }
 
+/// The key of `[world]` that names a shared world file.
+pub const WORLD_INCLUDE: &str = "include";
+
+/// `[world] include` of a scenario document: the path as written and where it points.
+struct WorldInclude {
+    written: String,
+    resolved: PathBuf,
+}
+
+impl WorldInclude {
+    /// The include of `doc` (the scenario file `file` as a table), if it has one.
+    fn of(doc: &toml::Table, file: &Path) -> Result<Option<Self>, SimError> {
+        let Some(v) = doc
+            .get("world")
+            .and_then(toml::Value::as_table)
+            .and_then(|w| w.get(WORLD_INCLUDE))
+        else {
+            return Ok(None);
+        };
+        let Some(written) = v.as_str() else {
+            return Err(invalid(
+                file,
+                "world.include",
+                format!("{v} is not a string naming a world file"),
+            ));
+        };
+        let resolved = file.parent().unwrap_or(Path::new(".")).join(written);
+        Ok(Some(Self {
+            written: written.to_string(),
+            resolved,
+        }))
+    }
+
+    fn error(&self, file: &Path, reason: impl Into<String>) -> SimError {
+        SimError::Include {
+            file: file.to_path_buf(),
+            include: self.written.clone(),
+            resolved: self.resolved.clone(),
+            reason: reason.into(),
+        }
+    }
+
+    /// The `[world]` table of the included file.
+    fn world(&self, file: &Path) -> Result<toml::Table, SimError> {
+        let text = std::fs::read_to_string(&self.resolved)
+            .map_err(|e| self.error(file, format!("cannot read: {e}")))?;
+        let mut doc: toml::Table = toml::from_str(&text)
+            .map_err(|e| self.error(file, format!("not a valid TOML file: {e}")))?;
+        if let Some(k) = doc.keys().find(|k| *k != "world") {
+            return Err(self.error(
+                file,
+                format!("`{k}`: a world file holds only `[world.<effect>]` tables"),
+            ));
+        }
+        let world = match doc.remove("world") {
+            Some(toml::Value::Table(t)) => t,
+            None => toml::Table::new(),
+            Some(v) => {
+                return Err(self.error(
+                    file,
+                    format!("`world = {v}`: a world file holds only `[world.<effect>]` tables"),
+                ));
+            }
+        };
+        if world.contains_key(WORLD_INCLUDE) {
+            return Err(self.error(
+                file,
+                "the world file has `[world] include` of its own; a world file cannot include \
+                 another (copy its tables instead)",
+            ));
+        }
+        Ok(world)
+    }
+}
+
+/// `doc` (the scenario file `file` as a table) with its world include resolved: the included
+/// world's tables with the scenario's own `[world]` merged over them, the `include` key removed.
+/// Returns the include, if there was one.
+fn resolve_world_include(
+    doc: &mut toml::Table,
+    file: &Path,
+) -> Result<Option<WorldInclude>, SimError> {
+    let Some(include) = WorldInclude::of(doc, file)? else {
+        return Ok(None);
+    };
+    let mut world = include.world(file)?;
+    if let Some(toml::Value::Table(own)) = doc.get_mut("world") {
+        own.remove(WORLD_INCLUDE);
+        merge(&mut world, own);
+    }
+    doc.insert("world".into(), toml::Value::Table(world));
+    Ok(Some(include))
+}
+
+/// The name of the table whose header is `line` (`[a.b]` or `[[a.b]]`, spaces and a comment
+/// allowed), if it is one.
+fn table_header(line: &str) -> Option<&str> {
+    let rest = line.trim().strip_prefix('[')?;
+    let rest = rest.strip_prefix('[').unwrap_or(rest);
+    let (name, after) = rest.split_once(']')?;
+    let after = after.strip_prefix(']').unwrap_or(after).trim_start();
+    let plain = name
+        .chars()
+        .all(|c| c.is_ascii_alphanumeric() || "_-. \"'".contains(c));
+    (plain && (after.is_empty() || after.starts_with('#'))).then(|| name.trim())
+}
+
+/// `text` with the lines of its `[world]` and `[world.*]` tables blanked, so that every other
+/// line keeps its number.
+fn without_world_tables(text: &str) -> String {
+    let mut in_world = false;
+    let mut out = String::with_capacity(text.len());
+    for line in text.lines() {
+        if let Some(name) = table_header(line) {
+            in_world = name == "world" || name.starts_with("world.");
+        }
+        if !in_world {
+            out.push_str(line);
+        }
+        out.push('\n');
+    }
+    out
+}
+
 impl Scenario {
+    /// The scenario file `path` (its text `text`) as one TOML document, with its world include
+    /// resolved: the included file's `[world.*]` tables with the scenario's own merged over them
+    /// key by key, no `include` key. A scenario without an include is its text parsed. Edit the
+    /// result and give `toml::to_string` of it to [`Scenario::from_toml_str`] with the same path
+    /// to change a value wherever it was written.
+    pub fn resolved_toml(text: &str, path: &Path) -> Result<toml::Table, SimError> {
+        let mut doc: toml::Table = toml::from_str(text).map_err(|e| SimError::Parse {
+            file: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
+        resolve_world_include(&mut doc, path)?;
+        Ok(doc)
+    }
+
+    /// [`Scenario::resolved_toml`] of the file `path`.
+    pub fn read_resolved_toml(path: &Path) -> Result<toml::Table, SimError> {
+        let text = std::fs::read_to_string(path).map_err(|e| SimError::Io {
+            file: path.to_path_buf(),
+            reason: e.to_string(),
+        })?;
+        Self::resolved_toml(&text, path)
+    }
+
     /// Read, parse and validate a scenario file; grade files are looked up in `sensors_dir`
     /// (relative to the scenario file, default `../sensors`).
     pub fn load(path: &Path) -> Result<Self, SimError> {
@@ -925,12 +1079,57 @@ impl Scenario {
         Self::validate(spec, path, &dir)
     }
 
-    /// First pass: strict TOML parse.
+    /// First pass: strict TOML parse, with the world include (if any) resolved relative to
+    /// `path`.
     pub fn parse(text: &str, path: &Path) -> Result<ScenarioFile, SimError> {
-        toml::from_str(text).map_err(|e| SimError::Parse {
+        let parse_error = |e: toml::de::Error| SimError::Parse {
             file: path.to_path_buf(),
             message: e.to_string(),
-        })
+        };
+        let mut doc: toml::Table = toml::from_str(text).map_err(parse_error)?;
+        let Some(include) = resolve_world_include(&mut doc, path)? else {
+            // Parsed from the text, so that an error names its line.
+            return toml::from_str(text).map_err(parse_error);
+        };
+        let merged_world = doc.get("world").cloned();
+        toml::Value::Table(doc)
+            .try_into()
+            .map_err(|e: toml::de::Error| {
+                // The merged document has no lines: name the world table that fails, if one does.
+                let failing = merged_world
+                    .as_ref()
+                    .and_then(toml::Value::as_table)
+                    .into_iter()
+                    .flatten()
+                    .find_map(|(name, table)| {
+                        let one = toml::Table::from_iter([(name.clone(), table.clone())]);
+                        toml::Value::Table(one)
+                            .try_into::<crate::world::WorldSection>()
+                            .err()
+                            .map(|e| (name.clone(), e))
+                    });
+                let message = match failing {
+                    Some((name, e)) => format!(
+                        "[world.{name}] (with `[world] include = {:?}` merged in): {}",
+                        include.written,
+                        e.message()
+                    ),
+                    // Outside `[world]`: the scenario's own text without its world tables names
+                    // the line.
+                    None => match toml::from_str::<ScenarioFile>(&without_world_tables(text)) {
+                        Err(own) => own.to_string(),
+                        Ok(_) => format!(
+                            "{} (with `[world] include = {:?}` merged in)",
+                            e.message(),
+                            include.written
+                        ),
+                    },
+                };
+                SimError::Parse {
+                    file: path.to_path_buf(),
+                    message,
+                }
+            })
     }
 
     /// Second pass: check values, resolve grades. Errors name `file` and the dotted key.
@@ -1609,6 +1808,194 @@ mod tests {
         assert!(e.contains("gnss.grade"), "{e}");
         assert!(e.contains("unknown grade `}`"), "{e}");
         assert!(e.contains("known grades:"), "{e}");
+    }
+
+    /// A scratch configuration directory: `scenarios/s.toml` (the shipped static site without
+    /// its world, then `scenario`) and `worlds/` with the given files; the sensor grades are the
+    /// shipped ones. Returns the scenario's path.
+    fn scratch(tag: &str, scenario: &str, worlds: &[(&str, &str)]) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!(
+            "sextant-world-include-{tag}-{}",
+            std::process::id()
+        ));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(dir.join("scenarios")).unwrap();
+        std::fs::create_dir_all(dir.join("worlds")).unwrap();
+        for (name, text) in worlds {
+            std::fs::write(dir.join("worlds").join(name), text).unwrap();
+        }
+        let sensors = Path::new(env!("CARGO_MANIFEST_DIR")).join("../config/sensors");
+        let path = dir.join("scenarios/s.toml");
+        let head = shipped("static_site.toml").1;
+        let head = &head[..head.find("\n[world").unwrap() + 1];
+        let head = head.replacen(
+            "seed = 1\n",
+            &format!(
+                "seed = 1\nsensors_dir = {:?}\n",
+                sensors.display().to_string()
+            ),
+            1,
+        );
+        assert!(
+            head.contains("sensors_dir"),
+            "static_site.toml has `seed = 1`"
+        );
+        std::fs::write(&path, format!("{head}\n{scenario}")).unwrap();
+        path
+    }
+
+    const WORLD: &str = "# a shared world\n\
+        [world.code_noise]\nsigma_at_45_dbhz_m = 0.3\n\
+        [world.gnss_antenna]\nlever_arm_b_m = [0.3, 0.0, -1.5]\nlatency_s = 0.05\n\
+        [world.units]\nnoise_log_sigma = 0.2\noscillator_log_sigma = 0.5\n";
+
+    /// The scenario's own keys win over the included ones key by key; the included keys it
+    /// does not name stay; a table it adds is added; `enabled = false` switches an included
+    /// effect off.
+    #[test]
+    fn world_include_merges_key_by_key() {
+        let path = scratch(
+            "merge",
+            "[world]\ninclude = \"../worlds/w.toml\"\n\
+             [world.gnss_antenna]\nlatency_s = 0.02\n\
+             [world.units]\nenabled = false\n\
+             [world.gravity]\nanomaly_sigma_mgal = 10.0\ncorrelation_length_km = 5.0\n",
+            &[("w.toml", WORLD)],
+        );
+        let w = Scenario::load(&path).unwrap().spec.world.unwrap();
+        let antenna = w.gnss_antenna.unwrap();
+        assert_eq!(antenna.latency_s, 0.02);
+        assert_eq!(antenna.lever_arm_b_m, [0.3, 0.0, -1.5]);
+        assert_eq!(w.code_noise.unwrap().sigma_at_45_dbhz_m, 0.3);
+        let units = w.units.unwrap();
+        assert!(!units.enabled && units.noise_log_sigma == 0.2);
+        assert!(w.units().is_none());
+        assert_eq!(w.gravity.unwrap().anomaly_sigma_mgal, 10.0);
+        assert!(w.ionosphere.is_none());
+        // The merged document: no include left, the scenario's value in place.
+        let doc = Scenario::read_resolved_toml(&path).unwrap();
+        let world = doc["world"].as_table().unwrap();
+        assert!(!world.contains_key(WORLD_INCLUDE));
+        assert_eq!(world["gnss_antenna"]["latency_s"].as_float(), Some(0.02));
+        assert_eq!(
+            world["code_noise"]["sigma_at_45_dbhz_m"].as_float(),
+            Some(0.3)
+        );
+        // It loads to the same scenario as the file.
+        let again = Scenario::from_toml_str(&toml::to_string(&doc).unwrap(), &path).unwrap();
+        assert_eq!(format!("{:?}", again.spec.world), format!("{:?}", Some(w)));
+        std::fs::remove_dir_all(path.parent().unwrap().parent().unwrap()).unwrap();
+    }
+
+    /// A world include is resolved relative to the scenario file's directory, an absolute one
+    /// as it is; a scenario with only the include has exactly the included world.
+    #[test]
+    fn world_include_is_relative_to_the_scenario() {
+        let path = scratch(
+            "relative",
+            "[world]\ninclude = \"../worlds/w.toml\"\n",
+            &[("w.toml", WORLD)],
+        );
+        let dir = path.parent().unwrap().parent().unwrap().to_path_buf();
+        let included = Scenario::load(&path).unwrap().spec.world;
+        let abs = dir.join("worlds/w.toml");
+        let text = std::fs::read_to_string(&path).unwrap().replace(
+            "\"../worlds/w.toml\"",
+            &format!("{:?}", abs.display().to_string()),
+        );
+        let absolute = Scenario::from_toml_str(&text, &path).unwrap().spec.world;
+        let own = std::fs::read_to_string(&path)
+            .unwrap()
+            .replace("[world]\ninclude = \"../worlds/w.toml\"\n", WORLD);
+        let written = Scenario::from_toml_str(&own, &path).unwrap().spec.world;
+        assert_eq!(format!("{included:?}"), format!("{written:?}"));
+        assert_eq!(format!("{absolute:?}"), format!("{written:?}"));
+        // Relative to the scenario, not to the working directory.
+        let e = Scenario::from_toml_str(
+            &text.replace(&abs.display().to_string(), "worlds/w.toml"),
+            &path,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains(&dir.join("scenarios/worlds/w.toml").display().to_string()),
+            "{e}"
+        );
+        std::fs::remove_dir_all(dir).unwrap();
+    }
+
+    /// An include that cannot be used is an error naming the scenario, the include as written
+    /// and what is wrong.
+    #[test]
+    fn bad_world_include_names_scenario_include_and_reason() {
+        // (include, the world files written, what the error says)
+        type Case<'a> = (&'a str, &'a [(&'a str, &'a str)], &'a str);
+        let cases: [Case; 6] = [
+            ("missing.toml", &[], "cannot read"),
+            (
+                "w.toml",
+                &[("w.toml", "[world.code_noise\n")],
+                "not a valid TOML file",
+            ),
+            (
+                "w.toml",
+                &[("w.toml", "[imu]\ngrade = \"mems\"\n")],
+                "holds only `[world.<effect>]` tables",
+            ),
+            (
+                "w.toml",
+                &[
+                    ("w.toml", "[world]\ninclude = \"v.toml\"\n"),
+                    ("v.toml", WORLD),
+                ],
+                "cannot include another",
+            ),
+            (
+                "w.toml",
+                &[("w.toml", "[world.code_noise]\nsigma_m = 0.3\n")],
+                "[world.code_noise]",
+            ),
+            (
+                "w.toml",
+                &[("w.toml", "[world.nowhere]\nsigma_m = 0.3\n")],
+                "nowhere",
+            ),
+        ];
+        for (i, (include, worlds, reason)) in cases.into_iter().enumerate() {
+            let path = scratch(
+                &format!("bad{i}"),
+                &format!("[world]\ninclude = \"../worlds/{include}\"\n"),
+                worlds,
+            );
+            let e = Scenario::load(&path).unwrap_err().to_string();
+            assert!(e.contains(&path.display().to_string()), "{e}");
+            assert!(e.contains(include), "{e}");
+            assert!(e.contains(reason), "{reason}: {e}");
+            std::fs::remove_dir_all(path.parent().unwrap().parent().unwrap()).unwrap();
+        }
+        // An error outside `[world]` in a scenario with an include names its key and line.
+        let path = scratch(
+            "line",
+            "[world]\ninclude = \"../worlds/w.toml\"\n",
+            &[("w.toml", WORLD)],
+        );
+        let text = std::fs::read_to_string(&path).unwrap();
+        let line = 1 + text.lines().position(|l| l.starts_with("lat_deg")).unwrap();
+        let broken = text.replacen("lat_deg = 55.655", "lat_deg = \"north\"", 1);
+        assert_ne!(broken, text, "static_site.toml has `lat_deg = 55.655`");
+        let e = Scenario::from_toml_str(&broken, &path)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("s.toml") && e.contains("lat_deg") && e.contains(&format!("line {line}")),
+            "{e}"
+        );
+        std::fs::remove_dir_all(path.parent().unwrap().parent().unwrap()).unwrap();
+        // Not a string.
+        let path = scratch("type", "[world]\ninclude = 3\n", &[]);
+        let e = Scenario::load(&path).unwrap_err().to_string();
+        assert!(e.contains("world.include") && e.contains("s.toml"), "{e}");
+        std::fs::remove_dir_all(path.parent().unwrap().parent().unwrap()).unwrap();
     }
 
     /// The shipped scenarios load as they are.

@@ -29,7 +29,8 @@ fn load(name: &str) -> Scenario {
 /// A shipped scenario's text without its `[world]` (the tables a test appends its own to).
 fn text_without_world(name: &str) -> String {
     let text = std::fs::read_to_string(scenario_path(name)).unwrap();
-    let end = text.find("\n[world.").map_or(text.len(), |i| i + 1);
+    // `[world]` (its include) or the first `[world.<effect>]` table, whichever comes first.
+    let end = text.find("\n[world").map_or(text.len(), |i| i + 1);
     text[..end].to_string()
 }
 

@@ -197,10 +197,16 @@ fn predicted_mean(scn: &Scenario, configured: (f64, f64), dt_s: f64) -> (f64, f6
 ///   excluded.
 #[test]
 fn uav_hour_with_quantised_channels_has_no_false_alarm() {
-    let hour = |t: String| t.replace("duration_s = 18000.0", "duration_s = 3600.0");
+    use crate::fixture::replace_present;
+    let hour = |t: String| replace_present(&t, "duration_s = 18000.0", "duration_s = 3600.0");
     let scn = uav_with(hour);
-    let no_warmup =
-        uav_with(|t| hour(t).replace("accel_warmup_ug = 1000.0", "accel_warmup_ug = 0.0"));
+    let no_warmup = uav_with(|t| {
+        replace_present(
+            &hour(t),
+            "accel_warmup_ug = 1000.0",
+            "accel_warmup_ug = 0.0",
+        )
+    });
     let warmup = |s: &Scenario| {
         s.spec
             .world
@@ -299,8 +305,10 @@ fn uav_hour_with_quantised_channels_has_no_false_alarm() {
 /// exclusion comes within 3 blocks of the step (one partial, two full): before 403 s.
 #[test]
 fn bias_step_on_quantised_channel_is_still_isolated() {
+    use crate::fixture::replace_present;
     let scn = uav_with(|t| {
-        t.replace("duration_s = 18000.0", "duration_s = 420.0").replace(
+        replace_present(
+            &replace_present(&t, "duration_s = 18000.0", "duration_s = 420.0"),
             "channels = { layout = \"pyramid\", n = 4, alpha_deg = 28.7 }",
             "channels = { layout = \"pyramid\", n = 5, alpha_deg = 35.26, failures = [\
              { channel = 1, sensor = \"gyro\", kind = \"bias_step\", start_s = 400.0, magnitude = 300.0 } ] }",

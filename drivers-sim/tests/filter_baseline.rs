@@ -70,12 +70,15 @@ fn scenario(seed: u64, white_imu: bool) -> Scenario {
         env!("CARGO_MANIFEST_DIR"),
         "/../config/scenarios/vehicle.toml"
     ));
-    let mut text = std::fs::read_to_string(path)
-        .unwrap()
-        .replace("seed = 2\n", &format!("seed = {seed}\n"));
+    let mut text = crate::fixture::replace_present(
+        &std::fs::read_to_string(path).unwrap(),
+        "seed = 2\n",
+        &format!("seed = {seed}\n"),
+    );
     if white_imu {
         let zero = "misalignment_arcsec = 0.0, scale_factor_ppm = 0.0";
-        text = text.replace(
+        text = crate::fixture::replace_present(
+            &text,
             "grade = \"navigation\"\n",
             &format!(
                 "grade = \"navigation\"\noverrides = {{ gyro = {{ {zero}, bias_deg_h = 0.0, \

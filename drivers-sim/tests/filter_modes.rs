@@ -52,12 +52,16 @@ fn run(stars: bool, mode: NavMode) -> Outcome {
     // only the channels it needs: no GNSS at all (the known site's position is configured,
     // as on paper 000's stand: "GNSS lost" from the start), no odometer, no stars for the
     // free-inertial run.
-    let text = text
-        .replace("rate_hz = 200.0", "rate_hz = 25.0")
-        .replace("rate_hz = 5.0", "rate_hz = 1.0")
-        .replace("rate_hz = 20.0", "rate_hz = 2.0")
-        .replace("rate_hz = 50.0", "rate_hz = 1.0")
-        .replace("duration_s = 600.0", &format!("duration_s = {DURATION_S}"));
+    let mut text = text;
+    for (from, to) in [
+        ("rate_hz = 200.0", "rate_hz = 25.0".to_string()),
+        ("rate_hz = 5.0", "rate_hz = 1.0".to_string()),
+        ("rate_hz = 20.0", "rate_hz = 2.0".to_string()),
+        ("rate_hz = 50.0", "rate_hz = 1.0".to_string()),
+        ("duration_s = 600.0", format!("duration_s = {DURATION_S}")),
+    ] {
+        text = crate::fixture::replace_present(&text, from, &to);
+    }
     // The matched world: the floors below are the filter's own model's.
     let scn = sextant_drivers_sim::matched::scenario(Scenario::from_toml_str(&text, path).unwrap());
     let mut channels = vec![Channel::Imu, Channel::Baro, Channel::Truth];

@@ -36,17 +36,25 @@ pub fn matched_vehicle_edited(edit: impl FnOnce(String) -> String) -> Scenario {
     matched::scenario(scn)
 }
 
+/// `text` (a shipped file's) with every `from` replaced by `to`; panics when it has no `from`,
+/// so that an edit by text never silently misses (the file changed its layout, or the value
+/// moved to a shared world file).
+pub fn replace_present(text: &str, from: &str, to: &str) -> String {
+    assert!(text.contains(from), "the text has no `{from}`");
+    text.replace(from, to)
+}
+
 /// The default vehicle scenario's text with its trajectory's `segments` and its duration
 /// replaced.
 pub fn with_segments(text: &str, segments: &str, duration_s: f64) -> String {
     let start = text.find("segments = [").expect("segments");
     let end = start + text[start..].find("\n]\n").expect("end of segments") + 3;
-    format!(
-        "{}segments = [{segments}]\n{}",
-        &text[..start],
-        &text[end..]
-    )
-    .replace(
+    replace_present(
+        &format!(
+            "{}segments = [{segments}]\n{}",
+            &text[..start],
+            &text[end..]
+        ),
         "duration_s = 600.0",
         &format!("duration_s = {duration_s:.1}"),
     )

@@ -494,15 +494,17 @@ fn calibration_memory_starts_the_next_run_from_the_saved_boresight_and_odometer_
     const KAPPA_DEG: [f64; 3] = [40.0 / 3600.0, -30.0 / 3600.0, 60.0 / 3600.0];
     let with_mount = |seed: u64| {
         crate::fixture::matched_vehicle_edited(|text| {
-            crate::fixture::with_segments(&text, DRIVE, DRIVE_S)
-                .replace("seed = 2\n", &format!("seed = {seed}\n"))
-                .replace(
-                    "[star_tracker]\n",
-                    &format!(
-                        "[star_tracker]\nmounting_kappa_deg = [{}, {}, {}]\n",
-                        KAPPA_DEG[0], KAPPA_DEG[1], KAPPA_DEG[2]
-                    ),
-                )
+            let text = crate::fixture::with_segments(&text, DRIVE, DRIVE_S);
+            let text =
+                crate::fixture::replace_present(&text, "seed = 2\n", &format!("seed = {seed}\n"));
+            crate::fixture::replace_present(
+                &text,
+                "[star_tracker]\n",
+                &format!(
+                    "[star_tracker]\nmounting_kappa_deg = [{}, {}, {}]\n",
+                    KAPPA_DEG[0], KAPPA_DEG[1], KAPPA_DEG[2]
+                ),
+            )
         })
     };
     let mut cfg = default_config();

@@ -26,12 +26,13 @@ fn uav_with(edit: impl Fn(String) -> String) -> Scenario {
 /// coordinated turn (peak bank 9°) happen within 1000 s.
 fn short_uav() -> Scenario {
     uav_with(|t| {
-        t.replacen(
-            "{ type = \"cruise\", duration_s = 1140.0 },",
-            "{ type = \"cruise\", duration_s = 100.0 },",
-            1,
+        let from = "{ type = \"cruise\", duration_s = 1140.0 },";
+        assert!(t.contains(from), "uav.toml has no `{from}`");
+        crate::fixture::replace_present(
+            &t.replacen(from, "{ type = \"cruise\", duration_s = 100.0 },", 1),
+            "duration_s = 18000.0",
+            "duration_s = 1000.0",
         )
-        .replace("duration_s = 18000.0", "duration_s = 1000.0")
     })
 }
 
@@ -132,7 +133,8 @@ fn strapdown_of_ls_triad_reproduces_aircraft_truth() {
 #[test]
 fn channel_errors_and_failures_have_configured_size() {
     let scn = uav_with(|t| {
-        t.replace(
+        crate::fixture::replace_present(
+            &t,
             "channels = { layout = \"pyramid\", n = 4, alpha_deg = 28.7 }",
             "channels = { layout = \"pyramid\", n = 5, alpha_deg = 35.26, failures = [\
              { channel = 1, sensor = \"gyro\", kind = \"bias_step\", start_s = 30.0, magnitude = 3600.0 },\

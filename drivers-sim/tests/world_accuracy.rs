@@ -49,8 +49,8 @@ enum World {
 
 fn vehicle(world: World) -> Scenario {
     let path = root().join("config/scenarios/vehicle.toml");
-    let text = std::fs::read_to_string(&path).unwrap();
-    let mut doc: toml::Table = toml::from_str(&text).unwrap();
+    // The scenario with its shared world file merged in: every effect's table is here.
+    let mut doc = Scenario::read_resolved_toml(&path).unwrap();
     match world {
         World::Matched => {
             doc.remove("world");

@@ -100,8 +100,30 @@ mod tests {
         assert_eq!(a, b);
         // Nothing partial is left behind.
         assert_eq!(std::fs::read_dir(&base).unwrap().count(), 1);
-        // A scenario of the copy loads with its sensor grades (found relative to it).
-        drivers_sim::scenario::Scenario::load(&a.join("scenarios/vehicle.toml")).unwrap();
+        // Every scenario of the copy loads with its sensor grades and its shared world file
+        // (found relative to it), to the same world as the repository's; those following a
+        // recorded trajectory read its points from the source tree, not from the copy.
+        let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("../config");
+        let mut names = 0;
+        for e in std::fs::read_dir(a.join("scenarios")).unwrap().flatten() {
+            let rel = Path::new("scenarios").join(e.file_name());
+            let text = std::fs::read_to_string(e.path()).unwrap();
+            if text.contains("kind = \"reference\"") {
+                continue;
+            }
+            let copy = drivers_sim::scenario::Scenario::load(&a.join(&rel))
+                .unwrap_or_else(|e| panic!("{e}"));
+            let shipped = drivers_sim::scenario::Scenario::load(&repo.join(&rel)).unwrap();
+            assert_eq!(
+                format!("{:?}", copy.spec.world),
+                format!("{:?}", shipped.spec.world),
+                "{}",
+                rel.display()
+            );
+            names += 1;
+        }
+        assert!(names >= 2, "{names} scenarios");
+        assert!(a.join("worlds/car.toml").is_file());
         std::fs::remove_dir_all(&base).unwrap();
     }
 

@@ -432,10 +432,15 @@ pub fn int(v: &serde_json::Value, ptr: &str) -> Option<i64> {
 }
 
 /// The default vehicle scenario, driving from the start (speed-up in 5 s, turns at 10 to
-/// 15 m/s) for 90 s, its sensor grades from the repository, written into `dir`.
+/// 15 m/s) for 90 s, its sensor grades and its shared world file from the repository, written
+/// into `dir`.
 pub fn driving_scenario(dir: &Path) -> PathBuf {
     let root = repo_root();
     let text = std::fs::read_to_string(root.join("config/scenarios/vehicle.toml")).unwrap();
+    assert!(
+        text.contains("duration_s = 600.0") && text.contains("seed = 2\n"),
+        "vehicle.toml changed its [scenario] layout"
+    );
     let start = text.find("segments = [").unwrap();
     let end = start + text[start..].find("\n]\n").unwrap() + 3;
     let segments = r#"segments = [
@@ -457,6 +462,16 @@ pub fn driving_scenario(dir: &Path) -> PathBuf {
                 root.join("config/sensors").display().to_string()
             ),
         );
+    // The world include is relative to the scenario's directory: make it absolute.
+    let include = "include = \"../worlds/";
+    assert!(
+        text.contains(include),
+        "vehicle.toml changed its [world] include"
+    );
+    let text = text.replace(
+        include,
+        &format!("include = \"{}/", root.join("config/worlds").display()),
+    );
     let path = dir.join("driving.toml");
     std::fs::write(&path, text).unwrap();
     path

@@ -197,10 +197,15 @@ fn malformed_config_and_scenario_are_named_by_file_key_and_line() {
     let sys = std::fs::read_to_string(root.join("config/sextant.toml")).unwrap();
     let filter = std::fs::read_to_string(root.join("config/filter.toml")).unwrap();
     std::fs::write(cfg_dir.join("filter.toml"), &filter).unwrap();
-    let sensors = root.join("config/sensors");
-    std::fs::create_dir_all(cfg_dir.join("sensors")).unwrap();
-    for e in std::fs::read_dir(&sensors).unwrap().flatten() {
-        std::fs::copy(e.path(), cfg_dir.join("sensors").join(e.file_name())).unwrap();
+    // The sensor grades and the shared world files the scenarios name.
+    for sub in ["sensors", "worlds"] {
+        std::fs::create_dir_all(cfg_dir.join(sub)).unwrap();
+        for e in std::fs::read_dir(root.join("config").join(sub))
+            .unwrap()
+            .flatten()
+        {
+            std::fs::copy(e.path(), cfg_dir.join(sub).join(e.file_name())).unwrap();
+        }
     }
     let scen = std::fs::read_to_string(root.join("config/scenarios/static_site.toml")).unwrap();
     std::fs::write(cfg_dir.join("scenarios/vehicle.toml"), &scen).unwrap();

@@ -121,7 +121,8 @@ fn kill_and_check(tag: &str, delete_checkpoint: bool, stars: bool) -> Figures {
     if !stars {
         // The matched world (see the module comment).
         let text = std::fs::read_to_string(&scenario).unwrap();
-        let end = text.find("\n[world.").expect("the car's world");
+        // `[world]` (the car's include) or its first `[world.<effect>]` table.
+        let end = text.find("\n[world").expect("the car's world");
         std::fs::write(&scenario, &text[..end + 1]).unwrap();
     }
     let duration_s = if stars {

@@ -28,7 +28,9 @@
 //! gyro drift, warm-up), the star tracker's thermal error, boresight bias and time-tag latency
 //! and the barometer's day of weather ([`aiding`]), and every aiding sensor as a unit of its
 //! model ([`units`]: noise and oscillator scattered about the data sheet, constant errors drawn). Off unless a table is present and enabled;
-//! every table is on in `config/scenarios/vehicle.toml`, the default scenario.
+//! every table is on in `config/scenarios/vehicle.toml`, the default scenario (its shared world
+//! `config/worlds/car.toml` and its own carrier-phase tracking). A scenario's tables may come
+//! from a shared world file (`[world] include`, merged key by key: [`crate::scenario`]).
 //!
 //! These models are the world's own: none calls `fusion`'s ionosphere, troposphere or gravity
 //! models, nor its sensor error models (only its proven foundations: ellipsoid, time, frames;

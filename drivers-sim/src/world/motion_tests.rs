@@ -21,6 +21,10 @@ fn vehicle_path() -> PathBuf {
 /// of its trajectory and `duration_s`.
 pub(crate) fn vehicle_in_motion_world(on: &[&str], segments: &str, duration_s: f64) -> Scenario {
     let text = std::fs::read_to_string(vehicle_path()).unwrap();
+    assert!(
+        text.contains("duration_s = 600.0"),
+        "vehicle.toml's duration"
+    );
     let seg_start = text.find("segments = [").unwrap();
     let seg_end = seg_start + text[seg_start..].find("\n]\n").unwrap() + 3;
     let text = format!(
@@ -439,37 +443,46 @@ fn baro_reads_the_air_of_the_day() {
 /// Bad motion-world values are refused with the file and the dotted key.
 #[test]
 fn motion_world_is_validated() {
-    let text = std::fs::read_to_string(vehicle_path()).unwrap();
-    let err = |base: &str, from: &str, to: &str| {
-        assert!(base.contains(from), "{from}");
-        match Scenario::from_toml_str(&base.replacen(from, to, 1), &vehicle_path()) {
-            Ok(_) => String::from("accepted"),
-            Err(e) => e.to_string(),
-        }
+    // The scenarios with their shared world files merged in, edited value by value.
+    let car = Scenario::read_resolved_toml(&vehicle_path()).unwrap();
+    let err = |doc: &toml::Table, path: &Path| match Scenario::from_toml_str(
+        &toml::to_string(doc).unwrap(),
+        path,
+    ) {
+        Ok(_) => String::from("accepted"),
+        Err(e) => e.to_string(),
     };
-    let head = text.as_str();
-    assert_eq!(err(head, "", ""), "accepted");
-    let e = err(head, "grade_sigma_deg = 2.0", "grade_sigma_deg = -2.0");
+    let set = |effect: &str, key: &str, value: toml::Value| {
+        let mut doc = car.clone();
+        let table = doc["world"][effect].as_table_mut().unwrap();
+        assert!(
+            table.insert(key.into(), value).is_some(),
+            "the car has world.{effect}.{key}"
+        );
+        err(&doc, &vehicle_path())
+    };
+    assert_eq!(err(&car, &vehicle_path()), "accepted");
+    let e = set("vehicle", "grade_sigma_deg", (-2.0).into());
     assert!(e.contains("world.vehicle.grade_sigma_deg"), "{e}");
-    let e = err(head, "latency_s = 0.01", "latency_s = 0.0105");
+    let e = set("star_tracker", "latency_s", 0.0105.into());
     assert!(e.contains("world.star_tracker.latency_s"), "{e}");
-    let e = err(
-        head,
-        "broadband_band_hz = [20.0, 200.0]",
-        "broadband_band_hz = [20.0, 600.0]",
+    let e = set(
+        "vibration",
+        "broadband_band_hz",
+        toml::Value::Array(vec![20.0.into(), 600.0.into()]),
     );
     assert!(e.contains("world.vibration.broadband_band_hz"), "{e}");
-    let e = err(head, "warmup_tau_s = 600.0", "warmup_tau_s = 0.0");
+    let e = set("imu", "warmup_tau_s", 0.0.into());
     assert!(e.contains("world.imu.warmup_tau_s"), "{e}");
     // The road needs a car: a static trajectory with [world.vehicle] on is refused.
-    let stat = std::fs::read_to_string(vehicle_path().with_file_name("static_site.toml")).unwrap();
-    let car_start = text.find("\n[world.vehicle]").unwrap() + 1;
-    let car_len = text[car_start + 1..].find("\n[world.").unwrap() + 1;
-    let car = &text[car_start..car_start + car_len];
+    let stat_path = vehicle_path().with_file_name("static_site.toml");
+    let mut stat = Scenario::read_resolved_toml(&stat_path).unwrap();
+    let stat_world = stat["world"].as_table_mut().unwrap();
     assert!(
-        !stat.contains("[world.vehicle]"),
+        !stat_world.contains_key("vehicle"),
         "the parked car has no road"
     );
-    let e = err(&format!("{stat}\n{car}\n"), "", "");
+    stat_world.insert("vehicle".into(), car["world"]["vehicle"].clone());
+    let e = err(&stat, &stat_path);
     assert!(e.contains("world.vehicle"), "{e}");
 }
