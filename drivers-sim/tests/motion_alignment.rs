@@ -610,7 +610,12 @@ fn calibration_memory_starts_the_next_run_from_the_saved_boresight_and_odometer_
 
 /// The start without stars on the car's world (its `[world]` on, the car's filter
 /// `config/filter.toml`), over seeds: mean attitude NEES and the heading and tilt error over σ
-/// at the start and after it. A measurement, not a CI test (`--ignored --nocapture`).
+/// at the start and after it, per seed the start's error, σ and NEES. A measurement, not a CI
+/// test (`--ignored --nocapture`). Measured with 72 seeds (χ² band of the mean attitude NEES
+/// [2.45, 3.58]): the long drive 2.86 at the start, 2.85 after 20 s; the restart's drive 3.42
+/// at the start, 2.80 after 20 s, per-axis error/σ RMS 0.89–1.09. Its first 24 seeds alone gave
+/// 4.37 at the start, the next 24 on the matched world 2.52 and 3.13: a batch of 24 scatters
+/// by ±0.5 (√(6/24)), so a smaller run cannot tell a bias of this size from chance.
 #[test]
 #[ignore = "a Monte Carlo of the car's world: minutes"]
 fn starts_without_stars_on_the_cars_world_statistics() {
@@ -632,7 +637,7 @@ fn starts_without_stars_on_the_cars_world_statistics() {
 fn starts_without_stars_on_the_cars_world(segments: &str, duration_s: f64, first_s: f64) {
     let path = crate::fixture::vehicle_path();
     let text = std::fs::read_to_string(&path).expect("vehicle.toml");
-    let seeds: Vec<u64> = (1..=24).collect();
+    let seeds: Vec<u64> = (1..=72).collect();
     let times = [0.0, 1.0, 5.0, 20.0, 40.0];
     let mut sum_nees = [0.0; 5];
     let mut z2 = [[0.0; 3]; 5];
@@ -652,7 +657,8 @@ fn starts_without_stars_on_the_cars_world(segments: &str, duration_s: f64, first
             let Some(p) = r.points.iter().find(|p| p.t_s >= t0 + dt) else {
                 continue;
             };
-            sum_nees[k] += nees(&p.att_err_e_rad, &p.att_cov_e_rad2);
+            let nees_k = nees(&p.att_err_e_rad, &p.att_cov_e_rad2);
+            sum_nees[k] += nees_k;
             // NED components: north and east tilt, heading.
             let c_n_e = p.c_e_n.transpose();
             let e = c_n_e * p.att_err_e_rad;
@@ -662,7 +668,7 @@ fn starts_without_stars_on_the_cars_world(segments: &str, duration_s: f64, first
             }
             if k == 0 {
                 println!(
-                    "seed {seed}: start {:.1} s, error N/E/D {:.4?}°, σ {:.4?}°",
+                    "seed {seed}: start {:.1} s, error N/E/D {:.4?}°, σ {:.4?}°, NEES {nees_k:.2}",
                     t0,
                     [e.x, e.y, e.z].map(f64::to_degrees),
                     [0, 1, 2].map(|a| cov[(a, a)].sqrt().to_degrees())
