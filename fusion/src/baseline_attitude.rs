@@ -390,7 +390,7 @@ mod tests {
     use rand::SeedableRng;
     use rand_distr::{Distribution, StandardNormal};
 
-    const L1_WAVELENGTH_M: f64 = 299_792_458.0 / 1_575_420_000.0;
+    use crate::test_sky::{L1_WAVELENGTH_M, SKY_AZ_EL_DEG as SKY};
 
     fn site() -> (Vector3<f64>, Matrix3<f64>) {
         let g = Geodetic {
@@ -405,16 +405,6 @@ mod tests {
         let (az, el) = (az_deg.to_radians(), el_deg.to_radians());
         c_e_n * Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), -el.sin())
     }
-
-    const SKY: [(f64, f64); 7] = [
-        (0.0, 80.0),
-        (40.0, 20.0),
-        (110.0, 45.0),
-        (170.0, 15.0),
-        (230.0, 60.0),
-        (300.0, 30.0),
-        (340.0, 12.0),
-    ];
 
     fn observations(
         c_e_b: &Matrix3<f64>,

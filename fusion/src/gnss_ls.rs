@@ -702,18 +702,10 @@ mod tests {
     }
 
     fn sky() -> Vec<(f64, f64)> {
-        [
-            (0.0, 80.0),
-            (40.0, 20.0),
-            (110.0, 45.0),
-            (170.0, 15.0),
-            (230.0, 60.0),
-            (300.0, 30.0),
-            (340.0, 12.0),
-        ]
-        .iter()
-        .map(|&(a, e): &(f64, f64)| (a.to_radians(), e.to_radians()))
-        .collect()
+        crate::test_sky::SKY_AZ_EL_DEG
+            .iter()
+            .map(|&(a, e): &(f64, f64)| (a.to_radians(), e.to_radians()))
+            .collect()
     }
 
     #[test]

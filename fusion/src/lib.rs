@@ -42,6 +42,9 @@ pub mod strapdown;
 pub mod time;
 pub mod yaw_gsf;
 
+#[cfg(test)]
+mod test_sky;
+
 pub use navigator::{RejectReason, Rejection};
 
 /// A configuration value makes no sense; the message names the key (`filter.<key> <what>` for

@@ -11,18 +11,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 
-const L1_WAVELENGTH_M: f64 = 299_792_458.0 / 1_575_420_000.0;
-
-/// (azimuth, elevation) deg of a 7-satellite sky; PRN = index + 1.
-const SKY: [(f64, f64); 7] = [
-    (0.0, 80.0),
-    (40.0, 20.0),
-    (110.0, 45.0),
-    (170.0, 15.0),
-    (230.0, 60.0),
-    (300.0, 30.0),
-    (340.0, 12.0),
-];
+use crate::test_sky::{L1_WAVELENGTH_M, SKY_AZ_EL_DEG as SKY};
 
 fn site() -> (Vector3<f64>, Matrix3<f64>) {
     let g = Geodetic {

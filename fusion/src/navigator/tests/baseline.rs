@@ -3,16 +3,7 @@
 
 use super::*;
 
-const L1_WAVELENGTH_M: f64 = 299_792_458.0 / 1_575_420_000.0;
-const SKY: [(f64, f64); 7] = [
-    (0.0, 80.0),
-    (40.0, 20.0),
-    (110.0, 45.0),
-    (170.0, 15.0),
-    (230.0, 60.0),
-    (300.0, 30.0),
-    (340.0, 12.0),
-];
+use crate::test_sky::{L1_WAVELENGTH_M, SKY_AZ_EL_DEG as SKY};
 
 /// The static site's GNSS sample with the baseline phases of a receiver: 1 m baselines along
 /// body x and y, white noise of σ_φ = 0.01 cycle, an arbitrary integer per satellite and
