@@ -5,7 +5,9 @@
 //! Baseline carrier phases: the phase difference across each baseline is `b·u/λ + ε` plus, with
 //! `[world.carrier_phase]`, the receiver's unknown integer of the satellite and baseline (new
 //! at each acquisition, changed by cycle slips) with its lock time ([`crate::world::carrier_phase`]);
-//! without it the integer is already resolved (zero), as the matched fixture needs.
+//! without it the integer is already resolved (zero), as the matched fixture needs. With
+//! `[world.phase_multipath]` each difference also carries the two antennas' multipath
+//! ([`crate::world::phase_multipath`]), which the receiver's reported phase σ leaves out.
 //!
 //! Two receivers:
 //! * **Matched** (no `[world]` in the scenario): white pseudorange noise of the grade's σ and
@@ -32,6 +34,7 @@ use crate::scenario::{ConstellationSpec, GnssGrade, Scenario, UereModel, Window}
 use crate::truth::TruthPoint;
 use crate::world::GnssWorld;
 use crate::world::carrier_phase::{PhaseTracking, TrackedPhase};
+use crate::world::phase_multipath::PhaseMultipath;
 use crate::world::receiver_clock::TwoStateClock;
 use fusion::earth::WGS84;
 use fusion::gnss_corrections as corr;
@@ -167,6 +170,9 @@ pub struct GnssEpochTruth {
     /// The integer each published satellite's baseline phases (AB, CD) carry, cycles (0
     /// without `[world.carrier_phase]`).
     pub phase_ambiguity_cycles: [[i64; 2]; MAX_SATELLITES],
+    /// The multipath each published satellite's baseline phases carry, cycles (0 without
+    /// `[world.phase_multipath]`).
+    pub phase_multipath_cycles: [[f64; 2]; MAX_SATELLITES],
 }
 
 /// The lock time published with the phases (0 without them).
@@ -194,6 +200,8 @@ pub struct GnssSim {
     last_fix: Option<(Vector3<f64>, f64)>,
     /// Carrier-phase tracking of the baselines (integers, slips, lock time).
     phase_tracking: PhaseTracking,
+    /// Multipath of the baseline phases (`[world.phase_multipath]`).
+    phase_multipath: Option<PhaseMultipath>,
 }
 
 impl GnssSim {
@@ -239,8 +247,16 @@ impl GnssSim {
             constellation.len(),
             crate::sensor_rng(scn.spec.scenario.seed, "world_carrier_phase"),
         );
+        let phase_multipath = scn.spec.world.and_then(|w| w.phase_multipath()).map(|s| {
+            PhaseMultipath::new(
+                s,
+                constellation.len(),
+                crate::sensor_rng(scn.spec.scenario.seed, "world_phase_multipath"),
+            )
+        });
         Self {
             phase_tracking,
+            phase_multipath,
             constellation,
             grade: g,
             outages: scn.spec.gnss.outages.clone(),
@@ -290,6 +306,9 @@ impl GnssSim {
             if let Some((w, _)) = &mut self.world {
                 w.step(t_s - prev);
             }
+            if let Some(m) = &mut self.phase_multipath {
+                m.step(t_s - prev);
+            }
         }
         self.last_t_s = Some(t_s);
         self.phase_tracking.begin_epoch(t_s);
@@ -313,10 +332,12 @@ impl GnssSim {
         (out, outage)
     }
 
-    /// Carrier-phase differences of the two body baselines for line of sight `u` (cycles), as
-    /// the receiver publishes them: with the integer `tracked` carries.
+    /// Carrier-phase differences of the two body baselines for satellite `i`'s line of sight
+    /// `u` at elevation `el_rad` (cycles), as the receiver publishes them: with the integer
+    /// `tracked` carries and the world's phase multipath.
     fn baseline_phases(
         &self,
+        (i, el_rad): (usize, f64),
         c_e_b: &nalgebra::Matrix3<f64>,
         u: &Vector3<f64>,
         draws: &[f64; 4],
@@ -330,14 +351,22 @@ impl GnssSim {
                 c_e_b * Vector3::new(g.baseline_length_m[0], 0.0, 0.0),
                 c_e_b * Vector3::new(0.0, g.baseline_length_m[1], 0.0),
             ];
+            let multipath_m = self.phase_multipath_m(i, el_rad);
             for (k, b) in baselines_e.iter().enumerate() {
-                phase[k] = b.dot(u) / wavelength
+                phase[k] = (b.dot(u) + multipath_m[k]) / wavelength
                     + g.phase_sigma_cycles * draws[2 + k]
                     + tracked.ambiguity_cycles[k] as f64;
             }
             return (FLAG_PHASE, phase);
         }
         (0, phase)
+    }
+
+    /// The world's multipath on satellite `i`'s baseline phases at elevation `el_rad`, m.
+    fn phase_multipath_m(&self, i: usize, el_rad: f64) -> [f64; 2] {
+        self.phase_multipath
+            .as_ref()
+            .map_or([0.0; 2], |m| m.error_m(i, el_rad))
     }
 
     /// Antenna phase centre position and velocity (ECEF) for the truth point.
@@ -383,6 +412,7 @@ impl GnssSim {
             geometric_range_m: [0.0; MAX_SATELLITES],
             antenna_r_e_m: r_rx,
             phase_ambiguity_cycles: [[0; 2]; MAX_SATELLITES],
+            phase_multipath_cycles: [[0.0; 2]; MAX_SATELLITES],
         };
         let mut hth = Matrix4::<f64>::zeros();
         let mut ht_pr = Vector4::<f64>::zeros();
@@ -405,7 +435,7 @@ impl GnssSim {
             let rate = (v_s - v_rx).dot(&u);
             let cn0 = g.cn0_horizon_dbhz + (g.cn0_zenith_dbhz - g.cn0_horizon_dbhz) * el.sin();
             let tracked = self.phase_tracking.track(i, cn0);
-            let (phase_flag, phase) = self.baseline_phases(&c_e_b, &u, &draws, &tracked);
+            let (phase_flag, phase) = self.baseline_phases((i, el), &c_e_b, &u, &draws, &tracked);
             out.satellites[n] = GnssSatellite {
                 prn: i as u32 + 1,
                 flags: FLAG_PSEUDORANGE | FLAG_DOPPLER | phase_flag,
@@ -421,6 +451,11 @@ impl GnssSim {
             };
             hidden.geometric_range_m[n] = range;
             hidden.phase_ambiguity_cycles[n] = tracked.ambiguity_cycles;
+            if phase_flag != 0 {
+                let wavelength = SPEED_OF_LIGHT_M_S / g.carrier_frequency_hz;
+                hidden.phase_multipath_cycles[n] =
+                    self.phase_multipath_m(i, el).map(|m| m / wavelength);
+            }
             let h = Vector4::new(-u.x, -u.y, -u.z, 1.0);
             hth += h * h.transpose();
             ht_pr += h * e_pr;
@@ -487,6 +522,7 @@ impl GnssSim {
             geometric_range_m: [0.0; MAX_SATELLITES],
             antenna_r_e_m: r_rx,
             phase_ambiguity_cycles: [[0; 2]; MAX_SATELLITES],
+            phase_multipath_cycles: [[0.0; 2]; MAX_SATELLITES],
         };
         let mut obs = fusion::gnss_ls::Observations::default();
         let mut n = 0usize;
@@ -539,7 +575,7 @@ impl GnssSim {
             let e_rr = g.range_rate_sigma_m_s * draws[1];
             let rate = (v_s - v_rx).dot(&u);
             let tracked = self.phase_tracking.track(i, cn0);
-            let (phase_flag, phase) = self.baseline_phases(&c_e_b, &u, &draws, &tracked);
+            let (phase_flag, phase) = self.baseline_phases((i, el), &c_e_b, &u, &draws, &tracked);
             let sigma_pr = uere.sigma_m(el, cn0, klobuchar);
             let sat = GnssSatellite {
                 prn: i as u32 + 1,
@@ -557,6 +593,11 @@ impl GnssSim {
             out.satellites[n] = sat;
             hidden.geometric_range_m[n] = range;
             hidden.phase_ambiguity_cycles[n] = tracked.ambiguity_cycles;
+            if phase_flag != 0 {
+                let wavelength = SPEED_OF_LIGHT_M_S / g.carrier_frequency_hz;
+                hidden.phase_multipath_cycles[n] =
+                    self.phase_multipath_m(i, el).map(|m| m / wavelength);
+            }
             // Every value is finite and the satellite at orbital distance: push cannot fail.
             let _ = obs.push(fusion::gnss_ls::SatelliteObservation {
                 prn: sat.prn,

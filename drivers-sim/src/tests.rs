@@ -585,8 +585,11 @@ fn real_receiver_fix_is_its_own_least_squares_and_correlated() {
     );
 }
 
-/// `[world.carrier_phase]` through the receiver: each published baseline phase is the true
-/// `b·u/λ` plus the hidden integer plus white noise (residual within 5σ_φ), the integers are
+/// `[world.carrier_phase]` and `[world.phase_multipath]` through the receiver: each published
+/// baseline phase is the true `b·u/λ` plus the hidden integer plus the hidden multipath plus
+/// white noise (residual within 5σ_φ); the multipath has the world's σ(el) (its normalised
+/// variance, sampled every 60 s = 2τ so the samples are nearly independent, within 4 standard
+/// errors of 1), the integers are
 /// arbitrary (not 0), and the lock time runs with the epochs except where the integer changed
 /// (a flagged slip) or the satellite was (re)acquired; some integers change without a restart
 /// (the unflagged slips), and the source's slip counts agree with what is seen. Static site
@@ -600,6 +603,13 @@ fn published_baseline_phases_carry_the_tracked_integer_and_lock_time() {
     let mut truth = TruthGenerator::new(&scn);
     let g = scn.gnss;
     let lambda = msgs::SPEED_OF_LIGHT_M_S / g.carrier_frequency_hz;
+    let mp = scn
+        .spec
+        .world
+        .unwrap()
+        .phase_multipath()
+        .expect("phase multipath");
+    let mut mp_z2 = Vec::new();
     let mut prev: std::collections::HashMap<u32, ([i64; 2], [f64; 2])> = Default::default();
     let (mut nonzero, mut total, mut flagged, mut unflagged) = (0, 0, 0u64, 0u64);
     for k in 0..1200i64 {
@@ -617,8 +627,14 @@ fn published_baseline_phases_carry_the_tracked_integer_and_lock_time() {
             let n_int = hidden.phase_ambiguity_cycles[i];
             for j in 0..2 {
                 // The broadcast orbit error moves u by < 1e-7 rad: ≪ σ_φ on 1 m.
-                let r = s.baseline_phase_cycles[j] - b[j].dot(&u) / lambda - n_int[j] as f64;
+                let m_cyc = hidden.phase_multipath_cycles[i][j];
+                let r =
+                    s.baseline_phase_cycles[j] - b[j].dot(&u) / lambda - n_int[j] as f64 - m_cyc;
                 assert!(r.abs() < 5.0 * g.phase_sigma_cycles, "residual {r} cycles");
+                if k % 60 == 0 {
+                    let el = (-(tp.c_e_n.transpose() * u).z).asin();
+                    mp_z2.push((m_cyc * lambda / mp.sigma_m(el)).powi(2));
+                }
                 total += 1;
                 nonzero += usize::from(n_int[j] != 0);
             }
@@ -646,6 +662,11 @@ fn published_baseline_phases_carry_the_tracked_integer_and_lock_time() {
         }
         prev = now;
     }
+    let (v, se) = crate::world::gauss_markov::mean_and_standard_error(&mp_z2);
+    assert!(
+        mp_z2.len() > 200 && (v - 1.0).abs() < 4.0 * se,
+        "multipath z² {v} ± {se}"
+    );
     let c = src.sim.phase_slip_counts();
     eprintln!("{total} phases, {nonzero} with a non-zero integer; slips {c:?}");
     assert!(nonzero as f64 > 0.99 * total as f64);
@@ -675,6 +696,11 @@ fn world_section_is_validated() {
          max_slip_cycles = 3\ninitial_ambiguity_cycles = 10\n",
     );
     assert!(e.contains("world.carrier_phase.unflagged_fraction"), "{e}");
+    let e = err(
+        "[world.phase_multipath]\nsigma_zenith_mm = 2.0\nsigma_horizon_mm = 8.0\n\
+         elevation_scale_deg = 15.0\ntau_s = 0.0\n",
+    );
+    assert!(e.contains("world.phase_multipath.tau_s"), "{e}");
     let e = err("[world.code_noise]\nsigma_at_45_dbhz_m = 0.3\nbogus = 1\n");
     assert!(e.contains("bogus"), "{e}");
     let nlos = |p_h: f64, t: f64| {

@@ -10,7 +10,8 @@
 //! satellites hidden by buildings ([`nlos`]), broadcast clock and orbit errors ([`satellite`]), code tracking noise by C/N0 ([`CodeNoiseSpec`]),
 //! its own oscillator ([`receiver_clock`]) and the antenna's lever arm and time-tag latency
 //! ([`antenna`]); its baseline carrier-phase differences carry an unknown integer per
-//! satellite and baseline, cycle slips and a lock indicator ([`carrier_phase`]); it corrects the pseudoranges with its own broadcast models and reports a
+//! satellite and baseline, cycle slips and a lock indicator ([`carrier_phase`]) and the
+//! differential carrier-phase multipath of the two antennas ([`phase_multipath`]); it corrects the pseudoranges with its own broadcast models and reports a
 //! least-squares fix with the covariance of its own noise model, as a receiver does.
 //!
 //! The motion world ([`MotionWorld`], built by every driver's [`crate::truth::TruthGenerator`]
@@ -45,6 +46,7 @@ pub mod imu_unit;
 pub mod ionosphere;
 pub mod multipath;
 pub mod nlos;
+pub mod phase_multipath;
 pub mod receiver_clock;
 pub mod satellite;
 pub mod spectral;
@@ -63,6 +65,7 @@ use ionosphere::{Ionosphere, IonosphereSpec};
 use multipath::{Multipath, MultipathSpec};
 use nalgebra::Vector3;
 use nlos::{Nlos, NlosSpec};
+use phase_multipath::PhaseMultipathSpec;
 use rand_chacha::ChaCha20Rng;
 use receiver_clock::ReceiverClockSpec;
 use satellite::{EphemerisSpec, SatelliteClockSpec, SignalInSpace};
@@ -123,6 +126,8 @@ pub struct WorldSection {
     pub gnss_antenna: Option<GnssAntennaSpec>,
     /// Integer ambiguity, cycle slips and lock indicator of the baseline carrier phases.
     pub carrier_phase: Option<CarrierPhaseSpec>,
+    /// Differential carrier-phase multipath of the baseline phases.
+    pub phase_multipath: Option<PhaseMultipathSpec>,
     /// Ground vehicle on a real road: terrain, suspension, sideslip, wheel slip, odometer
     /// lever arm (ground-vehicle trajectories only).
     pub vehicle: Option<VehicleSpec>,
@@ -144,7 +149,7 @@ pub struct WorldSection {
 
 /// The GNSS part of `[world]`: every effect on the pseudoranges, the receiver's oscillator,
 /// the antenna and the carrier phases, by table name (the first entries of [`EFFECTS`]).
-pub const GNSS_EFFECTS: [&str; 10] = [
+pub const GNSS_EFFECTS: [&str; 11] = [
     "ionosphere",
     "troposphere",
     "multipath",
@@ -155,10 +160,11 @@ pub const GNSS_EFFECTS: [&str; 10] = [
     "receiver_clock",
     "gnss_antenna",
     "carrier_phase",
+    "phase_multipath",
 ];
 
 /// Every effect of `[world]`, by its table name.
-pub const EFFECTS: [&str; 17] = [
+pub const EFFECTS: [&str; 18] = [
     GNSS_EFFECTS[0],
     GNSS_EFFECTS[1],
     GNSS_EFFECTS[2],
@@ -169,6 +175,7 @@ pub const EFFECTS: [&str; 17] = [
     GNSS_EFFECTS[7],
     GNSS_EFFECTS[8],
     GNSS_EFFECTS[9],
+    GNSS_EFFECTS[10],
     "vehicle",
     "vibration",
     "gravity",
@@ -192,6 +199,7 @@ macro_rules! every_table {
             receiver_clock,
             gnss_antenna,
             carrier_phase,
+            phase_multipath,
             vehicle,
             vibration,
             gravity,
@@ -326,6 +334,10 @@ impl WorldSection {
     pub fn carrier_phase(&self) -> Option<CarrierPhaseSpec> {
         on(self.carrier_phase, |s| s.enabled)
     }
+    /// The baseline phases' multipath when enabled.
+    pub fn phase_multipath(&self) -> Option<PhaseMultipathSpec> {
+        on(self.phase_multipath, |s| s.enabled)
+    }
     /// The receiver oscillator when enabled.
     pub fn receiver_clock(&self) -> Option<ReceiverClockSpec> {
         on(self.receiver_clock, |s| s.enabled)
@@ -408,6 +420,12 @@ impl WorldSection {
             nonneg("multipath.sigma_horizon_m", s.sigma_horizon_m)?;
             positive("multipath.elevation_scale_deg", s.elevation_scale_deg)?;
             positive("multipath.tau_s", s.tau_s)?;
+        }
+        if let Some(s) = &self.phase_multipath {
+            nonneg("phase_multipath.sigma_zenith_mm", s.sigma_zenith_mm)?;
+            nonneg("phase_multipath.sigma_horizon_mm", s.sigma_horizon_mm)?;
+            positive("phase_multipath.elevation_scale_deg", s.elevation_scale_deg)?;
+            positive("phase_multipath.tau_s", s.tau_s)?;
         }
         if let Some(s) = &self.nlos {
             for (key, p) in [

@@ -26,6 +26,14 @@
 //! the lines of sight. Figures: per configuration the RMS error of heading, pitch and roll,
 //! the RMS of the predicted σ, and the normalised error `Σ(ε/σ)²/N` per axis (χ²(N)/N: 1 ±
 //! 4√(2/N) at 4σ); log-log slopes of RMS error against `λσ_φ/d` along both sweeps (theory: 1).
+//!
+//! The sweeps check the method's σ law, so the rest of their world is matched. The reference
+//! configuration then runs once more on the car's whole world (`vehicle.toml`'s `[world]`:
+//! the road's grade and bank, the antenna's lever arm and time tag — the truth is taken at the
+//! measurement instant — the pseudorange errors under the fix that gives the lines of sight,
+//! and the two antennas' carrier-phase multipath, [`drivers_sim::world::phase_multipath`]),
+//! the solver still weighting the phases by the receiver's σ_φ: what paper 003's method gives
+//! on a car, reported beside the law.
 
 use super::plot::{Chart, Line, color, finite_points, line_chart};
 use super::{Experiment, ExperimentError, fmt_f64, fmt_opt, linear_fit, progress_bar};
@@ -134,6 +142,9 @@ fn run_config(
     scn.gnss.phase_sigma_cycles = sigma_cycles;
     let mut src = GnssSource::new(&scn, scn.epoch_gps().ns);
     let mut truth = TruthGenerator::new(&scn);
+    // The receiver stamps its epoch `latency` after the measurement instant (the world's
+    // documented time tag): the attitude solved is the one of that instant.
+    let latency_ns = scn.spec.world.map_or(0, |w| w.gnss_latency_ns());
     let (mut se, mut sp, mut sz) = ([0.0; 3], [0.0; 3], [0.0; 3]);
     let mut n = 0usize;
     let mut wavelength = 0.0;
@@ -143,7 +154,7 @@ fn run_config(
     for k in 0..epochs as i64 {
         let t_ns = k * 1_000_000_000;
         let (msg, hidden) = src.sample_with_truth(t_ns);
-        truth.advance_to(t_ns);
+        truth.advance_to((t_ns - latency_ns).max(0));
         let tp = truth.current();
         if msg.fix_valid == 0 {
             continue;
@@ -366,6 +377,12 @@ pub struct Summary {
     pub slopes: Slopes,
     /// Largest |measured RMS / predicted σ − 1| over the configurations and axes.
     pub max_abs_measured_over_predicted_minus_one: f64,
+    /// The reference configuration on the car's whole world (the shipped scenario's
+    /// `[world]`: its road, antenna, time tag, pseudorange errors and the phases' multipath),
+    /// the solver still weighting the phases by the receiver's σ_φ.
+    pub car_world: Row,
+    /// The world effects on in that run (truth only).
+    pub car_world_effects: Vec<String>,
 }
 
 experiment!(
@@ -426,6 +443,7 @@ fn measure(
         .and_then(|w| w.only(&["carrier_phase"]).ok())
         .filter(|w| w.carrier_phase().is_some())
         .ok_or_else(|| measurement("the car's world has no [world.carrier_phase]"))?;
+    let car_world = shipped.clone();
     let mut base = drivers_sim::matched::scenario(shipped);
     base.spec.world = Some(phases);
     let mut jobs: Vec<(bool, f64, f64)> = settings
@@ -451,6 +469,14 @@ fn measure(
             r
         })
         .collect();
+    // The reference configuration on the car's whole world, its own noise stream.
+    let on_world = run_config(
+        &car_world,
+        settings.reference_length_m,
+        settings.reference_sigma_cycles,
+        settings.epochs,
+        base.spec.scenario.seed + 1 + jobs.len() as u64,
+    )?;
     bar.finish_and_clear();
     let (mut by_length, mut by_sigma) = (Vec::new(), Vec::new());
     for (job, r) in jobs.iter().zip(results) {
@@ -475,6 +501,8 @@ fn measure(
         length_sweep: by_length,
         sigma_sweep: by_sigma,
         max_abs_measured_over_predicted_minus_one: worst_ratio,
+        car_world: row(&on_world),
+        car_world_effects: super::world_effects(&car_world),
     };
     let mut lines = Vec::new();
     for (i, (label, rows)) in [
@@ -545,7 +573,11 @@ pub fn table(summary: &Summary) -> String {
         "pred",
         "z²"
     ));
-    for sweep in [&summary.length_sweep, &summary.sigma_sweep] {
+    for sweep in [
+        &summary.length_sweep,
+        &summary.sigma_sweep,
+        &vec![summary.car_world.clone()],
+    ] {
         for r in sweep {
             let mut line = format!(
                 "{:>6} {:>8} {:>10}",
@@ -566,6 +598,10 @@ pub fn table(summary: &Summary) -> String {
         }
         out.push('\n');
     }
+    out.push_str(&format!(
+        "the last row: the car's whole world ({}), the solver weighting by the receiver's σ_φ\n",
+        summary.car_world_effects.join(", ")
+    ));
     out.push_str(&format!(
         "log-log slope of heading RMS vs λσ/d: length sweep {}, σ sweep {} (theory 1)\n",
         fmt_opt(
@@ -598,7 +634,16 @@ pub fn table(summary: &Summary) -> String {
         "resid",
         "sets",
     ));
-    for r in summary.length_sweep.iter().chain(&summary.sigma_sweep) {
+    for (k, r) in summary
+        .length_sweep
+        .iter()
+        .chain(&summary.sigma_sweep)
+        .chain(std::iter::once(&summary.car_world))
+        .enumerate()
+    {
+        if k == summary.length_sweep.len() + summary.sigma_sweep.len() {
+            out.push_str("on the car's whole world:\n");
+        }
         let i = &r.integers;
         out.push_str(&format!(
             "{:>6} {:>8} | {:>6} {:>6} {:>7} {:>5} {:>6} {:>5} {:>5} | {:>6} {:>6} | {:>6} {:>6} {:>5}\n",
@@ -681,6 +726,17 @@ mod tests {
             slips += i.slips_flagged_seen + i.slips_found_by_residuals;
         }
         assert!(slips > 0);
+        // On the car's whole world the phases also carry the antennas' multipath, which the
+        // receiver's σ_φ leaves out: the solver weighting by σ_φ alone is optimistic (heading
+        // Σz²/N above the χ² band) and fixes fewer epochs — but never a wrong integer.
+        let w = &s.car_world;
+        assert_eq!(w.integers.wrong_fix_epochs, 0, "{w:?}");
+        assert!(w.epochs > 0, "{w:?}");
+        assert!(
+            w.heading_normalised_sq > 1.0 + 4.0 * (2.0 / w.epochs as f64).sqrt(),
+            "{w:?}"
+        );
+        assert!(s.car_world_effects.iter().any(|e| e == "phase_multipath"));
         let sl = |x: Option<f64>| x.expect("slope");
         let slopes = &s.slopes;
         assert!((sl(slopes.length_sweep_heading_predicted_loglog_slope) - 1.0).abs() < 0.01);

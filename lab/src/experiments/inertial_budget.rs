@@ -164,20 +164,23 @@ struct Measured {
 fn matched_scenario(
     settings: &Settings,
 ) -> Result<drivers_sim::scenario::Scenario, ExperimentError> {
-    Ok(drivers_sim::matched::scenario(load_scenario(
-        &settings.scenario,
-        settings.seed,
-    )?))
+    Ok(drivers_sim::matched::scenario(world_scenario(settings)?))
 }
 
-/// The navigator through the scenario; with `baro_in_window` false the baro samples of the
+/// The scenario as shipped, with its `[world]`: the same drive, window and seed, measured
+/// beside the budget so that the table says what the car's world adds to it.
+fn world_scenario(settings: &Settings) -> Result<drivers_sim::scenario::Scenario, ExperimentError> {
+    load_scenario(&settings.scenario, settings.seed)
+}
+
+/// The navigator through `scn`; with `baro_in_window` false the baro samples of the
 /// window are withheld (pure free inertial from the window start, vertical free).
 fn navigator_run(
     settings: &Settings,
+    mut scn: drivers_sim::scenario::Scenario,
     cfg: &NavigatorConfig,
     baro_in_window: bool,
 ) -> Result<(Snapshot, Measured), ExperimentError> {
-    let mut scn = matched_scenario(settings)?;
     let (w0, w1) = (
         settings.window_start_s,
         settings.window_start_s + settings.window_s,
@@ -534,6 +537,18 @@ pub struct Summary {
     pub estimated_gyro_nonorthogonality_arcsec: Vec<f64>,
     /// The simulator's drawn value (xy, xz, yz), arcsec.
     pub drawn_gyro_nonorthogonality_arcsec: [f64; 3],
+    /// The world effects of the shipped scenario (truth only) under the two runs below.
+    pub world_effects: Vec<String>,
+    /// The navigator on that world (baro in the window): horizontal error at the end, m.
+    pub world_navigator_horizontal_m: f64,
+    /// Its horizontal 1σ, m.
+    #[serde(deserialize_with = "nan_if_null")]
+    pub world_navigator_sigma_horizontal_m: f64,
+    /// The navigator on that world without baro in the window: horizontal, m.
+    pub world_navigator_without_baro_in_window_horizontal_m: f64,
+    /// Its horizontal 1σ, m.
+    #[serde(deserialize_with = "nan_if_null")]
+    pub world_navigator_without_baro_in_window_sigma_horizontal_m: f64,
     /// Wall-clock time, s.
     pub wall_time_s: f64,
 }
@@ -554,10 +569,16 @@ fn measure(
 ) -> Result<Summary, ExperimentError> {
     let wall = std::time::Instant::now();
     let cfg = config(settings)?;
-    let (snap, measured) = navigator_run(settings, &cfg, true)?;
+    let (snap, measured) = navigator_run(settings, matched_scenario(settings)?, &cfg, true)?;
     // Without the baro in the window nothing corrects the state after t₀: the budget must
     // close on this run exactly (up to the free vertical channel's coupling).
-    let (_, free) = navigator_run(settings, &cfg, false)?;
+    let (_, free) = navigator_run(settings, matched_scenario(settings)?, &cfg, false)?;
+    // The same window on the car's world (the shipped scenario with its `[world]`), the
+    // filter installed for it: what the navigator does when the truth is not the IMU model.
+    let world = world_scenario(settings)?;
+    let world_effects = super::world_effects(&world);
+    let (_, on_world) = navigator_run(settings, world.clone(), &cfg, true)?;
+    let (_, on_world_free) = navigator_run(settings, world, &cfg, false)?;
     let scn = matched_scenario(settings)?;
     let ell = cfg.ellipsoid.ellipsoid();
     let period = period_ns(scn.spec.imu.rate_hz);
@@ -966,6 +987,14 @@ fn measure(
     let sigma_end = *measured.sigma_m.last().unwrap_or(&f64::NAN);
     let free_end = *free.err_ne_m.last().unwrap_or(&Vector2::zeros());
     let free_sigma_end = *free.sigma_m.last().unwrap_or(&f64::NAN);
+    let end = |m: &Measured| {
+        (
+            m.err_ne_m.last().map_or(f64::NAN, |e| e.norm()),
+            *m.sigma_m.last().unwrap_or(&f64::NAN),
+        )
+    };
+    let (world_end, world_sigma_end) = end(&on_world);
+    let (world_free_end, world_free_sigma_end) = end(&on_world_free);
     let rj = nalgebra::DMatrix::from_fn(2, lin_joint.len(), |a, b| pos_ne(&lin_joint[b])[a]);
     let pj = sub_cov(&snap.p, &joint_cols);
     let joint_sigma = (rj.clone() * pj * rj.transpose()).trace().max(0.0).sqrt();
@@ -1023,6 +1052,11 @@ fn measure(
             gc.misalignment[(0, 2)].to_degrees() * 3600.0,
             gc.misalignment[(1, 2)].to_degrees() * 3600.0,
         ],
+        world_effects,
+        world_navigator_horizontal_m: world_end,
+        world_navigator_sigma_horizontal_m: world_sigma_end,
+        world_navigator_without_baro_in_window_horizontal_m: world_free_end,
+        world_navigator_without_baro_in_window_sigma_horizontal_m: world_free_sigma_end,
         wall_time_s: wall.elapsed().as_secs_f64(),
     };
 
@@ -1054,6 +1088,12 @@ fn measure(
             xy(&measured.t_s, &measured.sigma_m),
             color(5),
         ),
+        Line::solid(
+            "navigator on the car's world",
+            horizontal(&on_world),
+            color(7),
+        ),
+        Line::dashed("its 1σ", xy(&on_world.t_s, &on_world.sigma_m), color(8)),
     ];
     for (n, &i) in order.iter().take(4).enumerate() {
         lines.push(Line::solid(
@@ -1127,6 +1167,17 @@ pub fn table(summary: &Summary) -> String {
         f(m.filter_model_sigma_without_noise_horizontal_m, 2),
         f(m.filter_model_noise_sigma_closed_form_horizontal_m, 2),
     );
+    s += &format!(
+        "the budget above is the matched world's (the IMU model is all the truth has); the same window on the car's world: navigator with baro {} m (1σ {} m), without baro {} m (1σ {} m)\n{}\n",
+        f(m.world_navigator_horizontal_m, 2),
+        f(m.world_navigator_sigma_horizontal_m, 2),
+        f(m.world_navigator_without_baro_in_window_horizontal_m, 2),
+        f(
+            m.world_navigator_without_baro_in_window_sigma_horizontal_m,
+            2
+        ),
+        super::world_line(&m.world_effects),
+    );
     s
 }
 
@@ -1184,6 +1235,17 @@ mod tests {
             (model - sigma).abs() <= 0.1 * sigma,
             "{model} vs {sigma}\n{t}"
         );
+        // The car's world's runs are there, beside the budget (their size is measured, not
+        // bounded: the budget does not model them).
+        assert!(!s.world_effects.is_empty(), "{t}");
+        for x in [
+            s.world_navigator_horizontal_m,
+            s.world_navigator_sigma_horizontal_m,
+            s.world_navigator_without_baro_in_window_horizontal_m,
+            s.world_navigator_without_baro_in_window_sigma_horizontal_m,
+        ] {
+            assert!(x.is_finite() && x > 0.0, "{t}");
+        }
         assert!(dir.join("horizontal_error_budget.png").exists());
         let _ = std::fs::remove_dir_all(&dir);
     }
