@@ -1088,12 +1088,6 @@ fn measure(
             xy(&measured.t_s, &measured.sigma_m),
             color(5),
         ),
-        Line::solid(
-            "navigator on the car's world",
-            horizontal(&on_world),
-            color(7),
-        ),
-        Line::dashed("its 1σ", xy(&on_world.t_s, &on_world.sigma_m), color(8)),
     ];
     for (n, &i) in order.iter().take(4).enumerate() {
         lines.push(Line::solid(
@@ -1111,6 +1105,31 @@ fn measure(
             log_x: false,
             log_y: false,
             lines: &lines,
+        },
+    )?;
+    // The same window on the matched world and on the car's, with the filter's 1σ.
+    line_chart(
+        &out_dir.join("matched_and_car_world.png"),
+        &Chart {
+            title: "Free-inertial window: the matched world and the car's world",
+            x_label: "time since GNSS was lost, s",
+            y_label: "horizontal position error, m",
+            log_x: false,
+            log_y: false,
+            lines: &[
+                Line::solid("matched world", horizontal(&measured), color(0)),
+                Line::dashed(
+                    "matched world: filter 1σ",
+                    xy(&measured.t_s, &measured.sigma_m),
+                    color(0),
+                ),
+                Line::solid("car's world", horizontal(&on_world), color(1)),
+                Line::dashed(
+                    "car's world: filter 1σ",
+                    xy(&on_world.t_s, &on_world.sigma_m),
+                    color(1),
+                ),
+            ],
         },
     )?;
     Ok(summary)
@@ -1247,6 +1266,7 @@ mod tests {
             assert!(x.is_finite() && x > 0.0, "{t}");
         }
         assert!(dir.join("horizontal_error_budget.png").exists());
+        assert!(dir.join("matched_and_car_world.png").exists());
         let _ = std::fs::remove_dir_all(&dir);
     }
 
