@@ -245,7 +245,11 @@ impl ImuErrorModel {
         );
         if let Some(spec) = scn.spec.world.and_then(|w| w.imu()) {
             let mut rng = crate::sensor_rng(scn.spec.scenario.seed, "world_imu");
-            m.set_unit(crate::world::imu_unit::ImuUnit::new(&spec, &mut rng));
+            let mut rng_size = crate::sensor_rng(scn.spec.scenario.seed, "world_imu_size_effect");
+            m.set_unit(
+                crate::world::imu_unit::ImuUnit::new(&spec, &mut rng)
+                    .with_size_effect(&spec, &mut rng_size),
+            );
         }
         m
     }
@@ -328,11 +332,19 @@ impl ImuErrorModel {
             Some(u) => inc.delta_angle_b_rad + u.gyro_g_sensitivity * inc.delta_velocity_b_m_s,
             None => inc.delta_angle_b_rad,
         };
+        // Size effect: the accelerometers' residual offsets on the rotating body.
+        let delta_velocity = match &self.unit {
+            Some(u) => {
+                inc.delta_velocity_b_m_s
+                    + u.size_effect_dv_b_m_s(&inc.delta_rate_b_rad_s, &inc.rate_outer_b_rad2_s)
+            }
+            None => inc.delta_velocity_b_m_s,
+        };
         (
             self.gyro
                 .apply(&delta_angle, inc.dt_s, &e.gyro_bias_rad_s, &e.gyro_white),
             self.accel.apply(
-                &inc.delta_velocity_b_m_s,
+                &delta_velocity,
                 inc.dt_s,
                 &e.accel_bias_m_s2,
                 &e.accel_white,
@@ -750,6 +762,7 @@ mod tests {
             delta_velocity_b_m_s: Vector3::new(3.0, -4.0, -12.0).normalize() * 1.5 * G0_M_S2 * dt,
             distance_x_m: 0.0,
             odometer_distance_m: 0.0,
+            ..Default::default()
         };
         let (w, s) = (world.sample(dt, &inc), sheet.sample(dt, &inc));
         for (i, u) in units.iter().enumerate() {

@@ -28,7 +28,8 @@ pub fn filter(cfg: NavigatorConfig) -> NavigatorConfig {
 /// `cfg` (a tuning) installed like the car `car` (`config/filter.toml`) for a world that has
 /// only some of the car's effects: the antenna's lever arm and time tag where the world has the
 /// antenna, the receiver's error correlation where it has pseudorange errors, the wheel's lever
-/// arm where it has the car, the star tracker's time tag, low-frequency error and roll bias where it has
+/// arm where it has the car, the odometer's time tag where it has the host's time-stamping,
+/// the star tracker's time tag, low-frequency error and roll bias where it has
 /// the star tracker's world, the weather's drift where it has the barometer's air, the
 /// region's gravity class where it has a gravity disturbance, the oscillator's class where it
 /// has a real receiver clock; the matched
@@ -50,6 +51,9 @@ pub fn installed_for(
     }
     if w.vehicle().is_some() {
         cfg.vehicle.wheel_lever_arm_b_m = car.vehicle.wheel_lever_arm_b_m;
+    }
+    if w.time_tags().is_some() {
+        cfg.latency.odometer_s = car.latency.odometer_s;
     }
     if w.star_tracker().is_some() {
         cfg.latency.star_tracker_s = car.latency.star_tracker_s;

@@ -1366,6 +1366,42 @@ impl Scenario {
                     "must be shorter than the GNSS period",
                 ));
             }
+            // The jitter keeps the measurement instants in order and within one period of
+            // their stamps: latency + jitter and twice the jitter below the period.
+            if let Some(t) = w.time_tags() {
+                for (key, jitter, latency_ns, rate_hz) in [
+                    (
+                        "gnss_jitter_s",
+                        t.gnss_jitter_s,
+                        w.gnss_latency_ns(),
+                        spec.gnss.rate_hz,
+                    ),
+                    (
+                        "star_tracker_jitter_s",
+                        t.star_tracker_jitter_s,
+                        w.star_tracker_latency_ns(),
+                        spec.star_tracker.rate_hz,
+                    ),
+                    (
+                        "odometer_jitter_s",
+                        t.odometer_jitter_s,
+                        w.odometer_latency_ns(),
+                        spec.odometer.rate_hz,
+                    ),
+                ] {
+                    let period_s = 1.0 / rate_hz;
+                    let latency_s = latency_ns as f64 * 1e-9;
+                    if !(latency_s + jitter < period_s && 2.0 * jitter < period_s) {
+                        return Err(invalid(
+                            f,
+                            format!("world.time_tags.{key}"),
+                            format!(
+                                "latency {latency_s} s + jitter {jitter} s and twice the jitter must be shorter than the period {period_s} s"
+                            ),
+                        ));
+                    }
+                }
+            }
         }
         rate("odometer.rate_hz", spec.odometer.rate_hz)?;
         rate("baro.rate_hz", spec.baro.rate_hz)?;

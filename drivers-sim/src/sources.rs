@@ -110,8 +110,9 @@ pub struct StarTrackerSource {
     sim: StarTrackerSim,
     epoch_ns: i64,
     period_ns: i64,
-    /// `[world.star_tracker]` latency: the sample stamped t is the attitude at t − latency.
-    latency_ns: i64,
+    /// `[world.star_tracker]` latency and `[world.time_tags]` jitter: the sample stamped t
+    /// is the attitude at t − latency − jitter.
+    tag: crate::world::time_tags::TimeTag,
 }
 
 impl StarTrackerSource {
@@ -122,7 +123,7 @@ impl StarTrackerSource {
             sim: StarTrackerSim::new(scn),
             epoch_ns,
             period_ns: period_ns(scn.spec.star_tracker.rate_hz),
-            latency_ns: scn.spec.world.map_or(0, |w| w.star_tracker_latency_ns()),
+            tag: time_tag(scn, "star_tracker"),
         }
     }
 }
@@ -136,14 +137,14 @@ impl SampleSource for StarTrackerSource {
         0
     }
     fn sample(&mut self, t_ns: i64) -> StarTrackerSample {
-        if self.latency_ns == 0 {
+        if !self.tag.is_delayed() {
             self.gen_.advance_to(t_ns);
             return self
                 .sim
                 .sample(secs(t_ns), self.epoch_ns + t_ns, self.gen_.current());
         }
-        // Validation keeps the latency a whole number of truth-grid steps below one period.
-        let t_meas_ns = (t_ns - self.latency_ns).max(0);
+        // Validation keeps latency and jitter whole truth-grid steps below one period.
+        let t_meas_ns = self.tag.measurement_instant_ns(t_ns);
         self.gen_.advance_to(t_meas_ns);
         let mut s = self.sim.sample(
             secs(t_meas_ns),
@@ -155,8 +156,17 @@ impl SampleSource for StarTrackerSource {
     }
 }
 
-/// GNSS receiver. With a `[world.gnss_antenna]` latency `L`, the sample stamped `t` is the
-/// measurement made at `t − L` (a time-tag error the filter must be told about).
+/// How `sensor` is stamped in `scn`'s world (no delay without one).
+fn time_tag(scn: &Scenario, sensor: &str) -> crate::world::time_tags::TimeTag {
+    scn.spec.world.map_or_else(
+        || crate::world::time_tags::TimeTag::fixed(0),
+        |w| w.time_tag(scn.spec.scenario.seed, sensor),
+    )
+}
+
+/// GNSS receiver. With a `[world.gnss_antenna]` latency `L` (and a `[world.time_tags]` jitter
+/// `j`), the sample stamped `t` is the measurement made at `t − L − j` (a time-tag error the
+/// filter must be told about: `L`, not `j`).
 #[derive(Debug, Clone)]
 pub struct GnssSource {
     gen_: TruthGenerator,
@@ -164,7 +174,7 @@ pub struct GnssSource {
     pub sim: GnssSim,
     epoch_ns: i64,
     period_ns: i64,
-    latency_ns: i64,
+    tag: crate::world::time_tags::TimeTag,
 }
 
 impl GnssSource {
@@ -175,14 +185,14 @@ impl GnssSource {
             sim: GnssSim::new(scn),
             epoch_ns,
             period_ns: period_ns(scn.spec.gnss.rate_hz),
-            latency_ns: scn.spec.world.map_or(0, |w| w.gnss_latency_ns()),
+            tag: time_tag(scn, "gnss"),
         }
     }
 
     /// Sample with the hidden truth of the epoch (clock, geometric ranges).
     pub fn sample_with_truth(&mut self, t_ns: i64) -> (GnssSample, crate::gnss::GnssEpochTruth) {
-        // Validation keeps the latency a whole number of truth-grid steps below one period.
-        let t_meas_ns = (t_ns - self.latency_ns).max(0);
+        // Validation keeps latency and jitter whole truth-grid steps below one period.
+        let t_meas_ns = self.tag.measurement_instant_ns(t_ns);
         self.gen_.advance_to(t_meas_ns);
         let (mut s, truth) = self.sim.sample(
             secs(t_meas_ns),
@@ -207,13 +217,15 @@ impl SampleSource for GnssSource {
     }
 }
 
-/// Odometer.
+/// Odometer. With `[world.time_tags]`, the sample stamped `t` holds the distance up to
+/// `t − L − j`.
 #[derive(Debug, Clone)]
 pub struct OdometerSource {
     gen_: TruthGenerator,
     sim: OdometerSim,
     epoch_ns: i64,
     period_ns: i64,
+    tag: crate::world::time_tags::TimeTag,
 }
 
 impl OdometerSource {
@@ -224,6 +236,7 @@ impl OdometerSource {
             sim: OdometerSim::new(scn),
             epoch_ns,
             period_ns: period_ns(scn.spec.odometer.rate_hz),
+            tag: time_tag(scn, "odometer"),
         }
     }
 }
@@ -237,7 +250,7 @@ impl SampleSource for OdometerSource {
         1
     }
     fn sample(&mut self, t_ns: i64) -> OdometerSample {
-        let inc = self.gen_.advance_to(t_ns);
+        let inc = self.gen_.advance_to(self.tag.measurement_instant_ns(t_ns));
         self.sim.sample(self.epoch_ns + t_ns, &inc)
     }
 }

@@ -701,6 +701,20 @@ fn world_section_is_validated() {
          elevation_scale_deg = 15.0\ntau_s = 0.0\n",
     );
     assert!(e.contains("world.phase_multipath.tau_s"), "{e}");
+    let tags = |odo_latency: f64, gnss_jitter: f64| {
+        format!(
+            "[world.time_tags]\nodometer_latency_s = {odo_latency}\ngnss_jitter_s = {gnss_jitter}\n\
+             odometer_jitter_s = 0.002\nstar_tracker_jitter_s = 0.0\n"
+        )
+    };
+    // Without an antenna latency the GNSS stamp cannot scatter about it.
+    let e = err(&tags(0.01, 0.002));
+    assert!(e.contains("world.time_tags.gnss_jitter_s"), "{e}");
+    let e = err(&tags(0.0105, 0.0));
+    assert!(e.contains("world.time_tags.odometer_latency_s"), "{e}");
+    let e = err(&tags(0.001, 0.0));
+    assert!(e.contains("world.time_tags.odometer_jitter_s"), "{e}");
+    assert_eq!(err(&tags(0.01, 0.0)), "accepted");
     let e = err("[world.code_noise]\nsigma_at_45_dbhz_m = 0.3\nbogus = 1\n");
     assert!(e.contains("bogus"), "{e}");
     let nlos = |p_h: f64, t: f64| {

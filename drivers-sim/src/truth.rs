@@ -500,6 +500,11 @@ pub struct Increments {
     pub distance_x_m: f64,
     /// ∫(odometer wheel's rolling speed) dt, m: `distance_x_m` unless `[world.vehicle]`.
     pub odometer_distance_m: f64,
+    /// `ω_ib^b(end) − ω_ib^b(start)` = ∫ω̇ dt, rad/s: the tangential part of the
+    /// accelerometers' size effect.
+    pub delta_rate_b_rad_s: Vector3<f64>,
+    /// ∫ω_ib^b ω_ib^bᵀ dt, rad²/s: the centripetal part (`∫ω×(ω×r) dt = (W − tr W·I) r`).
+    pub rate_outer_b_rad2_s: Matrix3<f64>,
 }
 
 /// Steps the truth along the 1 ms grid.
@@ -850,6 +855,11 @@ impl TruthGenerator {
         let prev = &self.point;
         self.acc.dt_s += h;
         self.acc.delta_angle_b_rad += 0.5 * h * (prev.w_ib_b_rad_s + next.w_ib_b_rad_s);
+        self.acc.delta_rate_b_rad_s += next.w_ib_b_rad_s - prev.w_ib_b_rad_s;
+        self.acc.rate_outer_b_rad2_s += 0.5
+            * h
+            * (prev.w_ib_b_rad_s * prev.w_ib_b_rad_s.transpose()
+                + next.w_ib_b_rad_s * next.w_ib_b_rad_s.transpose());
         if self.world.vibration.is_some() {
             // The vibration's integral is exact (its velocity's change), the trapezoid would
             // misstate lines near the grid's Nyquist frequency.

@@ -56,6 +56,9 @@ fn static_shortcut_equals_the_driver_sources() {
         delta_velocity_b_m_s: truth.f_b_m_s2 * dt,
         distance_x_m: 0.0,
         odometer_distance_m: 0.0,
+        // A constant rate: no tangential term, the centripetal one of the Earth's rate.
+        delta_rate_b_rad_s: nalgebra::Vector3::zeros(),
+        rate_outer_b_rad2_s: truth.w_ib_b_rad_s * truth.w_ib_b_rad_s.transpose() * dt,
     };
     for k in 1..=300i64 {
         let s = src.sample(k * p);

@@ -22,6 +22,14 @@
 //! The accelerometer triad's misalignment to the gyro-defined body frame is already part of
 //! every unit's constant errors ([`crate::imu`], six independent terms).
 //!
+//! Size effect: each accelerometer's proof mass sits away from the point the unit reports
+//! for, so on a rotating body it senses also `ω̇ × r_i + ω × (ω × r_i)` along its axis
+//! (Savage, "Strapdown Analytics", 2nd ed., §6.4; Titterton & Weston §8.2.3). A unit
+//! compensates the offsets its drawings give; what is left is the residual of each offset,
+//! drawn here per component (`accel_size_effect_residual_mm`, 1-σ), from its own stream
+//! `"world_imu_size_effect"`. Over an interval the integral is exact from the truth's rate:
+//! `∫ω̇ dt = Δω`, `∫ω × (ω × r) dt = (W − tr W·I) r` with `W = ∫ωωᵀ dt`.
+//!
 //! Draws come from the stream `"world_imu"`, so the `"imu"` stream of every run is unchanged.
 
 use nalgebra::{Matrix3, Vector3};
@@ -55,6 +63,10 @@ pub struct ImuUnitSpec {
     pub accel_warmup_ug: f64,
     /// Time constant of the warm-up, s.
     pub warmup_tau_s: f64,
+    /// 1-σ per component of each accelerometer's offset left after the unit's size-effect
+    /// compensation, mm (0 when absent: a perfect compensation).
+    #[serde(default)]
+    pub accel_size_effect_residual_mm: f64,
 }
 
 /// This unit's draws.
@@ -76,6 +88,8 @@ pub struct ImuUnit {
     pub accel_warmup_m_s2: Vector3<f64>,
     /// Warm-up time constant, s.
     pub warmup_tau_s: f64,
+    /// Column i: accelerometer i's residual offset from the reported point, body, m.
+    pub accel_offsets_b_m: Matrix3<f64>,
 }
 
 impl ImuUnit {
@@ -102,7 +116,31 @@ impl ImuUnit {
             gyro_warmup_rad_s,
             accel_warmup_m_s2,
             warmup_tau_s: spec.warmup_tau_s,
+            accel_offsets_b_m: Matrix3::zeros(),
         }
+    }
+
+    /// This unit with its accelerometers' residual offsets drawn from `rng` (the stream
+    /// `"world_imu_size_effect"`: the other draws of the unit stay those of `"world_imu"`).
+    pub fn with_size_effect(mut self, spec: &ImuUnitSpec, rng: &mut ChaCha20Rng) -> Self {
+        let s = spec.accel_size_effect_residual_mm * 1e-3;
+        self.accel_offsets_b_m = Matrix3::from_fn(|_, _| s * rng.sample::<f64, _>(StandardNormal));
+        self
+    }
+
+    /// The size effect's velocity increment over an interval, body, m/s: accelerometer i
+    /// senses `e_iᵀ(Δω × r_i + (W − tr W·I) r_i)` with `Δω` the change of the body rate over
+    /// the interval (rad/s) and `W = ∫ωωᵀ dt` (rad²/s).
+    pub fn size_effect_dv_b_m_s(
+        &self,
+        delta_rate_b_rad_s: &Vector3<f64>,
+        rate_outer_b_rad2_s: &Matrix3<f64>,
+    ) -> Vector3<f64> {
+        let centripetal = rate_outer_b_rad2_s - Matrix3::identity() * rate_outer_b_rad2_s.trace();
+        Vector3::from_fn(|i, _| {
+            let r = self.accel_offsets_b_m.column(i).into_owned();
+            (delta_rate_b_rad_s.cross(&r) + centripetal * r)[i]
+        })
     }
 
     /// Warm-up biases (gyro rad/s, accelerometer m/s²) at `t_s` after power-on.
@@ -127,7 +165,42 @@ mod tests {
             gyro_warmup_deg_h: 0.02,
             accel_warmup_ug: 30.0,
             warmup_tau_s: 300.0,
+            accel_size_effect_residual_mm: 1.0,
         }
+    }
+
+    /// A body spinning steadily at ω about z (Δω = 0, W = ω²T e_z e_zᵀ): the x accelerometer
+    /// offset by r along x senses the centripetal −ω²r·T, the z one nothing; a step of the
+    /// rate Δω about z gives the x accelerometer offset along y the tangential −Δω·r_y. The
+    /// drawn offsets have the specified σ (4000 units, 4 standard errors) and leave the
+    /// `"world_imu"` draws as they were.
+    #[test]
+    fn size_effect_closed_forms_and_draws() {
+        let mut u = ImuUnit::new(&spec(), &mut ChaCha20Rng::seed_from_u64(3));
+        let (w, t, r) = (0.5, 0.01, 0.002);
+        u.accel_offsets_b_m = Matrix3::new(r, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, r);
+        let outer = Matrix3::new(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, w * w * t);
+        let dv = u.size_effect_dv_b_m_s(&Vector3::zeros(), &outer);
+        assert!((dv.x + w * w * r * t).abs() < 1e-18, "{dv}");
+        assert!(dv.z.abs() < 1e-18 && dv.y.abs() < 1e-18, "{dv}");
+        u.accel_offsets_b_m = Matrix3::new(0.0, 0.0, 0.0, r, 0.0, 0.0, 0.0, 0.0, 0.0);
+        let dv = u.size_effect_dv_b_m_s(&Vector3::new(0.0, 0.0, 0.3), &Matrix3::zeros());
+        assert!((dv.x + 0.3 * r).abs() < 1e-18, "{dv}");
+        let mut rng = ChaCha20Rng::seed_from_u64(9);
+        let sq: Vec<f64> = (0..4000)
+            .map(|_| {
+                ImuUnit::new(&spec(), &mut ChaCha20Rng::seed_from_u64(1))
+                    .with_size_effect(&spec(), &mut rng)
+                    .accel_offsets_b_m[(2, 1)]
+                    .powi(2)
+            })
+            .collect();
+        let (v, se) = mean_and_standard_error(&sq);
+        assert!((v - 1e-6).abs() < 4.0 * se, "{v} vs 1e-6 m² ± {se}");
+        let a = ImuUnit::new(&spec(), &mut ChaCha20Rng::seed_from_u64(1));
+        let b = a.with_size_effect(&spec(), &mut rng);
+        assert_eq!(a.gyro_g_sensitivity, b.gyro_g_sensitivity);
+        assert_eq!(a.accel_warmup_m_s2, b.accel_warmup_m_s2);
     }
 
     /// Over independent units: E[ln² factor] = s², E[G_ij²] = σ_G², E[b_w²] = σ_w² (each

@@ -28,7 +28,9 @@
 //! ([`imu_unit`]: its noise and bias instability scattered about the data sheet, g-sensitive
 //! gyro drift, warm-up), the star tracker's thermal error, boresight bias and time-tag latency
 //! and the barometer's day of weather ([`aiding`]), and every aiding sensor as a unit of its
-//! model ([`units`]: noise and oscillator scattered about the data sheet, constant errors drawn). Off unless a table is present and enabled;
+//! model ([`units`]: noise and oscillator scattered about the data sheet, constant errors drawn),
+//! and the host's time-stamping of them ([`time_tags`]: the odometer's latency, every stamp's
+//! jitter). Off unless a table is present and enabled;
 //! every table is on in `config/scenarios/vehicle.toml`, the default scenario (its shared world
 //! `config/worlds/car.toml` and its own carrier-phase tracking). A scenario's tables may come
 //! from a shared world file (`[world] include`, merged key by key: [`crate::scenario`]).
@@ -50,6 +52,7 @@ pub mod phase_multipath;
 pub mod receiver_clock;
 pub mod satellite;
 pub mod spectral;
+pub mod time_tags;
 pub mod troposphere;
 pub mod units;
 pub mod vehicle;
@@ -145,6 +148,8 @@ pub struct WorldSection {
     /// The aiding sensors as units of their model: noise and oscillator scatter, constant
     /// errors drawn per unit.
     pub units: Option<units::UnitsSpec>,
+    /// Host time-stamping: the odometer's latency and every aiding stamp's jitter.
+    pub time_tags: Option<time_tags::TimeTagsSpec>,
 }
 
 /// The GNSS part of `[world]`: every effect on the pseudoranges, the receiver's oscillator,
@@ -164,7 +169,7 @@ pub const GNSS_EFFECTS: [&str; 11] = [
 ];
 
 /// Every effect of `[world]`, by its table name.
-pub const EFFECTS: [&str; 18] = [
+pub const EFFECTS: [&str; 19] = [
     GNSS_EFFECTS[0],
     GNSS_EFFECTS[1],
     GNSS_EFFECTS[2],
@@ -183,6 +188,7 @@ pub const EFFECTS: [&str; 18] = [
     "star_tracker",
     "baro",
     "units",
+    "time_tags",
 ];
 
 /// Calls macro `$m` with every table's field of [`WorldSection`], in the order of [`EFFECTS`].
@@ -206,7 +212,8 @@ macro_rules! every_table {
             imu,
             star_tracker,
             baro,
-            units
+            units,
+            time_tags
         )
     };
 }
@@ -319,6 +326,37 @@ impl WorldSection {
         self.units().map_or(units::AidingUnit::DATA_SHEET, |u| {
             units::AidingUnit::draw(&u, seed, sensor)
         })
+    }
+
+    /// The host time-stamping when enabled.
+    pub fn time_tags(&self) -> Option<time_tags::TimeTagsSpec> {
+        on(self.time_tags, |s| s.enabled)
+    }
+    /// The odometer's latency, ns (0 when off).
+    pub fn odometer_latency_ns(&self) -> i64 {
+        self.time_tags()
+            .map_or(0, |t| (t.odometer_latency_s * 1e9).round() as i64)
+    }
+    /// How `sensor` (`"gnss"`, `"odometer"` or `"star_tracker"`) is stamped in this world
+    /// for scenario seed `seed`: its latency and jitter (stream `"world_time_tag_<sensor>"`).
+    pub fn time_tag(&self, seed: u64, sensor: &str) -> time_tags::TimeTag {
+        let latency_ns = match sensor {
+            "gnss" => self.gnss_latency_ns(),
+            "star_tracker" => self.star_tracker_latency_ns(),
+            "odometer" => self.odometer_latency_ns(),
+            _ => 0,
+        };
+        let jitter_s = self.time_tags().map_or(0.0, |t| match sensor {
+            "gnss" => t.gnss_jitter_s,
+            "star_tracker" => t.star_tracker_jitter_s,
+            "odometer" => t.odometer_jitter_s,
+            _ => 0.0,
+        });
+        time_tags::TimeTag::new(
+            latency_ns,
+            jitter_s,
+            crate::sensor_rng(seed, &format!("world_time_tag_{sensor}")),
+        )
     }
 
     /// The IMU unit spec when enabled.
@@ -643,6 +681,49 @@ impl WorldSection {
                     "baro.sensor_temp_coeff_pa_per_c",
                     "must be finite".into(),
                 ));
+            }
+        }
+        if let Some(s) = &self.time_tags {
+            for (key, v) in [
+                ("odometer_latency_s", s.odometer_latency_s),
+                ("gnss_jitter_s", s.gnss_jitter_s),
+                ("odometer_jitter_s", s.odometer_jitter_s),
+                ("star_tracker_jitter_s", s.star_tracker_jitter_s),
+            ] {
+                let ms = v * 1e3;
+                if !(v.is_finite() && (0.0..1.0).contains(&v) && (ms - ms.round()).abs() < 1e-6) {
+                    return Err(bad(
+                        &format!("time_tags.{key}"),
+                        format!(
+                            "{v} must be a whole number of milliseconds (the truth grid) in [0, 1) s"
+                        ),
+                    ));
+                }
+            }
+            // A sample is never stamped before it is measured: the jitter stays within the
+            // latency it scatters about.
+            for (key, jitter, latency) in [
+                ("gnss_jitter_s", s.gnss_jitter_s, self.gnss_latency_ns()),
+                (
+                    "star_tracker_jitter_s",
+                    s.star_tracker_jitter_s,
+                    self.star_tracker_latency_ns(),
+                ),
+                (
+                    "odometer_jitter_s",
+                    s.odometer_jitter_s,
+                    (s.odometer_latency_s * 1e9).round() as i64,
+                ),
+            ] {
+                if (jitter * 1e9).round() as i64 > latency {
+                    return Err(bad(
+                        &format!("time_tags.{key}"),
+                        format!(
+                            "{jitter} s exceeds the sensor's latency {} s",
+                            latency as f64 * 1e-9
+                        ),
+                    ));
+                }
             }
         }
         if let Some(s) = &self.gravity {

@@ -61,7 +61,7 @@ impl Navigator {
                     self.bridge_imu_gap(p, &e);
                 }
                 self.imu_log.push(e);
-                self.imu_step(&e, Tally::Count);
+                self.imu_step(&e);
                 self.health[id].fused += 1;
             }
         }

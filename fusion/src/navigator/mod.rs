@@ -263,6 +263,10 @@ pub struct Navigator {
     /// aiding up to it belongs to the alignment period, whenever it arrives (`fuse_due`).
     nav_start: Option<GpsTime>,
     zupt: ZuptHealth,
+    /// Epoch of the latest zero-velocity update counted in `zupt`: a replay re-fuses updates
+    /// up to it (not counted again) and may fuse some at epochs the live run did not have,
+    /// which are counted once when they lie beyond it.
+    zupt_counted_until: Option<GpsTime>,
     solutions: u64,
     mode: NavMode,
     aiding_mask: u32,
@@ -347,6 +351,7 @@ impl Navigator {
             nav_start: None,
             core,
             zupt: ZuptHealth::default(),
+            zupt_counted_until: None,
             solutions: 0,
             mode: NavMode::Initializing,
             aiding_mask: 0,
@@ -415,6 +420,12 @@ impl Navigator {
     /// Zero-velocity update counters.
     pub fn zupt_health(&self) -> ZuptHealth {
         self.zupt
+    }
+
+    /// Time of validity of the latest zero-velocity update counted in [`Self::zupt_health`]
+    /// (it may precede [`Self::time`]: an update first fused in a replay).
+    pub fn last_zupt_counted(&self) -> Option<GpsTime> {
+        self.zupt_counted_until
     }
 
     /// Counters of the non-holonomic constraint updates.

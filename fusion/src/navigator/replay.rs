@@ -7,9 +7,9 @@ use super::*;
 impl Navigator {
     /// One navigating IMU step (live or replayed): mechanization, transition accumulation,
     /// covariance propagation at its interval, fusion of the aiding due, ZUPT, checkpoint.
-    /// `tally` is whether the step's own update (ZUPT) counts: `Count` live, `Skip` replayed
-    /// (a queued sample carries its own tally, [`Tally::first_time`]).
-    pub(super) fn imu_step(&mut self, e: &ImuLogEntry, tally: Tally) {
+    /// The same live and replayed: a queued sample carries its own tally
+    /// ([`Tally::first_time`]), the ZUPT counts by its epoch ([`Self::maybe_zupt`]).
+    pub(super) fn imu_step(&mut self, e: &ImuLogEntry) {
         let t = e.t;
         // The increment covers dt_s; after missing samples, stretch it over the gap.
         let gap_s = e.prev_t.map_or(e.dt_s, |p| (t - p).seconds_f64());
@@ -41,7 +41,7 @@ impl Navigator {
         self.time = t;
         self.update_static_detector(t, &inc);
         self.fuse_due(t);
-        self.maybe_zupt(t, tally);
+        self.maybe_zupt(t);
         let due = self.checkpoints.len == 0
             || t - self.checkpoints.get(self.checkpoints.len - 1).t >= CHECKPOINT_PERIOD;
         if due {
@@ -117,7 +117,7 @@ impl Navigator {
         for i in 0..self.imu_log.len {
             let e = *self.imu_log.get(i);
             if e.t > c.t {
-                self.imu_step(&e, Tally::Skip);
+                self.imu_step(&e);
             }
         }
     }

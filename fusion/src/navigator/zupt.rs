@@ -63,7 +63,12 @@ impl Navigator {
         }
     }
 
-    pub(super) fn maybe_zupt(&mut self, t: GpsTime, tally: Tally) {
+    /// The zero-velocity update due at `t`, if any. Counted in the health once per epoch as
+    /// time advances (`zupt_counted_until`), whether it is fused live or first in a replay:
+    /// a late aiding sample (an odometer's latency) rewinds the filter, and the replayed
+    /// static detector, fed the corrected biases, may schedule its updates at other epochs
+    /// than the live run did.
+    pub(super) fn maybe_zupt(&mut self, t: GpsTime) {
         let a = self.config.aiding;
         if !self.config.updates.zupt {
             return;
@@ -90,6 +95,12 @@ impl Navigator {
             return;
         }
         self.core.last_zupt = Some(t);
+        let tally = if self.zupt_counted_until.is_some_and(|c| t <= c) {
+            Tally::Skip
+        } else {
+            self.zupt_counted_until = Some(t);
+            Tally::Count
+        };
         let m = ekf::zero_velocity(&self.core.nav, a.zupt_sigma_m_s);
         self.run_update(Counter::Zupt, &m, tally);
     }

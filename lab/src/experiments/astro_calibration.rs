@@ -183,6 +183,9 @@ pub fn simulate(k: usize, duration_s: f64, window_s: f64) -> Result<Record, Expe
         delta_velocity_b_m_s: truth.f_b_m_s2 * dt,
         distance_x_m: 0.0,
         odometer_distance_m: 0.0,
+        // A constant rate: no tangential term, the centripetal one of the Earth's rate.
+        delta_rate_b_rad_s: nalgebra::Vector3::zeros(),
+        rate_outer_b_rad2_s: truth.w_ib_b_rad_s * truth.w_ib_b_rad_s.transpose() * dt,
     };
     let n = duration_s.floor() as usize;
     let mut f_mean = Vec::with_capacity(n);

@@ -333,6 +333,7 @@ fn fly(
             delta_velocity_b_m_s: *dv,
             distance_x_m: 0.0,
             odometer_distance_m: 0.0,
+            ..Default::default()
         };
         let ch = model.sample(t_end, &inc);
         let zg = ChannelVector::from(ch.delta_angle_rad);
