@@ -37,6 +37,10 @@ pub(super) struct Core {
     pub(super) baro_anchor_height_m: Option<f64>,
     /// Time of validity and speed (m/s) of the last odometer sample (ZUPT veto).
     pub(super) last_odo: Option<(GpsTime, f64)>,
+    /// The last odometer epoch fused (interval-mean to end-point speed, `fuse_odometer`):
+    /// replayable, so that a sample re-fused after a rewind meets the epoch before it, not a
+    /// later one.
+    pub(super) odo_epoch: Option<OdometerEpoch>,
     /// Whether the receiver clock states have been started (tight coupling).
     pub(super) clock_initialized: bool,
     /// Time of validity of the last GNSS epoch whose position or pseudoranges were fused
@@ -71,6 +75,7 @@ impl Core {
             baro_anchor_height_m: None,
             last_star_fused: None,
             last_odo: None,
+            odo_epoch: None,
             clock_initialized: false,
             last_gnss_ranging: None,
             w_ib_b_rad_s: Vector3::zeros(),

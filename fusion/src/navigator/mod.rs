@@ -284,8 +284,6 @@ pub struct Navigator {
     ambiguity: Option<crate::phase_ambiguity::AmbiguityResolver>,
     /// An IMU time discontinuity waiting for confirmation (see [`Navigator::check_imu_time`]).
     imu_time_jump: Option<ImuTimeJump>,
-    /// The last odometer epoch (interval-mean to end-point speed, `fuse_odometer`).
-    odo_epoch: Option<OdometerEpoch>,
     /// Non-holonomic constraint counters.
     nhc: NhcHealth,
     /// The latest least-squares GNSS fix of the alignment period and its time of validity
@@ -360,7 +358,6 @@ impl Navigator {
             diagnostics: NavigatorDiagnostics::default(),
             ambiguity: None,
             imu_time_jump: None,
-            odo_epoch: None,
             nhc: NhcHealth::default(),
             init_ls: None,
             star_attitude: None,

@@ -73,7 +73,7 @@ impl Navigator {
         let k = self.core.ekf.odo_scale;
         let wheel = self.wheel_contact();
         let wheel_vx = |nav: &NavState| wheel.body_velocity(nav).0.x;
-        let prev = self.odo_epoch.take();
+        let prev = self.core.odo_epoch.take();
         let spacing = prev.map(|p| ts - p.t);
         let v_now = wheel_vx(&self.core.nav);
         let mut accel_long_m_s2 = 0.0;
@@ -150,7 +150,7 @@ impl Navigator {
                 self.correct(&out.dx);
             }
         }
-        self.odo_epoch = Some(OdometerEpoch {
+        self.core.odo_epoch = Some(OdometerEpoch {
             t: ts,
             spacing,
             v_x_m_s: wheel_vx(&self.core.nav),
