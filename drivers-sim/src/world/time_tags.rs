@@ -10,9 +10,9 @@
 //! truth's 1 ms grid), variance `J(J + 1)/3` ms² for `J` in ms. The filter is told `L`, never
 //! `j`.
 //!
-//! Validation keeps `J ≤ L` (a measurement is never stamped before it is made) and
-//! `L + J` below one sample period, and `2J` below one period, so that the measurement
-//! instants stay in order.
+//! A measurement is never stamped before it is made: `J` is cut to `L` where it is larger
+//! (no jitter where the sensor's latency table is off). Validation keeps `L + J` and `2J`
+//! below one sample period, so that the measurement instants stay in order.
 //!
 //! Draws come from one stream per sensor (`"world_time_tag_<sensor>"`): each driver process
 //! draws its own, and switching the effect changes no other realisation.
@@ -121,6 +121,33 @@ mod tests {
         let lag: Vec<f64> = late_ms.windows(2).map(|w| w[0] * w[1]).collect();
         let (c, se_c) = mean_and_standard_error(&lag);
         assert!(c.abs() < 4.0 * se_c, "lag-1 {c} ± {se_c}");
+    }
+
+    /// A world's stamps: the jitter is cut to the sensor's latency, so without the GNSS
+    /// antenna's latency the fix is measured exactly at its stamp, and the odometer's instants
+    /// stay within `L ± min(J, L)`.
+    #[test]
+    fn jitter_is_cut_to_the_latency() {
+        let w = crate::world::WorldSection {
+            time_tags: Some(TimeTagsSpec {
+                enabled: true,
+                odometer_latency_s: 0.001,
+                gnss_jitter_s: 0.002,
+                odometer_jitter_s: 0.003,
+                star_tracker_jitter_s: 0.0,
+            }),
+            ..Default::default()
+        };
+        let (mut gnss, mut odo) = (w.time_tag(1, "gnss"), w.time_tag(1, "odometer"));
+        let mut seen = [false; 3];
+        for k in 1..=1000i64 {
+            let t = k * 50_000_000;
+            assert_eq!(gnss.measurement_instant_ns(t), t);
+            let late_ms = (t - odo.measurement_instant_ns(t)) / 1_000_000;
+            assert!((0..=2).contains(&late_ms), "{late_ms} ms");
+            seen[late_ms as usize] = true;
+        }
+        assert_eq!(seen, [true; 3]);
     }
 
     /// Without jitter the instant is the stamp less the latency, clamped at the start.
