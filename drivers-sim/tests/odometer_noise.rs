@@ -87,6 +87,19 @@ fn run_on(scn: Scenario, cfg: NavigatorConfig, duration_s: f64) -> OdoRun {
     out
 }
 
+/// Every sample of the 600 s run fused, and the speed's NIS per dof inside the χ² band of a
+/// consistent filter: with n ≈ 10 000 one-dof updates its mean is 1 ± √(2/n), 3σ ± 0.042.
+fn assert_speed_nis_in_band(r: &OdoRun) {
+    println!("{r:?}");
+    let band = 3.0 * (2.0 / r.updates as f64).sqrt();
+    assert!(r.updates > 9000, "{} updates", r.updates);
+    assert!(
+        (r.nis_per_dof - 1.0).abs() < band,
+        "odometer NIS/dof {} outside 1 ± {band}",
+        r.nis_per_dof
+    );
+}
+
 #[test]
 #[ignore = "diagnostic: the default 600 s run with several odometer/NHC noise settings"]
 fn odometer_noise_report() {
@@ -120,14 +133,7 @@ fn odometer_noise_report() {
 #[test]
 fn default_run_odometer_is_consistent() {
     let r = run(matched_car_config(), 600.0);
-    println!("{r:?}");
-    let band = 3.0 * (2.0 / r.updates as f64).sqrt();
-    assert!(r.updates > 9000, "{} updates", r.updates);
-    assert!(
-        (r.nis_per_dof - 1.0).abs() < band,
-        "odometer NIS/dof {} outside 1 ± {band}",
-        r.nis_per_dof
-    );
+    assert_speed_nis_in_band(&r);
     // Gate at 0.999: 0.1 % of consistent updates rejected, ≈ 10; 3σ of a Poisson(10): 20.
     assert!(r.rejected <= 20, "{} rejected", r.rejected);
     assert!(r.nhc_updates + 20 >= r.updates);
@@ -162,12 +168,5 @@ fn late_odometer_samples_keep_their_interval_mean_correction() {
     let mut cfg = matched_car_config();
     cfg.latency.odometer_s = 0.01;
     let r = run_on(scn, cfg, 600.0);
-    println!("{r:?}");
-    let band = 3.0 * (2.0 / r.updates as f64).sqrt();
-    assert!(r.updates > 9000, "{} updates", r.updates);
-    assert!(
-        (r.nis_per_dof - 1.0).abs() < band,
-        "odometer NIS/dof {} outside 1 ± {band}",
-        r.nis_per_dof
-    );
+    assert_speed_nis_in_band(&r);
 }
