@@ -123,7 +123,7 @@ impl StarTrackerSource {
             sim: StarTrackerSim::new(scn),
             epoch_ns,
             period_ns: period_ns(scn.spec.star_tracker.rate_hz),
-            tag: time_tag(scn, "star_tracker"),
+            tag: time_tag(scn, msgs::SensorId::StarTracker),
         }
     }
 }
@@ -157,7 +157,7 @@ impl SampleSource for StarTrackerSource {
 }
 
 /// How `sensor` is stamped in `scn`'s world (no delay without one).
-fn time_tag(scn: &Scenario, sensor: &str) -> crate::world::time_tags::TimeTag {
+fn time_tag(scn: &Scenario, sensor: msgs::SensorId) -> crate::world::time_tags::TimeTag {
     scn.spec.world.map_or_else(
         || crate::world::time_tags::TimeTag::fixed(0),
         |w| w.time_tag(scn.spec.scenario.seed, sensor),
@@ -185,7 +185,7 @@ impl GnssSource {
             sim: GnssSim::new(scn),
             epoch_ns,
             period_ns: period_ns(scn.spec.gnss.rate_hz),
-            tag: time_tag(scn, "gnss"),
+            tag: time_tag(scn, msgs::SensorId::Gnss),
         }
     }
 
@@ -236,7 +236,7 @@ impl OdometerSource {
             sim: OdometerSim::new(scn),
             epoch_ns,
             period_ns: period_ns(scn.spec.odometer.rate_hz),
-            tag: time_tag(scn, "odometer"),
+            tag: time_tag(scn, msgs::SensorId::Odometer),
         }
     }
 }

@@ -337,27 +337,36 @@ impl WorldSection {
         self.time_tags()
             .map_or(0, |t| (t.odometer_latency_s * 1e9).round() as i64)
     }
-    /// How `sensor` (`"gnss"`, `"odometer"` or `"star_tracker"`) is stamped in this world
-    /// for scenario seed `seed`: its latency and jitter (stream `"world_time_tag_<sensor>"`).
-    pub fn time_tag(&self, seed: u64, sensor: &str) -> time_tags::TimeTag {
-        let latency_ns = match sensor {
-            "gnss" => self.gnss_latency_ns(),
-            "star_tracker" => self.star_tracker_latency_ns(),
-            "odometer" => self.odometer_latency_ns(),
-            _ => 0,
+    /// How `sensor` is stamped in this world for scenario seed `seed`: its latency and
+    /// jitter (stream `"world_time_tag_<sensor>"`); the IMU and the barometer are stamped at
+    /// their sampling instant.
+    pub fn time_tag(&self, seed: u64, sensor: msgs::SensorId) -> time_tags::TimeTag {
+        use msgs::SensorId;
+        let t = self.time_tags();
+        let (latency_ns, jitter_s, stream) = match sensor {
+            SensorId::Gnss => (
+                self.gnss_latency_ns(),
+                t.map_or(0.0, |t| t.gnss_jitter_s),
+                "world_time_tag_gnss",
+            ),
+            SensorId::StarTracker => (
+                self.star_tracker_latency_ns(),
+                t.map_or(0.0, |t| t.star_tracker_jitter_s),
+                "world_time_tag_star_tracker",
+            ),
+            SensorId::Odometer => (
+                self.odometer_latency_ns(),
+                t.map_or(0.0, |t| t.odometer_jitter_s),
+                "world_time_tag_odometer",
+            ),
+            SensorId::Imu | SensorId::Baro => return time_tags::TimeTag::fixed(0),
         };
-        let jitter_s = self.time_tags().map_or(0.0, |t| match sensor {
-            "gnss" => t.gnss_jitter_s,
-            "star_tracker" => t.star_tracker_jitter_s,
-            "odometer" => t.odometer_jitter_s,
-            _ => 0.0,
-        });
         // A sample is never stamped before it is measured: the jitter is cut to the latency it
         // scatters about (none where the sensor's latency table is off).
         time_tags::TimeTag::new(
             latency_ns,
             jitter_s.min(latency_ns as f64 * 1e-9),
-            crate::sensor_rng(seed, &format!("world_time_tag_{sensor}")),
+            crate::sensor_rng(seed, stream),
         )
     }
 

@@ -138,7 +138,10 @@ mod tests {
             }),
             ..Default::default()
         };
-        let (mut gnss, mut odo) = (w.time_tag(1, "gnss"), w.time_tag(1, "odometer"));
+        let (mut gnss, mut odo) = (
+            w.time_tag(1, msgs::SensorId::Gnss),
+            w.time_tag(1, msgs::SensorId::Odometer),
+        );
         let mut seen = [false; 3];
         for k in 1..=1000i64 {
             let t = k * 50_000_000;
