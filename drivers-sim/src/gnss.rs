@@ -334,7 +334,8 @@ impl GnssSim {
 
     /// Carrier-phase differences of the two body baselines for satellite `i`'s line of sight
     /// `u` at elevation `el_rad` (cycles), as the receiver publishes them: with the integer
-    /// `tracked` carries and the world's phase multipath.
+    /// `tracked` carries and the world's phase multipath, which is returned too (cycles, for
+    /// the hidden truth; zeros without phases).
     fn baseline_phases(
         &self,
         (i, el_rad): (usize, f64),
@@ -342,7 +343,7 @@ impl GnssSim {
         u: &Vector3<f64>,
         draws: &[f64; 4],
         tracked: &TrackedPhase,
-    ) -> (u32, [f64; 2]) {
+    ) -> (u32, [f64; 2], [f64; 2]) {
         let g = self.grade;
         let wavelength = SPEED_OF_LIGHT_M_S / g.carrier_frequency_hz;
         let mut phase = [0.0; 2];
@@ -351,22 +352,18 @@ impl GnssSim {
                 c_e_b * Vector3::new(g.baseline_length_m[0], 0.0, 0.0),
                 c_e_b * Vector3::new(0.0, g.baseline_length_m[1], 0.0),
             ];
-            let multipath_m = self.phase_multipath_m(i, el_rad);
+            let multipath_m = self
+                .phase_multipath
+                .as_ref()
+                .map_or([0.0; 2], |m| m.error_m(i, el_rad));
             for (k, b) in baselines_e.iter().enumerate() {
                 phase[k] = (b.dot(u) + multipath_m[k]) / wavelength
                     + g.phase_sigma_cycles * draws[2 + k]
                     + tracked.ambiguity_cycles[k] as f64;
             }
-            return (FLAG_PHASE, phase);
+            return (FLAG_PHASE, phase, multipath_m.map(|m| m / wavelength));
         }
-        (0, phase)
-    }
-
-    /// The world's multipath on satellite `i`'s baseline phases at elevation `el_rad`, m.
-    fn phase_multipath_m(&self, i: usize, el_rad: f64) -> [f64; 2] {
-        self.phase_multipath
-            .as_ref()
-            .map_or([0.0; 2], |m| m.error_m(i, el_rad))
+        (0, phase, [0.0; 2])
     }
 
     /// Antenna phase centre position and velocity (ECEF) for the truth point.
@@ -435,7 +432,8 @@ impl GnssSim {
             let rate = (v_s - v_rx).dot(&u);
             let cn0 = g.cn0_horizon_dbhz + (g.cn0_zenith_dbhz - g.cn0_horizon_dbhz) * el.sin();
             let tracked = self.phase_tracking.track(i, cn0);
-            let (phase_flag, phase) = self.baseline_phases((i, el), &c_e_b, &u, &draws, &tracked);
+            let (phase_flag, phase, multipath_cycles) =
+                self.baseline_phases((i, el), &c_e_b, &u, &draws, &tracked);
             out.satellites[n] = GnssSatellite {
                 prn: i as u32 + 1,
                 flags: FLAG_PSEUDORANGE | FLAG_DOPPLER | phase_flag,
@@ -451,11 +449,7 @@ impl GnssSim {
             };
             hidden.geometric_range_m[n] = range;
             hidden.phase_ambiguity_cycles[n] = tracked.ambiguity_cycles;
-            if phase_flag != 0 {
-                let wavelength = SPEED_OF_LIGHT_M_S / g.carrier_frequency_hz;
-                hidden.phase_multipath_cycles[n] =
-                    self.phase_multipath_m(i, el).map(|m| m / wavelength);
-            }
+            hidden.phase_multipath_cycles[n] = multipath_cycles;
             let h = Vector4::new(-u.x, -u.y, -u.z, 1.0);
             hth += h * h.transpose();
             ht_pr += h * e_pr;
@@ -575,7 +569,8 @@ impl GnssSim {
             let e_rr = g.range_rate_sigma_m_s * draws[1];
             let rate = (v_s - v_rx).dot(&u);
             let tracked = self.phase_tracking.track(i, cn0);
-            let (phase_flag, phase) = self.baseline_phases((i, el), &c_e_b, &u, &draws, &tracked);
+            let (phase_flag, phase, multipath_cycles) =
+                self.baseline_phases((i, el), &c_e_b, &u, &draws, &tracked);
             let sigma_pr = uere.sigma_m(el, cn0, klobuchar);
             let sat = GnssSatellite {
                 prn: i as u32 + 1,
@@ -593,11 +588,7 @@ impl GnssSim {
             out.satellites[n] = sat;
             hidden.geometric_range_m[n] = range;
             hidden.phase_ambiguity_cycles[n] = tracked.ambiguity_cycles;
-            if phase_flag != 0 {
-                let wavelength = SPEED_OF_LIGHT_M_S / g.carrier_frequency_hz;
-                hidden.phase_multipath_cycles[n] =
-                    self.phase_multipath_m(i, el).map(|m| m / wavelength);
-            }
+            hidden.phase_multipath_cycles[n] = multipath_cycles;
             // Every value is finite and the satellite at orbital distance: push cannot fail.
             let _ = obs.push(fusion::gnss_ls::SatelliteObservation {
                 prn: sat.prn,
