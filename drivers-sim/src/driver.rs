@@ -188,6 +188,16 @@ pub enum SimDriver {
 }
 
 impl SimDriver {
+    /// Every simulated driver, in the order a run starts them.
+    pub const ALL: [SimDriver; 6] = [
+        Self::Imu,
+        Self::StarTracker,
+        Self::Gnss,
+        Self::Odometer,
+        Self::Baro,
+        Self::Truth,
+    ];
+
     /// The process's name (its binary's and its iceoryx2 node's).
     pub fn process_name(self) -> &'static str {
         match self {

@@ -686,9 +686,8 @@ mod tests {
     use super::*;
     use crate::scenario::Site;
     use crate::truth::{Profile, TruthGenerator};
-    use fusion::earth::GravityModel;
-    use fusion::strapdown::{ImuIncrement, Integrator, MechanizationConfig, NavState, Strapdown};
-    use nalgebra::{Rotation3, UnitQuaternion};
+    use fusion::strapdown::ImuIncrement;
+    use nalgebra::Rotation3;
     use std::f64::consts::FRAC_PI_2;
 
     /// A synthetic drive (module of the test): 6 m/s north, braking to a 4 s stop, away again
@@ -908,14 +907,7 @@ mod tests {
         let mut truth = TruthGenerator::from_profile(Profile::Reference(spline.clone()), site);
         let p0 = *truth.current();
         assert!((p0.r_e_m - spline.position_ecef_m(0.0)).norm() < 1e-6);
-        let q0 = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(p0.c_n_b));
-        let mut state = NavState::from_geodetic(&WGS84, &p0.geodetic, &p0.v_ned_m_s, &q0);
-        let mut sd = Strapdown::new(MechanizationConfig {
-            ellipsoid: WGS84,
-            gravity: GravityModel::J2,
-            integrator: Integrator::Rk4,
-            coning_sculling: true,
-        });
+        let (mut state, mut sd) = p0.reference_ins();
         let period_ns = 5_000_000;
         let (mut max_pos, mut max_vel, mut max_att, mut max_truth) =
             (0.0f64, 0.0f64, 0.0f64, 0.0f64);

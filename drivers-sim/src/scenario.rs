@@ -141,60 +141,10 @@ pub struct AircraftTrajectory {
     /// Heading at the start, degrees from north, clockwise.
     pub initial_heading_deg: f64,
     /// Segments flown in order; after the last one the aircraft keeps its final speed, heading
-    /// and flight-path angle.
-    pub segments: Vec<FlightSegment>,
-}
-
-/// One piece of an aircraft trajectory. Body x is along the velocity (no angle of attack or
-/// sideslip), so pitch is the flight-path angle; turns are coordinated, with the bank
-/// `φ = atan(V ψ̇ / g0)`. Every change follows a raised-cosine profile.
-#[derive(Debug, Clone, Copy, Deserialize)]
-#[serde(tag = "type", rename_all = "snake_case", deny_unknown_fields)]
-pub enum FlightSegment {
-    /// Stand still on the ground (speed must be zero) for `duration_s`.
-    Hold {
-        /// Duration, s.
-        duration_s: f64,
-    },
-    /// Change the airspeed (= ground speed, no wind) to `to_m_s`.
-    Speed {
-        /// Target speed, m/s.
-        to_m_s: f64,
-        /// Duration, s.
-        duration_s: f64,
-    },
-    /// Coordinated turn by `angle_deg` (positive = right).
-    Turn {
-        /// Heading change, degrees.
-        angle_deg: f64,
-        /// Duration, s.
-        duration_s: f64,
-    },
-    /// Change the flight-path angle (= pitch) to `to_deg` (positive = climb).
-    Pitch {
-        /// Target pitch, degrees.
-        to_deg: f64,
-        /// Duration, s.
-        duration_s: f64,
-    },
-    /// Keep speed, heading and flight-path angle for `duration_s`.
-    Cruise {
-        /// Duration, s.
-        duration_s: f64,
-    },
-}
-
-impl FlightSegment {
-    /// Duration of the segment, s.
-    pub fn duration_s(&self) -> f64 {
-        match *self {
-            FlightSegment::Hold { duration_s }
-            | FlightSegment::Speed { duration_s, .. }
-            | FlightSegment::Turn { duration_s, .. }
-            | FlightSegment::Pitch { duration_s, .. }
-            | FlightSegment::Cruise { duration_s } => duration_s,
-        }
-    }
+    /// and flight-path angle. Body x is along the velocity (no angle of attack or sideslip), so
+    /// pitch is the flight-path angle; turns are coordinated, with the bank
+    /// `φ = atan(V ψ̇ / g0)`.
+    pub segments: Vec<Segment>,
 }
 
 /// `kind = "static"`.
@@ -239,8 +189,9 @@ pub struct GroundVehicleTrajectory {
     pub segments: Vec<Segment>,
 }
 
-/// One piece of a ground-vehicle trajectory. Accelerations and turn rates follow raised-cosine
-/// profiles that start and end at zero, so specific force and angular rate are continuous.
+/// One piece of a ground-vehicle or aircraft trajectory. Accelerations, turn and pitch rates
+/// follow raised-cosine profiles that start and end at zero, so specific force and angular rate
+/// are continuous.
 #[derive(Debug, Clone, Copy, Deserialize)]
 #[serde(tag = "type", rename_all = "snake_case", deny_unknown_fields)]
 pub enum Segment {
@@ -257,14 +208,22 @@ pub enum Segment {
         duration_s: f64,
     },
     /// Turn by `angle_deg` (positive = right, heading increases) over `duration_s` at the
-    /// current speed.
+    /// current speed (coordinated for an aircraft).
     Turn {
         /// Heading change, degrees.
         angle_deg: f64,
         /// Duration, s.
         duration_s: f64,
     },
-    /// Keep speed and heading for `duration_s`.
+    /// Aircraft only: change the flight-path angle (= pitch) to `to_deg` (positive = climb). A
+    /// ground vehicle's pitch follows its road.
+    Pitch {
+        /// Target pitch, degrees.
+        to_deg: f64,
+        /// Duration, s.
+        duration_s: f64,
+    },
+    /// Keep speed, heading (and an aircraft's flight-path angle) for `duration_s`.
     Cruise {
         /// Duration, s.
         duration_s: f64,
@@ -278,6 +237,7 @@ impl Segment {
             Segment::Hold { duration_s }
             | Segment::Speed { duration_s, .. }
             | Segment::Turn { duration_s, .. }
+            | Segment::Pitch { duration_s, .. }
             | Segment::Cruise { duration_s } => duration_s,
         }
     }
@@ -1245,7 +1205,9 @@ impl Scenario {
             ));
         }
         match &spec.trajectory {
-            Trajectory::Aircraft(ac) => validate_aircraft(f, ac)?,
+            Trajectory::Aircraft(ac) => {
+                validate_segments(f, ac.initial_heading_deg, &ac.segments, Mover::Aircraft)?
+            }
             Trajectory::Reference(_) => {} // checked when its spline was built above
             Trajectory::Static(st) => {
                 finite("trajectory.roll_deg", st.roll_deg)?;
@@ -1270,44 +1232,12 @@ impl Scenario {
                     end = mv.start_s + mv.duration_s;
                 }
             }
-            Trajectory::GroundVehicle(gv) => {
-                finite("trajectory.initial_heading_deg", gv.initial_heading_deg)?;
-                let mut speed = 0.0;
-                for (i, seg) in gv.segments.iter().enumerate() {
-                    let k = format!("trajectory.segments[{i}]");
-                    positive(&format!("{k}.duration_s"), seg.duration_s())?;
-                    match *seg {
-                        Segment::Hold { .. } if speed != 0.0 => {
-                            return Err(invalid(
-                                f,
-                                format!("{k}.type"),
-                                "`hold` needs the vehicle stopped (add a `speed` segment to 0)",
-                            ));
-                        }
-                        Segment::Speed { to_m_s, .. } => {
-                            if !(to_m_s.is_finite() && (0.0..=100.0).contains(&to_m_s)) {
-                                return Err(invalid(
-                                    f,
-                                    format!("{k}.to_m_s"),
-                                    format!("{to_m_s} is outside 0..100 m/s"),
-                                ));
-                            }
-                            speed = to_m_s;
-                        }
-                        Segment::Turn { angle_deg, .. } => {
-                            finite(&format!("{k}.angle_deg"), angle_deg)?;
-                            if speed == 0.0 {
-                                return Err(invalid(
-                                    f,
-                                    format!("{k}.type"),
-                                    "a ground vehicle cannot turn while stopped",
-                                ));
-                            }
-                        }
-                        _ => {}
-                    }
-                }
-            }
+            Trajectory::GroundVehicle(gv) => validate_segments(
+                f,
+                gv.initial_heading_deg,
+                &gv.segments,
+                Mover::GroundVehicle,
+            )?,
         }
         rate("imu.rate_hz", spec.imu.rate_hz)?;
         if let Some(ch) = &spec.imu.channels {
@@ -1756,54 +1686,109 @@ fn validate_channels(f: &Path, ch: &ImuChannelsSpec, duration_s: f64) -> Result<
     Ok(())
 }
 
-/// Checks of an aircraft trajectory.
-fn validate_aircraft(f: &Path, ac: &AircraftTrajectory) -> Result<(), SimError> {
-    if !ac.initial_heading_deg.is_finite() {
+/// What moves along a segment list: what its segments may ask of it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Mover {
+    GroundVehicle,
+    Aircraft,
+}
+
+/// Checks of a segment list: durations, the speed each segment leaves, and what the mover can do
+/// (a car turns only while moving and never pitches on its own; an aircraft's coordinated turn
+/// keeps its bank below 60°, its flight-path angle within ±30°).
+fn validate_segments(
+    f: &Path,
+    initial_heading_deg: f64,
+    segments: &[Segment],
+    mover: Mover,
+) -> Result<(), SimError> {
+    if !initial_heading_deg.is_finite() {
         return Err(invalid(
             f,
             "trajectory.initial_heading_deg",
-            "must be finite",
+            format!("must be finite, got {initial_heading_deg}"),
         ));
     }
+    let max_speed_m_s = match mover {
+        Mover::GroundVehicle => 100.0,
+        Mover::Aircraft => 300.0,
+    };
     let mut speed = 0.0;
-    for (i, seg) in ac.segments.iter().enumerate() {
+    for (i, seg) in segments.iter().enumerate() {
         let k = format!("trajectory.segments[{i}]");
         let d = seg.duration_s();
         if !(d.is_finite() && d > 0.0) {
-            return Err(invalid(f, format!("{k}.duration_s"), "must be > 0"));
+            return Err(invalid(
+                f,
+                format!("{k}.duration_s"),
+                format!("must be > 0, got {d}"),
+            ));
         }
         match *seg {
-            FlightSegment::Hold { .. } if speed != 0.0 => {
-                return Err(invalid(f, format!("{k}.type"), "`hold` needs speed 0"));
+            Segment::Hold { .. } if speed != 0.0 => {
+                return Err(invalid(
+                    f,
+                    format!("{k}.type"),
+                    "`hold` needs the vehicle stopped (add a `speed` segment to 0)",
+                ));
             }
-            FlightSegment::Speed { to_m_s, .. } => {
-                if !(to_m_s.is_finite() && (0.0..=300.0).contains(&to_m_s)) {
-                    return Err(invalid(f, format!("{k}.to_m_s"), "outside 0..300 m/s"));
+            Segment::Speed { to_m_s, .. } => {
+                if !(to_m_s.is_finite() && (0.0..=max_speed_m_s).contains(&to_m_s)) {
+                    return Err(invalid(
+                        f,
+                        format!("{k}.to_m_s"),
+                        format!("{to_m_s} is outside 0..{max_speed_m_s} m/s"),
+                    ));
                 }
                 speed = to_m_s;
             }
-            FlightSegment::Turn {
+            Segment::Turn {
                 angle_deg,
                 duration_s,
             } => {
-                // Peak turn rate of the raised-cosine profile is 2·Δψ/T; its bank must stay
-                // below 60°.
-                let peak = 2.0 * angle_deg.to_radians().abs() / duration_s;
-                if !angle_deg.is_finite() || speed == 0.0 || (speed * peak / 9.806_65) > 3f64.sqrt()
-                {
+                if !angle_deg.is_finite() {
                     return Err(invalid(
                         f,
                         format!("{k}.angle_deg"),
-                        "needs speed > 0 and a peak bank below 60°",
+                        format!("must be finite, got {angle_deg}"),
+                    ));
+                }
+                if speed == 0.0 {
+                    return Err(invalid(
+                        f,
+                        format!("{k}.type"),
+                        "a vehicle cannot turn while stopped",
+                    ));
+                }
+                // Peak turn rate of the raised-cosine profile is 2·Δψ/T; the coordinated
+                // turn's bank atan(V·ψ̇/g) must stay below 60°.
+                let peak_rad_s = 2.0 * angle_deg.to_radians().abs() / duration_s;
+                if mover == Mover::Aircraft && speed * peak_rad_s / 9.806_65 > 3f64.sqrt() {
+                    return Err(invalid(
+                        f,
+                        format!("{k}.angle_deg"),
+                        "the turn needs a peak bank above 60°: turn by less or for longer",
                     ));
                 }
             }
-            FlightSegment::Pitch { to_deg, .. }
-                if !(to_deg.is_finite() && to_deg.abs() <= 30.0) =>
-            {
-                return Err(invalid(f, format!("{k}.to_deg"), "outside ±30°"));
+            Segment::Pitch { to_deg, .. } => {
+                if mover == Mover::GroundVehicle {
+                    return Err(invalid(
+                        f,
+                        format!("{k}.type"),
+                        "a ground vehicle's pitch follows its road ([world.vehicle]); \
+                         `pitch` segments are for aircraft",
+                    ));
+                }
+                if !(to_deg.is_finite() && to_deg.abs() <= 30.0) {
+                    return Err(invalid(
+                        f,
+                        format!("{k}.to_deg"),
+                        format!("{to_deg} is outside ±30°"),
+                    ));
+                }
             }
-            _ => {}
+            Segment::Hold { .. } | Segment::Cruise { .. } => {}
         }
     }
     Ok(())
@@ -1844,6 +1829,41 @@ mod tests {
         assert!(e.contains("gnss.grade"), "{e}");
         assert!(e.contains("unknown grade `}`"), "{e}");
         assert!(e.contains("known grades:"), "{e}");
+    }
+
+    /// One segment grammar for cars and aircraft; what each can do is checked by mover and
+    /// named by key: a car's `pitch` segment and an aircraft's turn beyond a 60° bank are refused.
+    #[test]
+    fn segments_are_checked_for_what_the_mover_can_do() {
+        let (path, text) = shipped("vehicle.toml");
+        let car = "{ type = \"cruise\", duration_s = 30.0 },     # ends at 368 s";
+        assert!(text.contains(car), "vehicle.toml has its cruise to 368 s");
+        let pitched = text.replacen(
+            car,
+            "{ type = \"pitch\", to_deg = 3.0, duration_s = 30.0 },",
+            1,
+        );
+        let e = Scenario::from_toml_str(&pitched, &path)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("trajectory.segments[10].type"), "{e}");
+        assert!(e.contains("pitch follows its road"), "{e}");
+
+        let (path, text) = shipped("uav.toml");
+        let turn = "{ type = \"turn\", angle_deg = 90.0, duration_s = 60.0 },";
+        assert!(text.contains(turn), "uav.toml has a 90° turn in 60 s");
+        // 30 m/s, peak rate 2·90°/2 s = π/2 rad/s: bank atan(4.8) ≈ 78°.
+        let steep = text.replacen(
+            turn,
+            "{ type = \"turn\", angle_deg = 90.0, duration_s = 2.0 },",
+            1,
+        );
+        let e = Scenario::from_toml_str(&steep, &path)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("trajectory.segments[6].angle_deg"), "{e}");
+        assert!(e.contains("bank above 60°"), "{e}");
+        assert!(Scenario::from_toml_str(&text, &path).is_ok());
     }
 
     /// A scratch configuration directory: `scenarios/s.toml` (the shipped static site without

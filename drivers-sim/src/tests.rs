@@ -5,8 +5,8 @@ use crate::scenario::{Scenario, period_ns};
 use crate::sources::{GnssSource, ImuSource, SampleSource, TruthSource};
 use crate::truth::TruthGenerator;
 use fusion::earth::{self, GravityModel, WGS84};
-use fusion::strapdown::{ImuIncrement, Integrator, MechanizationConfig, NavState, Strapdown};
-use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
+use fusion::strapdown::ImuIncrement;
+use nalgebra::{Matrix3, Rotation3, Vector3};
 use std::path::{Path, PathBuf};
 
 fn scenario_path(name: &str) -> PathBuf {
@@ -64,7 +64,7 @@ fn static_imu_measures_earth_rate_and_minus_gravity() {
             &earth::geodetic_to_ecef(&WGS84, &geo),
         );
     let w_ie_n = c_e_n.transpose() * WGS84.omega_ie_e();
-    let c_n_b = crate::truth::c_n_b_from_rph(0.0, 0.0, 30f64.to_radians());
+    let c_n_b = fusion::attitude::c_n_b_from_rpy(0.0, 0.0, 30f64.to_radians());
     let w_b = c_n_b.transpose() * w_ie_n;
     let f_b = -(c_n_b.transpose() * g_n);
     let p = period_ns(scn.spec.imu.rate_hz);
@@ -119,15 +119,7 @@ pub(crate) fn perfect_ins_max_errors(
     let mut src = ImuSource::new(scn, 0);
     src.model.enabled = false;
     let mut truth = TruthGenerator::new(scn);
-    let p0 = *truth.current();
-    let q0 = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(p0.c_n_b));
-    let mut state = NavState::from_geodetic(&WGS84, &p0.geodetic, &p0.v_ned_m_s, &q0);
-    let mut sd = Strapdown::new(MechanizationConfig {
-        ellipsoid: WGS84,
-        gravity: GravityModel::J2,
-        integrator: Integrator::Rk4,
-        coning_sculling: true,
-    });
+    let (mut state, mut sd) = truth.current().reference_ins();
     let p = period_ns(scn.spec.imu.rate_hz);
     let (mut max_pos, mut max_vel, mut max_att) = (0.0f64, 0.0f64, 0.0f64);
     let mut k = 1;

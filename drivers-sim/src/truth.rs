@@ -10,9 +10,10 @@
 //! time of grid point k is `k·1e-3` s computed the same way everywhere, so all processes follow
 //! bit-identical floating-point paths without talking to each other.
 
-use crate::scenario::{FlightSegment, Scenario, Segment, TRUTH_GRID_NS, Trajectory};
+use crate::scenario::{Scenario, Segment, TRUTH_GRID_NS, Trajectory};
 use crate::world::MotionWorld;
 use crate::world::vehicle::{Intent, VehicleFollower, VehicleState, VibrationFollower};
+use fusion::attitude::c_n_b_from_rpy;
 use fusion::earth::{self, Ellipsoid, Geodetic, GravityModel, WGS84};
 use nalgebra::{Matrix3, Vector3};
 use std::f64::consts::{PI, TAU};
@@ -198,7 +199,10 @@ impl Profile {
                     let (dv, dpsi) = match *seg {
                         Segment::Speed { to_m_s, .. } => (to_m_s - v, 0.0),
                         Segment::Turn { angle_deg, .. } => (0.0, angle_deg.to_radians()),
-                        Segment::Hold { .. } | Segment::Cruise { .. } => (0.0, 0.0),
+                        // Validation refuses a ground vehicle's `pitch`.
+                        Segment::Hold { .. } | Segment::Cruise { .. } | Segment::Pitch { .. } => {
+                            (0.0, 0.0)
+                        }
                     };
                     pieces.push(VehiclePiece(Piece {
                         t0_s: t,
@@ -231,12 +235,10 @@ impl Profile {
                 for seg in &ac.segments {
                     let dur = seg.duration_s();
                     let (dv, dpsi, dth) = match *seg {
-                        FlightSegment::Speed { to_m_s, .. } => (to_m_s - v, 0.0, 0.0),
-                        FlightSegment::Turn { angle_deg, .. } => (0.0, angle_deg.to_radians(), 0.0),
-                        FlightSegment::Pitch { to_deg, .. } => (0.0, 0.0, to_deg.to_radians() - th),
-                        FlightSegment::Hold { .. } | FlightSegment::Cruise { .. } => {
-                            (0.0, 0.0, 0.0)
-                        }
+                        Segment::Speed { to_m_s, .. } => (to_m_s - v, 0.0, 0.0),
+                        Segment::Turn { angle_deg, .. } => (0.0, angle_deg.to_radians(), 0.0),
+                        Segment::Pitch { to_deg, .. } => (0.0, 0.0, to_deg.to_radians() - th),
+                        Segment::Hold { .. } | Segment::Cruise { .. } => (0.0, 0.0, 0.0),
                     };
                     pieces.push(AircraftPiece {
                         t0_s: t,
@@ -352,7 +354,7 @@ fn turntable_kinematics(
     } else {
         let (sb, cb) = beta_rad.sin_cos();
         let r_z = Matrix3::new(cb, -sb, 0.0, sb, cb, 0.0, 0.0, 0.0, 1.0);
-        let c = c_n_b_from_rph(roll0, pitch0, heading0) * r_z;
+        let c = c_n_b_from_rpy(roll0, pitch0, heading0) * r_z;
         let roll = c[(2, 1)].atan2(c[(2, 2)]);
         let pitch = -c[(2, 0)].clamp(-1.0, 1.0).asin();
         // Heading unwrapped around ψ0 + β so that it is continuous through the move.
@@ -402,24 +404,6 @@ fn a_ned(k: &Kinematics) -> Vector3<f64> {
         sd * ch * cp - s * sh * cp * hd - s * ch * sp * pd,
         sd * sh * cp + s * ch * cp * hd - s * sh * sp * pd,
         -sd * sp - s * cp * pd,
-    )
-}
-
-/// Body → NED DCM from roll φ, pitch θ, heading ψ: `C_n_b = R_z(ψ)·R_y(θ)·R_x(φ)`.
-pub fn c_n_b_from_rph(roll: f64, pitch: f64, heading: f64) -> Matrix3<f64> {
-    let (sr, cr) = roll.sin_cos();
-    let (sp, cp) = pitch.sin_cos();
-    let (sy, cy) = heading.sin_cos();
-    Matrix3::new(
-        cy * cp,
-        cy * sp * sr - sy * cr,
-        cy * sp * cr + sy * sr,
-        sy * cp,
-        sy * sp * sr + cy * cr,
-        sy * sp * cr - cy * sr,
-        -sp,
-        cp * sr,
-        cp * cr,
     )
 }
 
@@ -477,6 +461,25 @@ pub struct TruthPoint {
 }
 
 impl TruthPoint {
+    /// A strapdown started exactly on this point: the navigation state (WGS-84 position,
+    /// NED velocity, body → NED attitude) and the finest mechanization (J2 gravity, RK4 with
+    /// coning and sculling). Fed an error-free IMU it must follow the truth: the oracle of the
+    /// simulator's motion against the navigation equations.
+    pub fn reference_ins(&self) -> (fusion::strapdown::NavState, fusion::strapdown::Strapdown) {
+        use fusion::strapdown::{Integrator, MechanizationConfig, NavState, Strapdown};
+        use nalgebra::{Rotation3, UnitQuaternion};
+        let q_n_b =
+            UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(self.c_n_b));
+        let state = NavState::from_geodetic(&WGS84, &self.geodetic, &self.v_ned_m_s, &q_n_b);
+        let strapdown = Strapdown::new(MechanizationConfig {
+            ellipsoid: WGS84,
+            gravity: GravityModel::J2,
+            integrator: Integrator::Rk4,
+            coning_sculling: true,
+        });
+        (state, strapdown)
+    }
+
     /// Velocity relative to the Earth in ECEF axes, m/s.
     pub fn v_e_m_s(&self) -> Vector3<f64> {
         self.c_e_n * self.v_ned_m_s
@@ -745,7 +748,7 @@ impl TruthGenerator {
                 odometer_speed = Some(st.odometer_speed_m_s);
             }
             if let (Some(vibration), Some(f)) = (&w.vibration, &self.followers.vibration) {
-                let c_n_b = c_n_b_from_rph(kin.roll_rad, kin.pitch_rad, kin.heading_rad);
+                let c_n_b = c_n_b_from_rpy(kin.roll_rad, kin.pitch_rad, kin.heading_rad);
                 vib = vibration.at_followed(f);
                 for (o, x) in off.iter_mut().zip(&vib) {
                     *o += c_n_b * x;
@@ -761,7 +764,7 @@ impl TruthGenerator {
             a += off[2];
         }
         let lat = geo.lat_rad;
-        let c_n_b = c_n_b_from_rph(kin.roll_rad, kin.pitch_rad, kin.heading_rad);
+        let c_n_b = c_n_b_from_rpy(kin.roll_rad, kin.pitch_rad, kin.heading_rad);
         let c_b_n = c_n_b.transpose();
         let w_ie_n = Vector3::new(
             ell.omega_ie_rad_s * lat.cos(),
@@ -907,14 +910,6 @@ mod tests {
     }
 
     #[test]
-    fn euler_dcm_matches_nalgebra() {
-        let (r, p, y) = (0.1, -0.2, 2.5);
-        let c = c_n_b_from_rph(r, p, y);
-        let q = fusion::attitude::q_n_b_from_rpy(r, p, y);
-        assert!((c - q.to_rotation_matrix().into_inner()).norm() < 1e-14);
-    }
-
-    #[test]
     fn body_rate_from_euler_rates_matches_finite_difference() {
         let k0 = Kinematics {
             roll_rad: 0.1,
@@ -930,8 +925,8 @@ mod tests {
         k1.roll_rad += k0.roll_rate_rad_s * dt;
         k1.pitch_rad += k0.pitch_rate_rad_s * dt;
         k1.heading_rad += k0.heading_rate_rad_s * dt;
-        let c0 = c_n_b_from_rph(k0.roll_rad, k0.pitch_rad, k0.heading_rad);
-        let c1 = c_n_b_from_rph(k1.roll_rad, k1.pitch_rad, k1.heading_rad);
+        let c0 = c_n_b_from_rpy(k0.roll_rad, k0.pitch_rad, k0.heading_rad);
+        let c1 = c_n_b_from_rpy(k1.roll_rad, k1.pitch_rad, k1.heading_rad);
         // Ċ_n_b = C_n_b [ω_nb^b ×]  ⇒  [ω×] ≈ C_n_bᵀ (C1 − C0)/dt
         let w = c0.transpose() * (c1 - c0) / dt;
         let w_fd = Vector3::new(w[(2, 1)], w[(0, 2)], w[(1, 0)]);
@@ -951,14 +946,14 @@ mod tests {
         let k = turntable_kinematics(r0, p0, h0, beta, rate);
         let (sb, cb) = f64::sin_cos(beta);
         let r_z = Matrix3::new(cb, -sb, 0.0, sb, cb, 0.0, 0.0, 0.0, 1.0);
-        let expect = c_n_b_from_rph(r0, p0, h0) * r_z;
-        let got = c_n_b_from_rph(k.roll_rad, k.pitch_rad, k.heading_rad);
+        let expect = c_n_b_from_rpy(r0, p0, h0) * r_z;
+        let got = c_n_b_from_rpy(k.roll_rad, k.pitch_rad, k.heading_rad);
         assert!((got - expect).norm() < 1e-14, "{}", got - expect);
         assert!((w_nb_b(&k) - Vector3::new(0.0, 0.0, rate)).norm() < 1e-15);
         // At 180° the horizontal body axes are reversed in NED, the z axis is unchanged.
         let k = turntable_kinematics(r0, p0, h0, std::f64::consts::PI, 0.0);
-        let c180 = c_n_b_from_rph(k.roll_rad, k.pitch_rad, k.heading_rad);
-        let c0 = c_n_b_from_rph(r0, p0, h0);
+        let c180 = c_n_b_from_rpy(k.roll_rad, k.pitch_rad, k.heading_rad);
+        let c0 = c_n_b_from_rpy(r0, p0, h0);
         assert!((c180.column(0) + c0.column(0)).norm() < 1e-14);
         assert!((c180.column(1) + c0.column(1)).norm() < 1e-14);
         assert!((c180.column(2) - c0.column(2)).norm() < 1e-14);

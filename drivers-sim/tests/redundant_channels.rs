@@ -1,8 +1,7 @@
 //! Paper 004 simulator: redundant single-axis channels and the aircraft (UAV) trajectory.
 
-use fusion::earth::{GravityModel, WGS84};
-use fusion::strapdown::{ImuIncrement, Integrator, MechanizationConfig, NavState, Strapdown};
-use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
+use fusion::strapdown::ImuIncrement;
+use nalgebra::{Matrix3, Rotation3, Vector3};
 use sextant_drivers_sim::scenario::{Scenario, period_ns};
 use sextant_drivers_sim::sources::{ImuSource, SampleSource};
 use sextant_drivers_sim::truth::TruthGenerator;
@@ -74,15 +73,7 @@ fn strapdown_of_ls_triad_reproduces_aircraft_truth() {
     src.model.enabled = false;
     src.channels.as_mut().expect("channels").enabled = false;
     let mut truth = TruthGenerator::new(&scn);
-    let p0 = *truth.current();
-    let q0 = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(p0.c_n_b));
-    let mut state = NavState::from_geodetic(&WGS84, &p0.geodetic, &p0.v_ned_m_s, &q0);
-    let mut sd = Strapdown::new(MechanizationConfig {
-        ellipsoid: WGS84,
-        gravity: GravityModel::J2,
-        integrator: Integrator::Rk4,
-        coning_sculling: true,
-    });
+    let (mut state, mut sd) = truth.current().reference_ins();
     let p = period_ns(scn.spec.imu.rate_hz);
     let (mut max_pos, mut max_vel, mut max_att) = (0.0f64, 0.0f64, 0.0f64);
     let (mut max_bank, mut max_h) = (0.0f64, 0.0f64);

@@ -403,14 +403,12 @@ pub fn boresight(opts: &BoresightOptions) -> Result<Value, CalibrateError> {
     let png = opts.out.join("calibrate_boresight_error_vs_time.png");
     line_chart(
         &png,
-        &Chart {
-            title: "Astro fix error with the calibrated boresight (60 s means)",
-            x_label: "time since start [min]",
-            y_label: "horizontal error [m]",
-            log_x: false,
-            log_y: false,
-            lines: &lines,
-        },
+        &Chart::linear(
+            "Astro fix error with the calibrated boresight (60 s means)",
+            "time since start [min]",
+            "horizontal error [m]",
+            &lines,
+        ),
     )
     .map_err(|e| CalibrateError::Output {
         path: png.clone(),

@@ -855,14 +855,7 @@ fn write_report_plots(dir: &Path, p: &Plots) -> Vec<PathBuf> {
         let path = dir.join(name);
         match line_chart(
             &path,
-            &Chart {
-                title,
-                x_label: "time since start [s]",
-                y_label,
-                log_x: false,
-                log_y: false,
-                lines: &lines,
-            },
+            &Chart::linear(title, "time since start [s]", y_label, &lines),
         ) {
             Ok(()) => out.push(path),
             Err(e) => tracing::warn!("plot {}: {e}", path.display()),

@@ -35,7 +35,7 @@ pub fn bin(name: &str) -> Result<PathBuf> {
 pub fn tempdir(tag: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("sextant-{tag}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&d);
-    let _ = std::fs::create_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap_or_else(|e| panic!("create {}: {e}", d.display()));
     d
 }
 

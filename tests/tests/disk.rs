@@ -17,15 +17,6 @@ const SPEED: f64 = 25.0;
 const DURATION_S: f64 = 112.0;
 const NAV_S: f64 = DURATION_S - 100.0;
 
-const DRIVERS: [&str; 6] = [
-    "sextant-sim-imu",
-    "sextant-sim-star-tracker",
-    "sextant-sim-gnss",
-    "sextant-sim-odometer",
-    "sextant-sim-baro",
-    "sextant-sim-truth",
-];
-
 struct Outcome {
     /// Highest solution sequence number seen on the nav service (= solutions computed).
     nav_seq_max: u64,
@@ -86,7 +77,8 @@ fn run_fusion(tag: &str, out: &Path, fsize_limit: Option<u64>) -> Outcome {
         assert!(st.success(), "prlimit failed");
     }
     let start = msgs::monotonic_ns() + 1_000_000_000;
-    let mut drivers: Vec<Child> = DRIVERS
+    let mut drivers: Vec<Child> = drivers_sim::driver::SimDriver::ALL
+        .map(drivers_sim::driver::SimDriver::process_name)
         .iter()
         .map(|d| {
             Command::new(bin(d).unwrap())

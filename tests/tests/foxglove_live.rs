@@ -34,10 +34,7 @@ const GPS_MINUS_UTC_2025_NS: i64 = 18_000_000_000;
 const GPS_EPOCH_UNIX_NS: i64 = 315_964_800_000_000_000;
 
 fn out_dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("sextant-foxlive-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+    tempdir(&format!("foxlive-{name}"))
 }
 
 type Client = WebSocket<TcpStream>;

@@ -26,10 +26,7 @@ use std::process::Command;
 const DURATION_S: f64 = 150.0;
 
 fn out_dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("sextant-interchange-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+    tempdir(&format!("interchange-{name}"))
 }
 
 fn sextant(args: &[&str]) -> String {

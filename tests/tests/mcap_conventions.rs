@@ -30,10 +30,7 @@ const GPS_MINUS_UTC_2025_NS: i64 = 18_000_000_000;
 const GPS_EPOCH_UNIX_NS: i64 = 315_964_800_000_000_000;
 
 fn out_dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("sextant-mcapconv-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+    tempdir(&format!("mcapconv-{name}"))
 }
 
 fn unix_now_ns() -> u64 {
@@ -57,21 +54,7 @@ fn foxglove_time_ns(t: &serde_json::Value) -> u64 {
 }
 
 fn replay_offline(rec: &Path, out: &Path) -> serde_json::Value {
-    let o = Command::new(bin("sextant").unwrap())
-        .current_dir(repo_root())
-        .args(["replay", "--offline"])
-        .arg(rec)
-        .arg("--out")
-        .arg(out)
-        .output()
-        .unwrap();
-    assert!(
-        o.status.success(),
-        "{}\n{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    );
-    serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap()
+    sextant_offline(&["replay", "--offline", rec.to_str().unwrap()], out)
 }
 
 /// Rewrite a recording into the earlier convention (log time = GPS ns of validity, publish

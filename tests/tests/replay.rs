@@ -18,10 +18,7 @@ const DURATION_S: f64 = 120.0;
 const SPEED: f64 = 25.0;
 
 fn out_dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("sextant-replay-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+    tempdir(&format!("replay-{name}"))
 }
 
 /// A live recording made by `sextant run` (once per test binary).

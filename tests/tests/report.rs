@@ -8,10 +8,7 @@ use std::path::PathBuf;
 use std::process::{Command, Stdio};
 
 fn out_dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("sextant-report-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+    tempdir(&format!("report-{name}"))
 }
 
 /// North, east, down components of ECEF `r − r_true` at (lat, lon), m.
@@ -139,10 +136,33 @@ fn report_of_a_live_recording_matches_an_independent_computation() {
         assert!(b.len() > 1000, "{f}");
     }
 
-    // A truncated copy: reported up to the cut, the offset named.
+    // A truncated copy: reported up to the cut, the offset named. The cut falls in the middle
+    // of the last chunk holding solutions, found from the file's own chunk index (a fixed
+    // fraction of the bytes would depend on how the recorder's chunks fell on this run).
     let bytes = std::fs::read(&rec).unwrap();
+    let summary = mcap::Summary::read(&bytes)
+        .unwrap()
+        .expect("a finished recording has a summary");
+    let nav_channel = summary
+        .channels
+        .values()
+        .find(|c| c.topic == "nav")
+        .expect("a nav channel")
+        .id;
+    let nav_chunks: Vec<_> = summary
+        .chunk_indexes
+        .iter()
+        .filter(|c| c.message_index_offsets.contains_key(&nav_channel))
+        .collect();
+    assert!(
+        nav_chunks.len() >= 2,
+        "{} chunks hold solutions",
+        nav_chunks.len()
+    );
+    let last = nav_chunks.last().unwrap();
+    let cut_at = (last.chunk_start_offset + last.chunk_length / 2) as usize;
     let cut = out.join("cut.mcap");
-    std::fs::write(&cut, &bytes[..bytes.len() * 3 / 4]).unwrap();
+    std::fs::write(&cut, &bytes[..cut_at]).unwrap();
     let rep2 = out.join("report-cut");
     let o = Command::new(bin("sextant").unwrap())
         .args(["report"])

@@ -361,36 +361,30 @@ pub fn png(path: &Path, c: &Value) -> anyhow::Result<()> {
             y_from_zero: true,
         },
         Panel {
-            chart: Chart {
-                title: "Cost vs active filter states",
-                x_label: "active error states",
-                y_label: "fusion CPU time, ns per IMU sample",
-                log_x: false,
-                log_y: false,
-                lines: &states,
-            },
+            chart: Chart::linear(
+                "Cost vs active filter states",
+                "active error states",
+                "fusion CPU time, ns per IMU sample",
+                &states,
+            ),
             y_from_zero: true,
         },
         Panel {
-            chart: Chart {
-                title: "Cost vs satellites (tight coupling)",
-                x_label: &sat_label,
-                y_label: "fusion CPU time, ns per IMU sample",
-                log_x: false,
-                log_y: false,
-                lines: &sats,
-            },
+            chart: Chart::linear(
+                "Cost vs satellites (tight coupling)",
+                &sat_label,
+                "fusion CPU time, ns per IMU sample",
+                &sats,
+            ),
             y_from_zero: true,
         },
         Panel {
-            chart: Chart {
-                title: "Cost vs redundant IMU channels",
-                x_label: "single-axis channels",
-                y_label: "fusion CPU time, ns per IMU sample",
-                log_x: false,
-                log_y: false,
-                lines: &chans,
-            },
+            chart: Chart::linear(
+                "Cost vs redundant IMU channels",
+                "single-axis channels",
+                "fusion CPU time, ns per IMU sample",
+                &chans,
+            ),
             y_from_zero: true,
         },
     ];

@@ -261,14 +261,8 @@ fn live_run(
         .spawn()
         .context("start sextant-fusion")?;
     let start_mono_ns = msgs::monotonic_ns() + (START_DELAY_S * 1e9) as u64;
-    let drivers = [
-        "sextant-sim-imu",
-        "sextant-sim-star-tracker",
-        "sextant-sim-gnss",
-        "sextant-sim-odometer",
-        "sextant-sim-baro",
-        "sextant-sim-truth",
-    ];
+    let drivers =
+        drivers_sim::driver::SimDriver::ALL.map(drivers_sim::driver::SimDriver::process_name);
     let mut children: Vec<(String, Child)> = Vec::new();
     for d in drivers {
         let c = Command::new(opts.bin_dir.join(d))
@@ -623,14 +617,12 @@ fn histogram_png(
     }
     line_chart(
         path,
-        &Chart {
-            title: "IMU send -> solution send latency: Sextant and the bare iceoryx2 floor",
-            x_label: &format!("latency, us (bins of {width:.1} us; last bin holds the tail)"),
-            y_label: "fraction of solutions",
-            log_x: false,
-            log_y: true,
-            lines: &lines,
-        },
+        &Chart::log_y(
+            "IMU send -> solution send latency: Sextant and the bare iceoryx2 floor",
+            &format!("latency, us (bins of {width:.1} us; last bin holds the tail)"),
+            "fraction of solutions",
+            &lines,
+        ),
     )?;
     Ok(())
 }

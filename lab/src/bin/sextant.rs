@@ -642,17 +642,12 @@ fn bench(args: BenchArgs) -> anyhow::Result<()> {
         .parent()
         .map(Path::to_path_buf)
         .context("no directory of the current executable")?;
-    let names: Vec<String> = [
-        "sextant-fusion",
-        "sextant-sim-imu",
-        "sextant-sim-star-tracker",
-        "sextant-sim-gnss",
-        "sextant-sim-odometer",
-        "sextant-sim-baro",
-        "sextant-sim-truth",
-    ]
-    .map(String::from)
-    .into();
+    let names: Vec<String> = std::iter::once("sextant-fusion")
+        .chain(
+            drivers_sim::driver::SimDriver::ALL.map(drivers_sim::driver::SimDriver::process_name),
+        )
+        .map(String::from)
+        .collect();
     ensure_binaries(&bin_dir, &names)?;
     let cleaned = msgs::ipc::cleanup_dead_nodes()?;
     if cleaned > 0 {

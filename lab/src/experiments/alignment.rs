@@ -549,14 +549,7 @@ fn plots(out_dir: &Path, settings: &Settings, summary: &Summary) -> Result<(), E
     let title = format!("Heading error (RMS over seeds) at T = {t_max:.0} s");
     line_chart(
         &out_dir.join("heading_vs_latitude.png"),
-        &Chart {
-            title: &title,
-            x_label: "latitude [deg]",
-            y_label: "heading error RMS [deg]",
-            log_x: false,
-            log_y: true,
-            lines: &lines,
-        },
+        &Chart::log_y(&title, "latitude [deg]", "heading error RMS [deg]", &lines),
     )?;
     let lat_pick = settings
         .latitudes_deg

@@ -1063,14 +1063,12 @@ fn plots(
         }
         line_chart(
             &out_dir.join("astro_calibration_record1_error_vs_time.png"),
-            &Chart {
-                title: "Record 1: astro-fix error after the 3-stage calibration (60 s means)",
-                x_label: "time since start [min]",
-                y_label: "position error [m]",
-                log_x: false,
-                log_y: false,
-                lines: &lines,
-            },
+            &Chart::linear(
+                "Record 1: astro-fix error after the 3-stage calibration (60 s means)",
+                "time since start [min]",
+                "position error [m]",
+                &lines,
+            ),
         )?;
     }
     let per = |f: fn(&RecordFigures) -> f64| -> Vec<(f64, f64)> {

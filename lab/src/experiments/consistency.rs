@@ -592,14 +592,12 @@ fn measure(
     }
     line_chart(
         &out_dir.join("nees.png"),
-        &Chart {
-            title: "Average NEES (3 dof per group) and its 95 % band",
-            x_label: "time since scenario start, s",
-            y_label: "average NEES",
-            log_x: false,
-            log_y: true,
-            lines: &lines,
-        },
+        &Chart::log_y(
+            "Average NEES (3 dof per group) and its 95 % band",
+            "time since scenario start, s",
+            "average NEES",
+            &lines,
+        ),
     )?;
     for g in 0..3 {
         let scale = if g == 2 {
@@ -624,14 +622,12 @@ fn measure(
         let unit = ["m", "m/s", "deg"][g];
         line_chart(
             &out_dir.join(format!("sigma_vs_error_{}.png", GROUPS[g])),
-            &Chart {
-                title: &format!("{}: RMS error over runs vs filter σ", GROUPS[g]),
-                x_label: "time since scenario start, s",
-                y_label: &format!("{} error, {unit}", GROUPS[g]),
-                log_x: false,
-                log_y: true,
-                lines: &lines,
-            },
+            &Chart::log_y(
+                &format!("{}: RMS error over runs vs filter σ", GROUPS[g]),
+                "time since scenario start, s",
+                &format!("{} error, {unit}", GROUPS[g]),
+                &lines,
+            ),
         )?;
     }
     Ok(summary)

@@ -568,14 +568,12 @@ fn measure(
     ];
     line_chart(
         &out_dir.join("horizontal_error.png"),
-        &Chart {
-            title: "GNSS denied, 10 h: astro-inertial vs free inertial",
-            x_label: "time, h",
-            y_label: "horizontal position error, m",
-            log_x: false,
-            log_y: true,
-            lines: &lines,
-        },
+        &Chart::log_y(
+            "GNSS denied, 10 h: astro-inertial vs free inertial",
+            "time, h",
+            "horizontal position error, m",
+            &lines,
+        ),
     )?;
     let comp = vec![
         Line::solid(
@@ -593,14 +591,12 @@ fn measure(
     ];
     line_chart(
         &out_dir.join("astro_error_components.png"),
-        &Chart {
-            title: "Astro-inertial error (truth − estimate) oscillates about the bias floor",
-            x_label: "time, h",
-            y_label: "position error, m",
-            log_x: false,
-            log_y: false,
-            lines: &comp,
-        },
+        &Chart::linear(
+            "Astro-inertial error (truth − estimate) oscillates about the bias floor",
+            "time, h",
+            "position error, m",
+            &comp,
+        ),
     )?;
     Ok(summary)
 }

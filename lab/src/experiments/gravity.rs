@@ -357,14 +357,7 @@ fn measure(
     for (file, title, y_label, f) in charts {
         line_chart(
             &out_dir.join(file),
-            &Chart {
-                title,
-                x_label: "geodetic latitude [deg]",
-                y_label,
-                log_x: false,
-                log_y: false,
-                lines: &curves(f),
-            },
+            &Chart::linear(title, "geodetic latitude [deg]", y_label, &curves(f)),
         )?;
     }
     Ok(summary)

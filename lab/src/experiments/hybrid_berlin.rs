@@ -761,14 +761,12 @@ fn plots(
         ];
         line_chart(
             &out_dir.join("error_vs_3sigma.png"),
-            &Chart {
-                title: "hybrid-berlin: tight coupling with the χ² gate, error and its own 3σ",
-                x_label: "time since the reference's first epoch, s",
-                y_label: "m",
-                log_x: false,
-                log_y: false,
-                lines: &lines,
-            },
+            &Chart::linear(
+                "hybrid-berlin: tight coupling with the χ² gate, error and its own 3σ",
+                "time since the reference's first epoch, s",
+                "m",
+                &lines,
+            ),
         )?;
     }
     Ok(())

@@ -540,14 +540,7 @@ fn plots(out_dir: &Path, runs: &[Run], series: &[Series]) -> Result<(), Experime
         let path: PathBuf = out_dir.join(file);
         line_chart(
             &path,
-            &Chart {
-                title,
-                x_label: "time since 2020-06-25 00:00 GPS, s",
-                y_label,
-                log_x: false,
-                log_y: false,
-                lines: &lines,
-            },
+            &Chart::linear(title, "time since 2020-06-25 00:00 GPS, s", y_label, &lines),
         )?;
     }
     Ok(())

@@ -1098,14 +1098,12 @@ fn measure(
     }
     line_chart(
         &out_dir.join("horizontal_error_budget.png"),
-        &Chart {
-            title: "Free-inertial window: horizontal error and its largest sources",
-            x_label: "time since GNSS was lost, s",
-            y_label: "horizontal position error, m",
-            log_x: false,
-            log_y: false,
-            lines: &lines,
-        },
+        &Chart::linear(
+            "Free-inertial window: horizontal error and its largest sources",
+            "time since GNSS was lost, s",
+            "horizontal position error, m",
+            &lines,
+        ),
     )?;
     // The same window on the matched world and on the car's, with the filter's 1σ.
     line_chart(

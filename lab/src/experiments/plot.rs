@@ -98,6 +98,28 @@ pub struct Chart<'a> {
     pub lines: &'a [Line],
 }
 
+impl<'a> Chart<'a> {
+    /// A chart with linear axes.
+    pub fn linear(title: &'a str, x_label: &'a str, y_label: &'a str, lines: &'a [Line]) -> Self {
+        Self {
+            title,
+            x_label,
+            y_label,
+            log_x: false,
+            log_y: false,
+            lines,
+        }
+    }
+
+    /// A chart with a linear x axis and a logarithmic y axis.
+    pub fn log_y(title: &'a str, x_label: &'a str, y_label: &'a str, lines: &'a [Line]) -> Self {
+        Self {
+            log_y: true,
+            ..Self::linear(title, x_label, y_label, lines)
+        }
+    }
+}
+
 type DynErr = Box<dyn std::error::Error>;
 
 /// Draw `chart` into the PNG file `path` (1000 × 600 px).

@@ -938,14 +938,7 @@ fn plots(
             .collect();
         line_chart(
             &out_dir.join(file),
-            &Chart {
-                title,
-                x_label: "time [h]",
-                y_label: y,
-                log_x: false,
-                log_y: false,
-                lines: &lines,
-            },
+            &Chart::linear(title, "time [h]", y, &lines),
         )?;
     }
     Ok(())

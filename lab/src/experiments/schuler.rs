@@ -518,14 +518,7 @@ fn measure(
         lines.extend(extra);
         line_chart(
             &out_dir.join(file),
-            &Chart {
-                title,
-                x_label: "time [min]",
-                y_label: "position error [m]",
-                log_x: false,
-                log_y: false,
-                lines: &lines,
-            },
+            &Chart::linear(title, "time [min]", "position error [m]", &lines),
         )
     };
     ne_chart(

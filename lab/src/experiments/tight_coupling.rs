@@ -745,14 +745,12 @@ fn measure(
         if lines.len() > 1 {
             line_chart(
                 &out_dir.join(format!("horizontal_error_{}.png", c.name())),
-                &Chart {
-                    title: &format!("{} coupling: horizontal error in the window", c.name()),
-                    x_label: "time since the window started, s",
-                    y_label: "horizontal position error, m",
-                    log_x: false,
-                    log_y: true,
-                    lines: &lines,
-                },
+                &Chart::log_y(
+                    &format!("{} coupling: horizontal error in the window", c.name()),
+                    "time since the window started, s",
+                    "horizontal position error, m",
+                    &lines,
+                ),
             )?;
         }
     }
@@ -785,14 +783,12 @@ fn measure(
     }
     line_chart(
         &out_dir.join("final_error_vs_satellites.png"),
-        &Chart {
-            title: "Horizontal error at the end of the 10-minute window (5 = all satellites)",
-            x_label: "satellites tracked in the window",
-            y_label: "horizontal position error, m",
-            log_x: false,
-            log_y: true,
-            lines: &lines,
-        },
+        &Chart::log_y(
+            "Horizontal error at the end of the 10-minute window (5 = all satellites)",
+            "satellites tracked in the window",
+            "horizontal position error, m",
+            &lines,
+        ),
     )?;
     Ok(summary)
 }

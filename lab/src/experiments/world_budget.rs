@@ -223,14 +223,12 @@ fn plot(out_dir: &Path, rows: &[Row]) -> Result<(), ExperimentError> {
     );
     line_chart(
         &out_dir.join("world_budget.png"),
-        &Chart {
-            title: &title,
-            x_label: "run (0: matched, last: whole world)",
-            y_label: "RMS share, m",
-            log_x: false,
-            log_y: false,
-            lines: &lines,
-        },
+        &Chart::linear(
+            &title,
+            "run (0: matched, last: whole world)",
+            "RMS share, m",
+            &lines,
+        ),
     )
 }
 
