@@ -28,6 +28,7 @@
 //! 9×31·31×31 product for the rows and a 31×31·31×9 one for the columns (≈ 17 300
 //! multiply-adds, once per interval).
 
+use super::update::p_times_h_transpose;
 use super::{Covariance, ErrorStateEkf, NX, StateVector, idx, symmetrize};
 use crate::attitude::skew;
 use crate::earth::Ellipsoid;
@@ -382,36 +383,48 @@ impl ErrorStateEkf {
             self.acc
                 .gravity_disturbance_noise(&self.noise.gravity, r_e, &ell.omega_ie_e());
         self.acc = TransitionAccumulator::default();
-        let mut p = self.p;
+        // In place: the trapezoid's first half of the noise, then Φ (P + Q/2) Φᵀ, then the
+        // second half.
+        let (pn, qc) = (&mut self.p, &self.qc);
         for i in 0..NX {
-            p[(i, i)] += 0.5 * self.qc[i] * t;
+            pn[(i, i)] += 0.5 * qc[i] * t;
         }
-        // M = Φ P: rows 0..9 from A, clock bias row += T · drift row.
-        let mut m = p;
-        m.fixed_rows_mut::<9>(0).copy_from(&(a * p));
-        if self.active[idx::CLK] {
-            let drift_row = p.row(idx::CLK_DRIFT).into_owned();
-            let mut r = m.row_mut(idx::CLK);
-            r += drift_row * t;
+        // Φ is the identity but for its navigation rows 0..9 (`a`) and the clock row, and the
+        // two commute (no navigation row reads the clock). Navigation part, with
+        // G = P aᵀ (31×9, P symmetric so G = (aP)ᵀ):
+        //   P⁺[0..9, 0..9] = a G,  P⁺[9.., 0..9] = G[9.., ·] (and its mirror),  the rest = P.
+        let g = p_times_h_transpose(pn, &a);
+        let top = a * g;
+        for c in 0..9 {
+            for r in 0..9 {
+                pn[(r, c)] = 0.5 * (top[(r, c)] + top[(c, r)]);
+            }
+            for r in 9..NX {
+                pn[(r, c)] = g[(r, c)];
+                pn[(c, r)] = g[(r, c)];
+            }
         }
-        // P⁺ = M Φᵀ: columns 0..9 from Aᵀ, clock bias column += T · drift column.
-        let mut pn = m;
-        pn.fixed_columns_mut::<9>(0).copy_from(&(m * a.transpose()));
+        // Clock: bias row += T · drift row, then bias column += T · drift column (exactly
+        // symmetric again: each mirrored pair gets the same sum).
         if self.active[idx::CLK] {
-            let drift_col = m.column(idx::CLK_DRIFT).into_owned();
-            let mut c = pn.column_mut(idx::CLK);
-            c += drift_col * t;
+            for j in 0..NX {
+                let v = pn[(idx::CLK_DRIFT, j)] * t;
+                pn[(idx::CLK, j)] += v;
+            }
+            for i in 0..NX {
+                let v = pn[(i, idx::CLK_DRIFT)] * t;
+                pn[(i, idx::CLK)] += v;
+            }
         }
         for i in 0..NX {
-            pn[(i, i)] += 0.5 * self.qc[i] * t;
+            pn[(i, i)] += 0.5 * qc[i] * t;
         }
         let mut att = pn.fixed_view_mut::<3, 3>(idx::ATT, idx::ATT);
-        att += q_mis;
+        att += symmetrize(&q_mis);
         if self.active[idx::BA] {
             let mut ba = pn.fixed_view_mut::<3, 3>(idx::BA, idx::BA);
-            ba += q_grav;
+            ba += symmetrize(&q_grav);
         }
-        self.p = symmetrize(&pn);
         // The clock estimate moves with its drift (the error model's δḃ = δd).
         self.clock_bias_m += self.clock_drift_m_s * t;
     }
@@ -521,7 +534,8 @@ mod tests {
     #[test]
     fn sparse_covariance_propagation_equals_dense() {
         // Φ P Φᵀ formed block-sparse must equal the dense product with the same Φ and the
-        // trapezoidal noise, to rounding (relative 1e-12 of the largest entry).
+        // trapezoidal noise, to rounding (relative 1e-12 of the largest entry), and stay
+        // exactly symmetric.
         let mut rng = ChaCha8Rng::seed_from_u64(3);
         let p0 = random_spd(&mut rng, 1e-2);
         let noise = crate::navigator::ImuSpec::default().process_noise();
@@ -547,6 +561,8 @@ mod tests {
         f.predict(&WGS84, &nav, &f_b, &w_b, dt);
         let d = (f.p - dense).abs().max() / dense.abs().max();
         assert!(d < 1e-12, "{d}");
+        // Exactly symmetric, with no symmetrisation pass over the whole matrix.
+        assert_eq!(f.p, f.p.transpose());
     }
 
     /// Body axes of a level vehicle heading `yaw` at latitude `lat`, longitude 0: `C_e_b`.

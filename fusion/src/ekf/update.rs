@@ -16,7 +16,48 @@ use nalgebra::{Cholesky, SMatrix, SVector};
 
 /// `(P + Pᵀ)/2`.
 pub fn symmetrize<const D: usize>(p: &SMatrix<f64, D, D>) -> SMatrix<f64, D, D> {
-    (p + p.transpose()) * 0.5
+    let mut out = *p;
+    symmetrize_in_place(&mut out);
+    out
+}
+
+/// `P ← (P + Pᵀ)/2` in place: each pair of mirrored entries replaced by their mean, the
+/// diagonal untouched (the same numbers as [`symmetrize`], without the temporaries).
+pub fn symmetrize_in_place<const D: usize>(p: &mut SMatrix<f64, D, D>) {
+    for j in 1..D {
+        for i in 0..j {
+            let v = 0.5 * (p[(i, j)] + p[(j, i)]);
+            p[(i, j)] = v;
+            p[(j, i)] = v;
+        }
+    }
+}
+
+/// `P Hᵀ` from the columns of `P` that `H` weighs: a measurement's Jacobian touches a few
+/// states (a height one, a pseudorange four), so the zero entries are skipped. Adding the
+/// skipped `0·P` would change nothing: `x + 0 = x`.
+pub(super) fn p_times_h_transpose<const M: usize>(
+    p: &Covariance,
+    h: &SMatrix<f64, M, NX>,
+) -> SMatrix<f64, NX, M> {
+    let mut pht = SMatrix::<f64, NX, M>::zeros();
+    for a in 0..M {
+        let mut out = pht.column_mut(a);
+        for k in 0..NX {
+            let h_ak = h[(a, k)];
+            if h_ak != 0.0 {
+                out.zip_apply(&p.column(k), |o, p_ik| *o += p_ik * h_ak);
+            }
+        }
+    }
+    pht
+}
+
+/// True when every entry of `m` is finite, in one vectorisable pass: a NaN or an infinity
+/// makes the sum non-finite (`+∞ − ∞` is NaN). The sum of finite entries overflows only
+/// near 10³⁰⁸, far beyond any covariance, and would then refuse the result, not accept it.
+fn all_finite<const R: usize, const C: usize>(m: &SMatrix<f64, R, C>) -> bool {
+    m.as_slice().iter().sum::<f64>().is_finite()
 }
 
 /// A linearised measurement: innovation `y = z − h(x̂)`, Jacobian `H = ∂h/∂x` and noise
@@ -63,7 +104,7 @@ pub struct UpdateOutcome<const M: usize> {
 /// `gate` (NIS threshold; `f64::INFINITY` disables the gate). Pure; allocates nothing. A
 /// measurement with any non-finite entry is rejected before it can touch anything.
 pub fn update<const M: usize>(p: &Covariance, m: &Measurement<M>, gate: f64) -> UpdateOutcome<M> {
-    let pht: SMatrix<f64, NX, M> = p * m.h.transpose();
+    let pht = p_times_h_transpose(p, &m.h);
     let s = symmetrize(&(m.h * pht + m.r));
     let rejected_outcome = |nis: f64| UpdateOutcome {
         dx: StateVector::zeros(),
@@ -76,10 +117,7 @@ pub fn update<const M: usize>(p: &Covariance, m: &Measurement<M>, gate: f64) -> 
             rejected: true,
         },
     };
-    let finite = m.innovation.iter().all(|x| x.is_finite())
-        && m.h.iter().all(|x| x.is_finite())
-        && m.r.iter().all(|x| x.is_finite());
-    if !finite {
+    if !(all_finite(&m.innovation) && all_finite(&m.h) && all_finite(&m.r)) {
         return rejected_outcome(f64::INFINITY);
     }
     let Some(chol) = Cholesky::new(s) else {
@@ -92,11 +130,24 @@ pub fn update<const M: usize>(p: &Covariance, m: &Measurement<M>, gate: f64) -> 
     let s_inv = chol.inverse();
     let k: SMatrix<f64, NX, M> = pht * s_inv;
     let dx = k * m.innovation;
-    // Joseph form, expanded: (I−KH)P(I−KH)ᵀ + KRKᵀ = P − K(PHᵀ)ᵀ − (PHᵀ)Kᵀ + K S Kᵀ.
-    let k_pht_t = k * pht.transpose();
-    let p_new = p - k_pht_t - k_pht_t.transpose() + k * s * k.transpose();
-    let p_new = symmetrize(&p_new);
-    if !(dx.iter().all(|x| x.is_finite()) && p_new.iter().all(|x| x.is_finite())) {
+    // Joseph form, expanded: (I−KH)P(I−KH)ᵀ + KRKᵀ = P − K(PHᵀ)ᵀ − (PHᵀ)Kᵀ + K S Kᵀ
+    // = P − (K Eᵀ + E Kᵀ) with E = PHᵀ − K S/2: a rank-2M correction applied column by
+    // column (contiguous in memory) without any n×n temporary. Entry (i, j) subtracts
+    // K_ia·E_ja + E_ia·K_ja and entry (j, i) the same two products added the other way
+    // round; floating-point addition and multiplication commute, so a symmetric P stays
+    // exactly symmetric with no symmetrisation pass.
+    let e = pht - k * s * 0.5;
+    let mut p_new = *p;
+    for j in 0..NX {
+        let mut col = p_new.column_mut(j);
+        for a in 0..M {
+            let (e_ja, k_ja) = (e[(j, a)], k[(j, a)]);
+            col.zip_zip_apply(&k.column(a), &e.column(a), |x, k_ia, e_ia| {
+                *x -= k_ia * e_ja + e_ia * k_ja;
+            });
+        }
+    }
+    if !(all_finite(&dx) && all_finite(&p_new)) {
         return rejected_outcome(f64::INFINITY);
     }
     UpdateOutcome {
