@@ -79,7 +79,7 @@ pub struct MechanizationConfig {
 }
 
 /// The strapdown integrator with its one-sample history (for coning/sculling).
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Copy)]
 pub struct Strapdown {
     /// Settings.
     pub config: MechanizationConfig,

@@ -74,7 +74,9 @@ pub use measurements::{
     gnss_pseudorange, gnss_range_rate, gnss_velocity, kappa_jacobian, kappa_matrix,
     nhc_linearisation_covariance, odometer_nhc, odometer_speed, star_attitude, zero_velocity,
 };
-pub use update::{Measurement, Residual, UpdateOutcome, augment_covariance, symmetrize, update};
+pub use update::{
+    Measurement, Residual, UpdateOutcome, augment_covariance, symmetrize, update, update_in_place,
+};
 
 use crate::strapdown::NavState;
 use nalgebra::{SMatrix, SVector, UnitQuaternion, Vector3};
@@ -166,7 +168,7 @@ impl ActiveStates {
 
 /// The filter's own state: error covariance, the sensor-error estimates it feeds back, and
 /// the transition accumulated since the last covariance propagation.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ErrorStateEkf {
     /// Error-state covariance (layout in the module docs), valid at the last propagation.
     pub p: Covariance,

@@ -104,28 +104,42 @@ pub struct UpdateOutcome<const M: usize> {
 /// `gate` (NIS threshold; `f64::INFINITY` disables the gate). Pure; allocates nothing. A
 /// measurement with any non-finite entry is rejected before it can touch anything.
 pub fn update<const M: usize>(p: &Covariance, m: &Measurement<M>, gate: f64) -> UpdateOutcome<M> {
+    let mut p_new = *p;
+    let (dx, residual) = update_in_place(&mut p_new, m, gate);
+    UpdateOutcome {
+        dx,
+        p: p_new,
+        residual,
+    }
+}
+
+/// [`update()`] writing the posterior covariance over the prior in `p`: the correction and the
+/// residual record are returned, and `p` is left exactly as it was when the sample is
+/// rejected. The filter's hot path: no copy of the 31×31 matrix.
+pub fn update_in_place<const M: usize>(
+    p: &mut Covariance,
+    m: &Measurement<M>,
+    gate: f64,
+) -> (StateVector, Residual<M>) {
     let pht = p_times_h_transpose(p, &m.h);
     let s = symmetrize(&(m.h * pht + m.r));
-    let rejected_outcome = |nis: f64| UpdateOutcome {
-        dx: StateVector::zeros(),
-        p: *p,
-        residual: Residual {
-            innovation: m.innovation,
-            covariance: s,
-            nis,
-            gate,
-            rejected: true,
-        },
+    let residual = |nis: f64, rejected: bool| Residual {
+        innovation: m.innovation,
+        covariance: s,
+        nis,
+        gate,
+        rejected,
     };
+    let rejected = |nis: f64| (StateVector::zeros(), residual(nis, true));
     if !(all_finite(&m.innovation) && all_finite(&m.h) && all_finite(&m.r)) {
-        return rejected_outcome(f64::INFINITY);
+        return rejected(f64::INFINITY);
     }
     let Some(chol) = Cholesky::new(s) else {
-        return rejected_outcome(f64::INFINITY);
+        return rejected(f64::INFINITY);
     };
     let nis = m.innovation.dot(&chol.solve(&m.innovation));
     if !nis.is_finite() || nis > gate {
-        return rejected_outcome(nis);
+        return rejected(nis);
     }
     let s_inv = chol.inverse();
     let k: SMatrix<f64, NX, M> = pht * s_inv;
@@ -137,9 +151,18 @@ pub fn update<const M: usize>(p: &Covariance, m: &Measurement<M>, gate: f64) -> 
     // round; floating-point addition and multiplication commute, so a symmetric P stays
     // exactly symmetric with no symmetrisation pass.
     let e = pht - k * s * 0.5;
-    let mut p_new = *p;
+    // The result is finite when P, K and E are and no sum can overflow: every entry of P⁺ is
+    // bounded by max|P| + 2M·max|K|·max|E|, and a covariance's largest entry is on its
+    // diagonal (|P_ij| ≤ √(P_ii·P_jj)). Checked before P is touched, so that a refused update
+    // leaves it as it was.
+    let max_abs = |x: &[f64]| x.iter().fold(0.0_f64, |a, v| a.max(v.abs()));
+    let p_max = (0..NX).fold(0.0_f64, |a, i| a.max(p[(i, i)].abs()));
+    let bound = p_max + 2.0 * M as f64 * max_abs(k.as_slice()) * max_abs(e.as_slice());
+    if !(all_finite(&dx) && all_finite(&k) && all_finite(&e) && bound < 1e300) {
+        return rejected(f64::INFINITY);
+    }
     for j in 0..NX {
-        let mut col = p_new.column_mut(j);
+        let mut col = p.column_mut(j);
         for a in 0..M {
             let (e_ja, k_ja) = (e[(j, a)], k[(j, a)]);
             col.zip_zip_apply(&k.column(a), &e.column(a), |x, k_ia, e_ia| {
@@ -147,20 +170,7 @@ pub fn update<const M: usize>(p: &Covariance, m: &Measurement<M>, gate: f64) -> 
             });
         }
     }
-    if !(all_finite(&dx) && all_finite(&p_new)) {
-        return rejected_outcome(f64::INFINITY);
-    }
-    UpdateOutcome {
-        dx,
-        p: p_new,
-        residual: Residual {
-            innovation: m.innovation,
-            covariance: s,
-            nis,
-            gate,
-            rejected: false,
-        },
-    }
+    (dx, residual(nis, false))
 }
 
 /// State augmentation from measurements (used to start the receiver-clock states).
@@ -251,6 +261,13 @@ mod tests {
         let out = update(&p, &nan, f64::INFINITY);
         assert!(out.residual.rejected);
         assert_eq!(out.p, p);
+        // In place, a refused update leaves the covariance as it was.
+        for m in [&bad, &nan] {
+            let mut q = p;
+            let (dx, residual) = update_in_place(&mut q, m, gates.threshold(3));
+            assert!(residual.rejected);
+            assert_eq!((q, dx), (p, StateVector::zeros()));
+        }
     }
 
     #[test]
@@ -273,6 +290,9 @@ mod tests {
             };
             let out = update(&p, &m, f64::INFINITY);
             assert!(!out.residual.rejected, "step {k}");
+            let mut in_place = p;
+            let (dx, residual) = update_in_place(&mut in_place, &m, f64::INFINITY);
+            assert_eq!((in_place, dx, residual), (out.p, out.dx, out.residual));
             let s = h * p * h.transpose() + r;
             let kk = p * h.transpose() * s.try_inverse().unwrap();
             let ikh = Covariance::identity() - kk * h;

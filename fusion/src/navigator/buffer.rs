@@ -128,6 +128,18 @@ impl<T: Clone> Ring<T> {
             self.len += 1;
         }
     }
+    /// The slot the next entry goes to, appended (evicting the oldest entry when full) for
+    /// the caller to overwrite in place: a large entry is written once, not built and moved.
+    pub(super) fn push_slot(&mut self) -> &mut T {
+        let cap = self.buf.len();
+        let i = (self.head + self.len) % cap;
+        if self.len == cap {
+            self.head = (self.head + 1) % cap;
+        } else {
+            self.len += 1;
+        }
+        &mut self.buf[i]
+    }
     pub(super) fn truncate(&mut self, len: usize) {
         self.len = self.len.min(len);
     }

@@ -10,7 +10,7 @@
 use super::*;
 
 /// The replayable navigation state at the end of one IMU epoch.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Copy)]
 pub(super) struct Core {
     /// Inertial state (ECEF position, velocity, body attitude).
     pub(super) nav: NavState,
@@ -84,7 +84,7 @@ impl Core {
 }
 
 /// A delayed-fusion checkpoint: the [`Core`] at the end of the IMU epoch `t`.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Copy)]
 pub(super) struct Checkpoint {
     /// IMU epoch.
     pub(super) t: GpsTime,

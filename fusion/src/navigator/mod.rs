@@ -338,7 +338,7 @@ impl Navigator {
                 CHECKPOINT_CAP,
                 Checkpoint {
                     t: GpsTime::EPOCH,
-                    core: core.clone(),
+                    core,
                 },
             ),
             gnss_done: Box::new(TimeQueue::new()),

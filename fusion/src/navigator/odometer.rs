@@ -137,17 +137,17 @@ impl Navigator {
                 h,
                 r: r + ekf::nhc_linearisation_covariance(&self.core.nav, &p_vel_att),
             };
-            let out = ekf::update(&self.core.ekf.p, &m, self.gates.threshold(2));
+            let (dx, residual) =
+                ekf::update_in_place(&mut self.core.ekf.p, &m, self.gates.threshold(2));
             if tally == Tally::Count {
                 self.nhc.fold(Verdict {
-                    nis: out.residual.nis,
+                    nis: residual.nis,
                     dof: 2,
-                    rejected: out.residual.rejected,
+                    rejected: residual.rejected,
                 });
             }
-            if !out.residual.rejected {
-                self.core.ekf.p = out.p;
-                self.correct(&out.dx);
+            if !residual.rejected {
+                self.correct(&dx);
             }
         }
         self.core.odo_epoch = Some(OdometerEpoch {

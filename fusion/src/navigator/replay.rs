@@ -63,10 +63,9 @@ impl Navigator {
         if self.checkpoints.len == 0 {
             self.nav_start = Some(t);
         }
-        self.checkpoints.push(Checkpoint {
-            t,
-            core: self.core.clone(),
-        });
+        let slot = self.checkpoints.push_slot();
+        slot.t = t;
+        slot.core = self.core;
     }
 
     /// Fuse late samples at their time of validity exactly as if they had arrived in time
@@ -87,7 +86,7 @@ impl Navigator {
         if k == 0 {
             return;
         }
-        let c = self.checkpoints.get(k - 1).clone();
+        let c = *self.checkpoints.get(k - 1);
         // The IMU log must hold every step after the checkpoint epoch: its first entry is at
         // or before it, or is the very step after it (the log starts with navigation, right
         // after the checkpoint taken at the start).

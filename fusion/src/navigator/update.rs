@@ -21,11 +21,11 @@ impl Navigator {
         self.core
             .ekf
             .propagate_covariance(&self.ell, &self.core.nav.r_e);
-        let out = ekf::update(&self.core.ekf.p, m, self.gates.threshold(M));
+        let (dx, residual) = ekf::update_in_place(&mut self.core.ekf.p, m, self.gates.threshold(M));
         let v = Verdict {
-            nis: out.residual.nis,
+            nis: residual.nis,
             dof: M as u64,
-            rejected: out.residual.rejected,
+            rejected: residual.rejected,
         };
         if tally == Tally::Count {
             match counter {
@@ -34,8 +34,7 @@ impl Navigator {
             }
         }
         if v.accepted() {
-            self.core.ekf.p = out.p;
-            self.correct(&out.dx);
+            self.correct(&dx);
         }
         v
     }

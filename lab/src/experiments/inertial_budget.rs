@@ -216,7 +216,7 @@ fn navigator_run(
                         pos_err_e_m: p.pos_err_e_m,
                         vel_err_e_m_s: p.vel_err_e_m_s,
                         att_err_e_rad: p.att_err_e_rad,
-                        ekf: nav.filter().clone(),
+                        ekf: *nav.filter(),
                         p: *nav.covariance(),
                     });
                 }
