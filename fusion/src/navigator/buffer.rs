@@ -148,13 +148,18 @@ impl<T: Clone> Ring<T> {
     }
 }
 
-/// Checkpoints are taken at this period of IMU time (0.1 s).
-pub(super) const CHECKPOINT_PERIOD: Duration = Duration::from_ns(100_000_000);
+/// Checkpoints are taken at this period of IMU time (20 ms). A late sample rewinds to the
+/// checkpoint before its time of validity and replays the IMU steps since: a sensor that is
+/// always late by its latency (the odometer's 10 ms at 20 Hz, a receiver's 50 ms) rewinds at
+/// every sample, so the period bounds the work repeated each time (half a period on average
+/// beyond the latency itself). A checkpoint is one copy of the navigation core (≈ 10 kB).
+pub(super) const CHECKPOINT_PERIOD: Duration = Duration::from_ns(20_000_000);
 
-/// Checkpoints kept: the 2 s longest buffer window plus margin, at the period above.
-pub(super) const CHECKPOINT_CAP: usize = 32;
+/// Checkpoints kept: the 2 s longest buffer window plus two periods and margin, at the period
+/// above (128 × 20 ms = 2.56 s).
+pub(super) const CHECKPOINT_CAP: usize = 128;
 
-/// Largest delayed-fusion IMU log, steps (≈ 5 MB; 2 kHz with the 2 s window needs 4 402).
+/// Largest delayed-fusion IMU log, steps (≈ 5 MB; 2 kHz with the 2 s window needs 4 082).
 pub(super) const IMU_LOG_MAX_CAP: usize = 65_536;
 
 pub(super) const GNSS_CAP: usize = 32;

@@ -751,7 +751,7 @@ fn late_gnss_sample_at_1_khz_gives_the_in_time_update() {
 
 #[test]
 fn a_replay_the_imu_log_cannot_hold_is_counted_and_the_late_samples_dropped() {
-    // The log sized for 100 Hz (223 steps) holds 0.22 s of a 1 kHz IMU: the fixes 1.5 s
+    // The log sized for 100 Hz (206 steps) holds 0.2 s of a 1 kHz IMU: the fixes 1.5 s
     // and 0.5 s late cannot be replayed at their epoch. They must be dropped and counted
     // (not fused at the current epoch, the old silent behaviour): B ends exactly where a
     // navigator that never received them ends.
@@ -761,7 +761,7 @@ fn a_replay_the_imu_log_cannot_hold_is_counted_and_the_late_samples_dropped() {
         max_imu_rate_hz: 100.0,
         ..NavigatorConfig::default()
     };
-    assert_eq!(cfg.imu_log_capacity(), 223);
+    assert_eq!(cfg.imu_log_capacity(), 206);
     let (a, b, delayed) = late_fix_at_1_khz(cfg.clone(), true);
     let (_, c, _) = late_fix_at_1_khz(cfg, false);
     assert_eq!(delayed, 2);
@@ -784,7 +784,7 @@ fn an_imu_rate_the_log_cannot_hold_is_a_configuration_error() {
         max_imu_rate_hz: 2000.0,
         ..NavigatorConfig::default()
     };
-    assert_eq!(cfg.imu_log_capacity(), 4402);
+    assert_eq!(cfg.imu_log_capacity(), 4082);
     cfg.validate().unwrap();
     cfg.max_imu_rate_hz = 40_000.0; // 88 000 steps
     let e = cfg.validate().unwrap_err();
