@@ -145,6 +145,10 @@ pub fn geodetic_to_ecef(ell: &Ellipsoid, g: &Geodetic) -> Vector3<f64> {
 /// ([`ECEF_TO_GEODETIC_ITERATIONS`]); no division by the axis distance, so the poles and the
 /// equatorial plane need no special case. Valid for heights from well inside the Earth
 /// (≈ −6000 km) to beyond the geostationary orbit. Longitude is 0 on the polar axis.
+///
+/// The angles are carried as their (sine, cosine) pairs, each the normalised vector whose
+/// `atan2` the textbook form takes, so the passes need square roots only; the latitude's
+/// and longitude's `atan2` are taken once at the end (it runs for every solution).
 pub fn ecef_to_geodetic(ell: &Ellipsoid, r_e: &Vector3<f64>) -> Geodetic {
     let a = ell.a_m;
     let b = ell.b_m();
@@ -153,19 +157,24 @@ pub fn ecef_to_geodetic(ell: &Ellipsoid, r_e: &Vector3<f64>) -> Geodetic {
     let one_minus_f = 1.0 - ell.f;
     let p = r_e.x.hypot(r_e.y);
     let z = r_e.z;
+    // (sin, cos) of atan2(y, x), with atan2(0, 0) = 0 (the Earth's centre).
+    let unit = |y: f64, x: f64| {
+        let n = y.hypot(x);
+        if n > 0.0 { (y / n, x / n) } else { (0.0, 1.0) }
+    };
     // Initial parametric latitude: tan β = z a / (p b).
-    let mut beta = z.atan2(one_minus_f * p);
-    let mut lat = 0.0;
+    let (mut sb, mut cb) = unit(z, one_minus_f * p);
+    let (mut n_lat, mut d_lat) = (0.0, 1.0);
     for _ in 0..ECEF_TO_GEODETIC_ITERATIONS {
-        let (sb, cb) = beta.sin_cos();
-        lat = (z + ep2 * b * sb * sb * sb).atan2(p - e2 * a * cb * cb * cb);
-        let (sl, cl) = lat.sin_cos();
-        beta = (one_minus_f * sl).atan2(cl);
+        n_lat = z + ep2 * b * sb * sb * sb;
+        d_lat = p - e2 * a * cb * cb * cb;
+        let (sl, cl) = unit(n_lat, d_lat);
+        (sb, cb) = unit(one_minus_f * sl, cl);
     }
-    let (sl, cl) = lat.sin_cos();
+    let (sl, cl) = unit(n_lat, d_lat);
     let height_m = p * cl + z * sl - a * (1.0 - e2 * sl * sl).sqrt();
     Geodetic {
-        lat_rad: lat,
+        lat_rad: n_lat.atan2(d_lat),
         lon_rad: r_e.y.atan2(r_e.x),
         height_m,
     }

@@ -125,6 +125,13 @@ pub struct NavigatorDiagnostics {
     /// [`NavigatorConfig::max_imu_rate_hz`]): one per rewind; the samples are dropped and
     /// counted in their sensor's `dropped_late`, never fused at a wrong epoch.
     pub replays_impossible: u64,
+    /// Rewinds for late samples: the filter went back to a checkpoint and replayed the IMU
+    /// steps since (a burst of late samples shares one). A sensor late by its latency at
+    /// every sample rewinds at every sample.
+    pub rewinds: u64,
+    /// IMU steps processed again by those rewinds: the delayed fusion's extra work, beside
+    /// the IMU's own `fused` count.
+    pub replayed_imu_steps: u64,
     /// Alignments in motion (star-tracker attitude, GNSS position and velocity).
     pub motion_alignments: u64,
     /// Of those, the ones without a star attitude: heading from GNSS velocity

@@ -101,6 +101,7 @@ impl Navigator {
         self.checkpoints.truncate(k);
         self.core = c.core;
         self.time = c.t;
+        self.diagnostics.rewinds += 1;
         while let Some((t, v, _)) = self.gnss_done.pop_newer(c.t) {
             self.gnss_q.insert_flagged(t, v, true);
         }
@@ -113,11 +114,16 @@ impl Navigator {
         while let Some((t, v, _)) = self.baro_done.pop_newer(c.t) {
             self.baro_q.insert_flagged(t, v, true);
         }
-        for i in 0..self.imu_log.len {
+        // The log is in time order (IMU times only increase): the steps after the checkpoint
+        // are its tail, found from the end — a few steps, where the log holds seconds.
+        let mut first = self.imu_log.len;
+        while first > 0 && self.imu_log.get(first - 1).t > c.t {
+            first -= 1;
+        }
+        for i in first..self.imu_log.len {
             let e = *self.imu_log.get(i);
-            if e.t > c.t {
-                self.imu_step(&e);
-            }
+            self.imu_step(&e);
+            self.diagnostics.replayed_imu_steps += 1;
         }
     }
 
