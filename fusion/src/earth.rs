@@ -155,11 +155,13 @@ pub fn ecef_to_geodetic(ell: &Ellipsoid, r_e: &Vector3<f64>) -> Geodetic {
     let e2 = ell.e2();
     let ep2 = ell.ep2();
     let one_minus_f = 1.0 - ell.f;
-    let p = r_e.x.hypot(r_e.y);
+    // Plain square roots, not `hypot`: the squares of coordinates up to 10¹⁵⁰ m cannot
+    // overflow, and libm's `hypot` costs several times more.
+    let p = (r_e.x * r_e.x + r_e.y * r_e.y).sqrt();
     let z = r_e.z;
     // (sin, cos) of atan2(y, x), with atan2(0, 0) = 0 (the Earth's centre).
     let unit = |y: f64, x: f64| {
-        let n = y.hypot(x);
+        let n = (y * y + x * x).sqrt();
         if n > 0.0 { (y / n, x / n) } else { (0.0, 1.0) }
     };
     // Initial parametric latitude: tan β = z a / (p b).

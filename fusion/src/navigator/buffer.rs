@@ -115,29 +115,41 @@ impl<T: Clone> Ring<T> {
         }
     }
     pub(super) fn get(&self, i: usize) -> &T {
-        &self.buf[(self.head + i) % self.buf.len()]
+        &self.buf[self.slot(i)]
+    }
+    /// Index in `buf` of entry `i` (`i < len ≤ cap`, `head < cap`: one wrap at most, no
+    /// division).
+    fn slot(&self, i: usize) -> usize {
+        let k = self.head + i;
+        if k >= self.buf.len() {
+            k - self.buf.len()
+        } else {
+            k
+        }
+    }
+    /// Moves the head one entry on (the oldest entry evicted).
+    fn advance_head(&mut self) {
+        self.head += 1;
+        if self.head == self.buf.len() {
+            self.head = 0;
+        }
     }
     /// Append, evicting the oldest entry when full.
     pub(super) fn push(&mut self, v: T) {
-        let cap = self.buf.len();
-        let i = (self.head + self.len) % cap;
-        self.buf[i] = v;
-        if self.len == cap {
-            self.head = (self.head + 1) % cap;
-        } else {
-            self.len += 1;
-        }
+        *self.push_slot() = v;
     }
     /// The slot the next entry goes to, appended (evicting the oldest entry when full) for
     /// the caller to overwrite in place: a large entry is written once, not built and moved.
     pub(super) fn push_slot(&mut self) -> &mut T {
-        let cap = self.buf.len();
-        let i = (self.head + self.len) % cap;
-        if self.len == cap {
-            self.head = (self.head + 1) % cap;
+        let i = if self.len == self.buf.len() {
+            // Full: the new entry takes the oldest one's slot.
+            let i = self.head;
+            self.advance_head();
+            i
         } else {
             self.len += 1;
-        }
+            self.slot(self.len - 1)
+        };
         &mut self.buf[i]
     }
     pub(super) fn truncate(&mut self, len: usize) {

@@ -86,38 +86,39 @@ impl Navigator {
         if k == 0 {
             return;
         }
-        let c = *self.checkpoints.get(k - 1);
+        // Its time only: the core (≈ 10 kB) is copied once, straight into place, below.
+        let c_t = self.checkpoints.get(k - 1).t;
         // The IMU log must hold every step after the checkpoint epoch: its first entry is at
         // or before it, or is the very step after it (the log starts with navigation, right
         // after the checkpoint taken at the start).
         let covered = self.imu_log.len > 0 && {
             let first = self.imu_log.get(0);
-            first.t <= c.t || first.prev_t.is_some_and(|p| p <= c.t)
+            first.t <= c_t || first.prev_t.is_some_and(|p| p <= c_t)
         };
         if !covered {
             self.drop_unreplayable();
             return;
         }
         self.checkpoints.truncate(k);
-        self.core = c.core;
-        self.time = c.t;
+        self.core = self.checkpoints.get(k - 1).core;
+        self.time = c_t;
         self.diagnostics.rewinds += 1;
-        while let Some((t, v, _)) = self.gnss_done.pop_newer(c.t) {
+        while let Some((t, v, _)) = self.gnss_done.pop_newer(c_t) {
             self.gnss_q.insert_flagged(t, v, true);
         }
-        while let Some((t, v, _)) = self.star_done.pop_newer(c.t) {
+        while let Some((t, v, _)) = self.star_done.pop_newer(c_t) {
             self.star_q.insert_flagged(t, v, true);
         }
-        while let Some((t, v, _)) = self.odo_done.pop_newer(c.t) {
+        while let Some((t, v, _)) = self.odo_done.pop_newer(c_t) {
             self.odo_q.insert_flagged(t, v, true);
         }
-        while let Some((t, v, _)) = self.baro_done.pop_newer(c.t) {
+        while let Some((t, v, _)) = self.baro_done.pop_newer(c_t) {
             self.baro_q.insert_flagged(t, v, true);
         }
         // The log is in time order (IMU times only increase): the steps after the checkpoint
         // are its tail, found from the end — a few steps, where the log holds seconds.
         let mut first = self.imu_log.len;
-        while first > 0 && self.imu_log.get(first - 1).t > c.t {
+        while first > 0 && self.imu_log.get(first - 1).t > c_t {
             first -= 1;
         }
         for i in first..self.imu_log.len {
