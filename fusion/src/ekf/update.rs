@@ -6,7 +6,9 @@
 //! probability and whether the sample was rejected). Joseph form
 //! `P⁺ = (I − K H) P (I − K H)ᵀ + K R Kᵀ`, evaluated in its expanded, algebraically identical
 //! `O(n²m)` form `P − K (P Hᵀ)ᵀ − (P Hᵀ) Kᵀ + K S Kᵀ` (valid for any gain, like the factored
-//! form), then symmetrised. Everything is fixed-size (`SMatrix`/`SVector`): no allocation.
+//! form), written as the exactly symmetric `P − (K Eᵀ + E Kᵀ)`, `E = P Hᵀ − K S/2`.
+//! [`update_in_place`] writes it over the prior (the navigator's hot path), [`update()`] returns
+//! it. Everything is fixed-size (`SMatrix`/`SVector`): no allocation.
 //!
 //! The filter keeps no statistics of its own: the caller folds each [`Residual`] into its
 //! health record (rejection counts, NIS windows).
