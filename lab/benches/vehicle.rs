@@ -20,15 +20,8 @@ fn bench(c: &mut Criterion) {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     let cfg = sextant_lab::config::load(&root.join("config/sextant.toml")).expect("config");
     let scn = Scenario::load(&root.join("config/scenarios/vehicle.toml")).expect("scenario");
-    let channels = [
-        Channel::Imu,
-        Channel::StarTracker,
-        Channel::Gnss,
-        Channel::Odometer,
-        Channel::Baro,
-    ];
     let alignment_s = cfg.navigator.alignment_s;
-    let msgs: Vec<Record> = OfflineSim::with_channels(&scn, &channels)
+    let msgs: Vec<Record> = OfflineSim::with_channels(&scn, &Channel::SENSORS)
         .with_duration_s(alignment_s + 5.0 + NAV_S)
         .collect();
     let mut aligned = Navigator::new(cfg.navigator.clone()).expect("navigator");

@@ -695,6 +695,15 @@ impl Channel {
         Channel::Nav,
         Channel::Status,
     ];
+    /// The sensor channels a navigator fuses (IMU and the four aiding sensors), in delivery
+    /// order: the inputs of an offline run with every aiding.
+    pub const SENSORS: [Channel; 5] = [
+        Channel::StarTracker,
+        Channel::Gnss,
+        Channel::Odometer,
+        Channel::Baro,
+        Channel::Imu,
+    ];
     /// Channel name without prefix: the last component of the service name and the MCAP topic.
     pub const fn name(self) -> &'static str {
         match self {

@@ -104,14 +104,6 @@ fn state_count(s: &StateSwitches) -> usize {
         + on(s.boresight, 3)
 }
 
-const AIDED: [Channel; 5] = [
-    Channel::Imu,
-    Channel::StarTracker,
-    Channel::Gnss,
-    Channel::Odometer,
-    Channel::Baro,
-];
-
 /// One timed point.
 #[derive(Debug, Clone, Copy)]
 struct Timing {
@@ -193,7 +185,7 @@ fn scenario_variant(
 }
 
 fn stream(scn: &Scenario, sim_s: f64, limit: Option<usize>) -> (Vec<Record>, i64) {
-    let mut sim = OfflineSim::with_channels(scn, &AIDED).with_duration_s(sim_s);
+    let mut sim = OfflineSim::with_channels(scn, &Channel::SENSORS).with_duration_s(sim_s);
     if let Some(max_satellites) = limit {
         sim = sim.limit_satellites(SatelliteLimit {
             start_s: 3.0,

@@ -382,14 +382,7 @@ fn latency_figures(lat: &[f64], imu_hz: f64, duration_s: f64) -> Value {
 fn offline_throughput(cfg_dir: &Path, sim_s: f64) -> anyhow::Result<Value> {
     let cfg = crate::config::load(&cfg_dir.join("sextant.toml"))?;
     let scn = Scenario::load(&cfg_dir.join("scenarios/vehicle.toml"))?;
-    let channels = [
-        Channel::Imu,
-        Channel::StarTracker,
-        Channel::Gnss,
-        Channel::Odometer,
-        Channel::Baro,
-    ];
-    let msgs: Vec<Record> = OfflineSim::with_channels(&scn, &channels)
+    let msgs: Vec<Record> = OfflineSim::with_channels(&scn, &Channel::SENSORS)
         .with_duration_s(sim_s)
         .collect();
     let mut nav = Navigator::new(cfg.navigator.clone())?;
