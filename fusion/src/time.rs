@@ -281,9 +281,21 @@ fn tai_minus_utc_for_utc_day(day: i64) -> i64 {
 }
 
 /// GPS ns at which the table entry takes effect (00:00:00 UTC of its date).
-fn leap_gps_ns(l: &LeapSecond) -> i64 {
+const fn leap_gps_ns(l: &LeapSecond) -> i64 {
     leap_day(l) * NS_PER_DAY + (l.tai_minus_utc_s as i64) * NS_PER_S - TAI_MINUS_GPS_NS
 }
+
+/// [`leap_gps_ns`] of every entry of [`LEAP_SECONDS`], computed once at build time (the
+/// recorder converts every message's time through the table).
+const LEAP_GPS_NS: [i64; LEAP_SECONDS.len()] = {
+    let mut at = [0; LEAP_SECONDS.len()];
+    let mut i = 0;
+    while i < at.len() {
+        at[i] = leap_gps_ns(&LEAP_SECONDS[i]);
+        i += 1;
+    }
+    at
+};
 
 /// Round a finite `f64` number of seconds to integer nanoseconds.
 fn seconds_to_ns(s: f64) -> i64 {
@@ -392,15 +404,13 @@ impl GpsTime {
 
     /// TAI − UTC (s) in force at this instant (during a leap second, the old value).
     pub fn tai_minus_utc_s(&self) -> i32 {
-        let mut dat = LEAP_SECONDS[0].tai_minus_utc_s;
-        for l in LEAP_SECONDS.iter() {
-            if self.ns >= leap_gps_ns(l) {
-                dat = l.tai_minus_utc_s;
-            } else {
-                break;
-            }
-        }
-        dat
+        // From the latest entry back: a time of today is past the first one looked at.
+        LEAP_GPS_NS
+            .iter()
+            .rposition(|&at| self.ns >= at)
+            .map_or(LEAP_SECONDS[0].tai_minus_utc_s, |i| {
+                LEAP_SECONDS[i].tai_minus_utc_s
+            })
     }
 
     /// TAI as nanoseconds since 1958-01-01T00:00:00 TAI.

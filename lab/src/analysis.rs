@@ -412,9 +412,16 @@ impl Window {
 
     /// Forget what is older than `t_ns` (it will find no counterpart any more).
     pub(crate) fn evict_before(&mut self, t_ns: i64) {
-        self.truth = self.truth.split_off(&t_ns);
-        self.navs = self.navs.split_off(&t_ns);
-        self.fixes = self.fixes.split_off(&t_ns);
+        // Called for every record: drop the few old entries from the front instead of
+        // rebuilding each map (`split_off` moves what is kept into a new tree).
+        fn drop_front<V>(map: &mut BTreeMap<i64, V>, t_ns: i64) {
+            while map.first_key_value().is_some_and(|(&k, _)| k < t_ns) {
+                map.pop_first();
+            }
+        }
+        drop_front(&mut self.truth, t_ns);
+        drop_front(&mut self.navs, t_ns);
+        drop_front(&mut self.fixes, t_ns);
     }
 }
 

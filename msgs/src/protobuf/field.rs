@@ -2,7 +2,7 @@
 //! [`crate::protobuf`] for the mapping).
 
 use super::{DecodeError, FieldError, MAX_DEPTH, ProtoMessage, WireType};
-use prost::encoding::{decode_varint, encode_key, encode_varint, encoded_len_varint};
+use prost::encoding::{decode_varint, encoded_len_varint};
 use prost_types::field_descriptor_proto::{Label, Type};
 use prost_types::{DescriptorProto, FieldDescriptorProto};
 use std::collections::BTreeMap;
@@ -62,8 +62,38 @@ fn wire_code(w: WireType) -> u8 {
     w as u8
 }
 
+/// Append `v` as a base-128 varint (the recorder writes several per field: a plain loop on the
+/// `Vec` is faster than the generic `BufMut` path).
+#[inline]
+fn encode_varint(mut v: u64, buf: &mut Vec<u8>) {
+    while v >= 0x80 {
+        buf.push((v as u8) | 0x80);
+        v >>= 7;
+    }
+    buf.push(v as u8);
+}
+
+/// Append the key of field `number` with wire type `wire`.
+#[inline]
+fn encode_key(number: u32, wire: WireType, buf: &mut Vec<u8>) {
+    encode_varint((u64::from(number) << 3) | wire as u64, buf);
+}
+
 fn read_varint(data: &mut &[u8]) -> Result<u64, FieldError> {
-    decode_varint(data).map_err(|_| FieldError::Truncated)
+    varint(data).ok_or(FieldError::Truncated)
+}
+
+/// Read a varint: one byte (every key and most lengths of Sextant's messages) inline, longer
+/// ones by prost; `None` when the data ends inside it or it overflows 64 bits.
+#[inline]
+fn varint(data: &mut &[u8]) -> Option<u64> {
+    match data.split_first() {
+        Some((&b, rest)) if b < 0x80 => {
+            *data = rest;
+            Some(u64::from(b))
+        }
+        _ => decode_varint(data).ok(),
+    }
 }
 
 fn read_fixed64(data: &mut &[u8]) -> Result<u64, FieldError> {
@@ -108,7 +138,7 @@ pub fn next_key(
     if data.is_empty() {
         return Ok(None);
     }
-    let key = decode_varint(data).map_err(|_| DecodeError::Truncated {
+    let key = varint(data).ok_or(DecodeError::Truncated {
         message,
         field: "?",
     })?;
@@ -229,9 +259,21 @@ impl<const N: usize> DoubleArray for [[f64; 3]; N] {
     }
 }
 
+/// The elements up to the last one whose bits are not all zero: trailing `+0.0` are not
+/// written (a reader fills the rest of the array with zero), `-0.0` and NaN are.
+fn up_to_last_nonzero(values: &[f64]) -> &[f64] {
+    let n = values.iter().rposition(|v| v.to_bits() != 0).map_or(0, |i| i + 1);
+    &values[..n]
+}
+
 fn encode_doubles(values: &[f64], number: u32, buf: &mut Vec<u8>) {
+    let values = up_to_last_nonzero(values);
+    if values.is_empty() {
+        return;
+    }
     encode_key(number, WireType::LengthDelimited, buf);
     encode_varint(8 * values.len() as u64, buf);
+    buf.reserve(8 * values.len());
     for v in values {
         buf.extend_from_slice(&v.to_le_bytes());
     }
@@ -294,10 +336,15 @@ double_array_field!([f64; N], [[f64; 3]; N]);
 
 impl<const N: usize> Field for [u32; N] {
     fn encode(&self, number: u32, buf: &mut Vec<u8>) {
-        let len: usize = self.iter().map(|v| encoded_len_varint(u64::from(*v))).sum();
+        // Trailing zeros are not written (a reader fills the rest with zero).
+        let values = &self[..self.iter().rposition(|&v| v != 0).map_or(0, |i| i + 1)];
+        if values.is_empty() {
+            return;
+        }
+        let len: usize = values.iter().map(|v| encoded_len_varint(u64::from(*v))).sum();
         encode_key(number, WireType::LengthDelimited, buf);
         encode_varint(len as u64, buf);
-        for v in self {
+        for v in values {
             encode_varint(u64::from(*v), buf);
         }
     }
@@ -365,6 +412,22 @@ fn describe_message<M: ProtoMessage>(nested: &mut BTreeMap<&'static str, Descrip
     }
 }
 
+/// Every element of a fixed-size array up to the last one with a field to write: trailing
+/// elements whose every field is at its default (an empty body) are not written, a reader
+/// fills the rest of the array with defaults.
+fn encode_message_array<M: ProtoMessage>(ms: &[M], number: u32, buf: &mut Vec<u8>) {
+    let mut end = buf.len();
+    for m in ms {
+        let at = buf.len();
+        encode_len_delimited(number, buf, |b| m.encode_fields(b));
+        // Key and a one-byte length of zero: the element wrote no field.
+        if buf.len() - at > encoded_len_varint(u64::from(number << 3)) + 1 {
+            end = buf.len();
+        }
+    }
+    buf.truncate(end);
+}
+
 fn encode_messages<M: ProtoMessage>(ms: &[M], number: u32, buf: &mut Vec<u8>) {
     for m in ms {
         encode_len_delimited(number, buf, |b| m.encode_fields(b));
@@ -421,7 +484,7 @@ impl<M: ProtoMessage> Field for M {
 
 impl<M: ProtoMessage, const N: usize> Field for [M; N] {
     fn encode(&self, number: u32, buf: &mut Vec<u8>) {
-        encode_messages(self, number, buf);
+        encode_message_array(self, number, buf);
     }
     fn merge(&mut self, at: Occurrence<'_, '_>) -> Result<(), FieldError> {
         let Occurrence {

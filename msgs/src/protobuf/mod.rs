@@ -10,10 +10,15 @@
 //! - `f64` → `double`, `u32`/`u8` → `uint32`, `u64` → `uint64`, `i64` → `int64`,
 //!   `bool` → `bool`; a scalar equal to its default (all bits zero: `-0.0` is written) is
 //!   omitted, as proto3 does;
-//! - `[f64; N]` → `repeated double` (packed), always all `N` elements; `[[f64; 3]; N]` →
-//!   `repeated double` of the `3·N` elements row by row;
+//! - `[f64; N]` → `repeated double` (packed); `[[f64; 3]; N]` → `repeated double` of the `3·N`
+//!   elements row by row; `[u32; N]` → `repeated uint32` (packed);
 //! - a nested struct → a message field, always written (even empty), so that every reader sees
-//!   it present; `[M; N]` → `repeated M`, all `N` elements;
+//!   it present; `[M; N]` → `repeated M`;
+//! - a fixed-size array is written up to its last element that is not at its default: trailing
+//!   `+0.0` doubles (all bits zero), zero integers and messages with no field to write are
+//!   left out, as proto3 leaves out a default scalar, and a reader fills the rest of the array
+//!   with defaults (an array all at its default is absent). An IMU sample without redundant
+//!   channels does not carry their 48 zeros, a GNSS epoch not its empty satellite slots;
 //! - field numbers are explicit in the [`proto_message!`] declarations and never reused: a
 //!   field is only ever added with a new number, so a recording stays readable by later
 //!   versions (unknown fields are skipped, missing ones read as zero).

@@ -106,6 +106,43 @@ fn every_kind_round_trips_bit_for_bit() {
     assert!(same(&d, &Record::from_protobuf(d.kind(), &buf).unwrap()));
 }
 
+/// Trailing defaults are left out of fixed-size arrays, and come back as defaults: an IMU
+/// sample without redundant channels carries none of their 48 doubles, a GNSS epoch with nine
+/// satellites no empty slot; a zero inside an array, a trailing `-0.0` and a last satellite
+/// with only a PRN are kept.
+#[test]
+fn trailing_defaults_of_arrays_are_left_out_and_read_back() {
+    let mut buf = Vec::new();
+    let imu = ImuSample {
+        dt_s: 0.005,
+        delta_angle_rad: [1e-4, 0.0, 2e-4],
+        delta_velocity_m_s: [0.0, 0.0, -0.0],
+        ..Default::default()
+    };
+    Record::Imu(imu).write_protobuf(&mut buf);
+    // Header (empty), dt, two packed triads (3 and 3 doubles: the -0.0 keeps the second).
+    assert_eq!(buf.len(), 2 + 9 + 2 * (2 + 24), "{buf:?}");
+    let back = Record::from_protobuf(Record::Imu(imu).kind(), &buf).unwrap();
+    assert!(same(&Record::Imu(imu), &back));
+
+    let mut g = filled_gnss(1);
+    let full = {
+        Record::Gnss(Box::new(g)).write_protobuf(&mut buf);
+        buf.len()
+    };
+    g.satellites[9].prn = 31;
+    Record::Gnss(Box::new(g)).write_protobuf(&mut buf);
+    // One more element, holding only its PRN: key, length, PRN key and value.
+    assert_eq!(buf.len(), full + 4);
+    let back = Record::from_protobuf(Record::Gnss(Box::new(g)).kind(), &buf).unwrap();
+    assert!(same(&Record::Gnss(Box::new(g)), &back));
+    assert_eq!(
+        GnssSample::default().satellites.len(),
+        crate::MAX_SATELLITES,
+        "the slots left out are the array's"
+    );
+}
+
 /// A protobuf library that knows nothing of Sextant (prost-reflect) decodes every message
 /// from the schema's descriptor alone, and finds the values the JSON form holds.
 #[test]
@@ -155,9 +192,13 @@ fn assert_json_matches(expected: &serde_json::Value, decoded: &serde_json::Value
                 } else {
                     e.clone()
                 };
-            assert_eq!(flat.len(), d.len(), "{at}");
+            // Trailing elements at their default are not written (module docs).
+            assert!(d.len() <= flat.len(), "{at}: {} > {}", d.len(), flat.len());
             for (i, (x, y)) in flat.iter().zip(d).enumerate() {
                 assert_json_matches(x, y, &format!("{at}[{i}]"));
+            }
+            for (i, x) in flat.iter().enumerate().skip(d.len()) {
+                assert!(is_default(x), "{at}[{i}] = {x} was left out");
             }
         }
         (Value::Null, Value::String(s)) => {
@@ -179,6 +220,20 @@ fn assert_json_matches(expected: &serde_json::Value, decoded: &serde_json::Value
             assert_eq!(e.as_i64(), d.as_i64(), "{at}");
         }
         (e, d) => assert_eq!(e, d, "{at}"),
+    }
+}
+
+/// Whether a value of serde's JSON is its type's default: `+0` (not `-0`), `false`, empty, or
+/// an object or array of defaults.
+fn is_default(v: &serde_json::Value) -> bool {
+    use serde_json::Value;
+    match v {
+        Value::Number(n) => n.as_f64().map(f64::to_bits) == Some(0),
+        Value::Bool(b) => !b,
+        Value::String(s) => s.is_empty(),
+        Value::Array(a) => a.iter().all(is_default),
+        Value::Object(o) => o.values().all(is_default),
+        Value::Null => false,
     }
 }
 
