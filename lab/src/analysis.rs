@@ -213,7 +213,7 @@ pub fn analyze_with_progress(
         recording: path.display().to_string(),
         ..Default::default()
     };
-    let mut last_seq: HashMap<String, u64> = HashMap::new();
+    let mut last_seq: HashMap<&'static str, u64> = HashMap::new();
     let mut first_truth: Option<TruthSample> = None;
     let mut last_status: Option<Status> = None;
     let (mut t_min, mut t_max) = (i64::MAX, i64::MIN);
@@ -221,7 +221,15 @@ pub fn analyze_with_progress(
     let mut m = Matched::new(outages);
     let (mut first_nav_ns, mut last_nav_ns) = (None::<i64>, 0i64);
     let mut n = 0u64;
-    for e in rec {
+    // Per record, by topic: counted without building a key string for every message.
+    fn count<'a, V: Default>(map: &'a mut BTreeMap<String, V>, topic: &str) -> &'a mut V {
+        if !map.contains_key(topic) {
+            map.insert(topic.to_string(), V::default());
+        }
+        map.get_mut(topic).expect("inserted above")
+    }
+    // Decompressing and decoding on a thread of their own, the matching here.
+    for e in rec.read_ahead() {
         let e = match e {
             Ok(e) => e,
             Err(e) => {
@@ -234,9 +242,7 @@ pub fn analyze_with_progress(
         if n.is_multiple_of(4096) {
             pb.set_position(e.offset);
         }
-        *s.messages_per_channel
-            .entry(e.topic.to_string())
-            .or_insert(0) += 1;
+        *count(&mut s.messages_per_channel, &e.topic) += 1;
         let Some(record) = e.record else {
             continue;
         };
@@ -249,17 +255,12 @@ pub fn analyze_with_progress(
             t_min = t_min.min(h.time_ns);
             t_max = t_max.max(h.time_ns);
         }
-        let gaps = s
-            .sequence_gaps_per_channel
-            .entry(topic.to_string())
-            .or_insert(0);
-        if let Some(prev) = last_seq.insert(topic.to_string(), h.seq) {
+        let gaps = count(&mut s.sequence_gaps_per_channel, topic);
+        if let Some(prev) = last_seq.insert(topic, h.seq) {
             if h.seq > prev + 1 {
                 *gaps += h.seq - prev - 1;
             } else if h.seq <= prev {
-                *s.sequence_restarts_per_channel
-                    .entry(topic.to_string())
-                    .or_insert(0) += 1;
+                *count(&mut s.sequence_restarts_per_channel, topic) += 1;
             }
         }
         match record {

@@ -262,7 +262,10 @@ impl<const N: usize> DoubleArray for [[f64; 3]; N] {
 /// The elements up to the last one whose bits are not all zero: trailing `+0.0` are not
 /// written (a reader fills the rest of the array with zero), `-0.0` and NaN are.
 fn up_to_last_nonzero(values: &[f64]) -> &[f64] {
-    let n = values.iter().rposition(|v| v.to_bits() != 0).map_or(0, |i| i + 1);
+    let n = values
+        .iter()
+        .rposition(|v| v.to_bits() != 0)
+        .map_or(0, |i| i + 1);
     &values[..n]
 }
 
@@ -341,7 +344,10 @@ impl<const N: usize> Field for [u32; N] {
         if values.is_empty() {
             return;
         }
-        let len: usize = values.iter().map(|v| encoded_len_varint(u64::from(*v))).sum();
+        let len: usize = values
+            .iter()
+            .map(|v| encoded_len_varint(u64::from(*v)))
+            .sum();
         encode_key(number, WireType::LengthDelimited, buf);
         encode_varint(len as u64, buf);
         for v in values {
