@@ -546,7 +546,7 @@ pub fn report(path: &Path, out_dir: &Path) -> Result<ReportSummary, ReportError>
         detail: e.to_string(),
     };
     std::fs::create_dir_all(out_dir).map_err(|e| werr(out_dir, &e))?;
-    let mut rec = Recording::open(path)?;
+    let rec = Recording::open(path)?;
     let mut s = ReportSummary {
         recording: path.display().to_string(),
         ..Default::default()
@@ -570,7 +570,9 @@ pub fn report(path: &Path, out_dir: &Path) -> Result<ReportSummary, ReportError>
     let mut foreign_topics: Vec<String> = Vec::new();
     let pb = crate::progress::bytes(true, crate::progress::file_len(path), "report");
     let mut n = 0u64;
-    for e in &mut rec {
+    // Decompressing and decoding on a thread of their own, the statistics here.
+    let mut entries = rec.read_ahead();
+    for e in &mut entries {
         let e = match e {
             Ok(e) => e,
             Err(err) => {
@@ -657,7 +659,7 @@ pub fn report(path: &Path, out_dir: &Path) -> Result<ReportSummary, ReportError>
         }
     }
     pb.finish_and_clear();
-    s.recording_complete = rec.is_complete();
+    s.recording_complete = entries.into_recording().is_some_and(|r| r.is_complete());
     if sextant_records == 0 {
         return Err(ReportError::NotSextant {
             path: path.to_path_buf(),
