@@ -594,7 +594,7 @@ pub fn run<E: NavEngine>(
         let guard = ws.attach_deadline(*listener, dl(s)).map_err(attach)?;
         deadline_guards.push((s, guard));
     }
-    let _g_truth = ws.attach_notification(truth.listener()).map_err(attach)?;
+    let g_truth = ws.attach_notification(truth.listener()).map_err(attach)?;
     let g_status = ws
         .attach_interval(Duration::from_secs_f64(opts.system.fusion.status_period_s))
         .map_err(attach)?;
@@ -617,10 +617,20 @@ pub fn run<E: NavEngine>(
     // Readiness, status and watchdog for a service manager (no-op without NOTIFY_SOCKET).
     let mut service = crate::sd_notify::Service::from_env();
 
-    let drain_all = |st: &mut State<'_, E>| {
+    // `fired`: the sensors whose listener the WaitSet saw woken, then the truth's. Only those
+    // wake-ups are consumed before draining (one system call each; at 1 kHz most wake-ups are
+    // the IMU's alone, and five needless reads sat between its arrival and its solution). A
+    // wake-up that comes after the WaitSet looked stays pending: the next wait returns at once
+    // and consumes it. Every subscriber is drained whatever fired.
+    let drain_all = |st: &mut State<'_, E>, fired: &PerSensor<bool>, truth_fired: bool| {
         st.got = PerSensor::splat(false);
-        for l in listeners.0.iter().chain([&truth.listener()]) {
-            let _ = l.try_wait(|_| {});
+        for (s, l) in listeners.iter() {
+            if fired[s] {
+                let _ = l.try_wait(|_| {});
+            }
+        }
+        if truth_fired {
+            let _ = truth.listener().try_wait(|_| {});
         }
         // In `Channel` order, aiding first: the navigator buffers it until the inertial
         // solution reaches its time.
@@ -640,6 +650,8 @@ pub fn run<E: NavEngine>(
     let spin = Duration::from_micros(opts.system.fusion.spin_us);
     while !st.stop.load(Ordering::SeqCst) {
         let mut missed = PerSensor::splat(false);
+        let mut fired = PerSensor::splat(false);
+        let mut truth_fired = false;
         let mut status_due = false;
         if !spin.is_zero() {
             let until = Instant::now() + spin;
@@ -653,6 +665,12 @@ pub fn run<E: NavEngine>(
                     if id.has_missed_deadline(g) {
                         missed[*s] = true;
                     }
+                    if id.has_event_from(g) {
+                        fired[*s] = true;
+                    }
+                }
+                if id.has_event_from(&g_truth) {
+                    truth_fired = true;
                 }
                 if id.has_event_from(&g_status) {
                     status_due = true;
@@ -662,7 +680,7 @@ pub fn run<E: NavEngine>(
             Duration::from_secs(1),
         )
         .map_err(WaitSetError::Wait)?;
-        drain_all(&mut st);
+        drain_all(&mut st, &fired, truth_fired);
         for s in SensorId::ALL {
             if missed[s] {
                 st.deadline_missed(s);
@@ -679,7 +697,7 @@ pub fn run<E: NavEngine>(
         started.elapsed().as_secs_f64(),
         crate::signals::last_signal()
     );
-    drain_all(&mut st);
+    drain_all(&mut st, &PerSensor::splat(true), true);
     st.publish_status();
     st.log_warm_start();
     let report_base = (st.imu_received, st.solutions, st.published, st.stale);
