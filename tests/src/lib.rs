@@ -234,8 +234,8 @@ pub fn foxglove_json_schema(name: &str) -> Result<Option<serde_json::Value>> {
 /// fields when present), `google.protobuf.Timestamp` as Foxglove's `{sec, nsec}`, enums as
 /// numbers, non-finite doubles as `null`. Sextant's messages come out as their JSON form,
 /// except that nested arrays are flat (`channel_axis`: 24 numbers, row by row) and that a
-/// fixed-size array ends at its last element that is not at its default (see
-/// [`trailing_defaults_trimmed`]).
+/// fixed-size array ends at its last element that is not at its default
+/// ([`msgs::protobuf::as_decoded_json`] turns a message's JSON into that form).
 pub fn decode_message(channel: &mcap::Channel, data: &[u8]) -> Result<serde_json::Value> {
     match channel.message_encoding.as_str() {
         "json" => serde_json::from_slice(data)
@@ -259,38 +259,6 @@ pub fn decode_message(channel: &mcap::Channel, data: &[u8]) -> Result<serde_json
             Ok(dynamic_json(&m))
         }
         other => bail!("channel {}: message encoding {other}", channel.topic),
-    }
-}
-
-/// A message's JSON form (serde's, of the struct) as a protobuf recording holds it: every
-/// array without its trailing elements at their default (`+0`, not `-0`; `false`; an object
-/// of defaults), as the recorder leaves them out and a reader sees the shorter list.
-pub fn trailing_defaults_trimmed(v: serde_json::Value) -> serde_json::Value {
-    use serde_json::Value;
-    fn is_default(v: &Value) -> bool {
-        match v {
-            Value::Number(n) => n.as_f64().map(f64::to_bits) == Some(0),
-            Value::Bool(b) => !b,
-            Value::String(s) => s.is_empty(),
-            Value::Array(a) => a.iter().all(is_default),
-            Value::Object(o) => o.values().all(is_default),
-            Value::Null => false,
-        }
-    }
-    match v {
-        Value::Array(a) => {
-            let mut a: Vec<Value> = a.into_iter().map(trailing_defaults_trimmed).collect();
-            while a.last().is_some_and(is_default) {
-                a.pop();
-            }
-            Value::Array(a)
-        }
-        Value::Object(o) => Value::Object(
-            o.into_iter()
-                .map(|(k, v)| (k, trailing_defaults_trimmed(v)))
-                .collect(),
-        ),
-        other => other,
     }
 }
 

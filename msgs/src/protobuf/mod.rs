@@ -42,6 +42,50 @@ pub use field::{Field, Occurrence, next_key, skip};
 /// `Channel.message_encoding`) of this form.
 pub const ENCODING: &str = "protobuf";
 
+/// The JSON form of a message (serde's, of the struct) as an independent protobuf reader sees
+/// the message decoded: an array of arrays flattened row by row, and every array without its
+/// trailing elements at their default (`+0`, not `-0`; `false`; an object of defaults), which
+/// the encoding leaves out (module docs). For comparing a message with what a generic protobuf
+/// library decodes from a recording.
+pub fn as_decoded_json(v: serde_json::Value) -> serde_json::Value {
+    use serde_json::Value;
+    fn is_default(v: &Value) -> bool {
+        match v {
+            Value::Number(n) => n.as_f64().map(f64::to_bits) == Some(0),
+            Value::Bool(b) => !b,
+            Value::String(s) => s.is_empty(),
+            Value::Array(a) => a.iter().all(is_default),
+            Value::Object(o) => o.values().all(is_default),
+            Value::Null => false,
+        }
+    }
+    match v {
+        Value::Array(a) => {
+            let flat = !a.is_empty() && a.iter().all(Value::is_array);
+            let mut a: Vec<Value> = if flat {
+                a.into_iter()
+                    .flat_map(|row| match row {
+                        Value::Array(r) => r,
+                        other => vec![other],
+                    })
+                    .collect()
+            } else {
+                a.into_iter().map(as_decoded_json).collect()
+            };
+            while a.last().is_some_and(is_default) {
+                a.pop();
+            }
+            Value::Array(a)
+        }
+        Value::Object(o) => Value::Object(
+            o.into_iter()
+                .map(|(k, v)| (k, as_decoded_json(v)))
+                .collect(),
+        ),
+        other => other,
+    }
+}
+
 /// Why a protobuf message could not be read. `message` and `field` name the message type and
 /// the field (or `"?"` for a key that could not be read).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]

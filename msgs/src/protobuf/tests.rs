@@ -165,7 +165,8 @@ fn an_independent_protobuf_library_decodes_every_kind_from_the_schema_alone() {
         let decoded: serde_json::Value = serde_json::from_slice(&ser.into_inner()).unwrap();
         r.write_json(&mut json).unwrap();
         let expected: serde_json::Value = serde_json::from_slice(&json).unwrap();
-        assert_json_matches(&expected, &decoded, r.topic());
+        // Trailing defaults of arrays are not written (module docs): compared as decoded.
+        assert_json_matches(&as_decoded_json(expected), &decoded, r.topic());
     }
 }
 
@@ -192,13 +193,9 @@ fn assert_json_matches(expected: &serde_json::Value, decoded: &serde_json::Value
                 } else {
                     e.clone()
                 };
-            // Trailing elements at their default are not written (module docs).
-            assert!(d.len() <= flat.len(), "{at}: {} > {}", d.len(), flat.len());
+            assert_eq!(flat.len(), d.len(), "{at}");
             for (i, (x, y)) in flat.iter().zip(d).enumerate() {
                 assert_json_matches(x, y, &format!("{at}[{i}]"));
-            }
-            for (i, x) in flat.iter().enumerate().skip(d.len()) {
-                assert!(is_default(x), "{at}[{i}] = {x} was left out");
             }
         }
         (Value::Null, Value::String(s)) => {
@@ -220,20 +217,6 @@ fn assert_json_matches(expected: &serde_json::Value, decoded: &serde_json::Value
             assert_eq!(e.as_i64(), d.as_i64(), "{at}");
         }
         (e, d) => assert_eq!(e, d, "{at}"),
-    }
-}
-
-/// Whether a value of serde's JSON is its type's default: `+0` (not `-0`), `false`, empty, or
-/// an object or array of defaults.
-fn is_default(v: &serde_json::Value) -> bool {
-    use serde_json::Value;
-    match v {
-        Value::Number(n) => n.as_f64().map(f64::to_bits) == Some(0),
-        Value::Bool(b) => !b,
-        Value::String(s) => s.is_empty(),
-        Value::Array(a) => a.iter().all(is_default),
-        Value::Object(o) => o.values().all(is_default),
-        Value::Null => false,
     }
 }
 
