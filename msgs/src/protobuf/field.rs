@@ -2,7 +2,7 @@
 //! [`crate::protobuf`] for the mapping).
 
 use super::{DecodeError, FieldError, MAX_DEPTH, ProtoMessage, WireType};
-use prost::encoding::{decode_varint, encoded_len_varint};
+use prost::encoding::{decode_varint, encode_key, encode_varint, encoded_len_varint};
 use prost_types::field_descriptor_proto::{Label, Type};
 use prost_types::{DescriptorProto, FieldDescriptorProto};
 use std::collections::BTreeMap;
@@ -62,38 +62,8 @@ fn wire_code(w: WireType) -> u8 {
     w as u8
 }
 
-/// Append `v` as a base-128 varint (the recorder writes several per field: a plain loop on the
-/// `Vec` is faster than the generic `BufMut` path).
-#[inline]
-fn encode_varint(mut v: u64, buf: &mut Vec<u8>) {
-    while v >= 0x80 {
-        buf.push((v as u8) | 0x80);
-        v >>= 7;
-    }
-    buf.push(v as u8);
-}
-
-/// Append the key of field `number` with wire type `wire`.
-#[inline]
-fn encode_key(number: u32, wire: WireType, buf: &mut Vec<u8>) {
-    encode_varint((u64::from(number) << 3) | wire as u64, buf);
-}
-
 fn read_varint(data: &mut &[u8]) -> Result<u64, FieldError> {
-    varint(data).ok_or(FieldError::Truncated)
-}
-
-/// Read a varint: one byte (every key and most lengths of Sextant's messages) inline, longer
-/// ones by prost; `None` when the data ends inside it or it overflows 64 bits.
-#[inline]
-fn varint(data: &mut &[u8]) -> Option<u64> {
-    match data.split_first() {
-        Some((&b, rest)) if b < 0x80 => {
-            *data = rest;
-            Some(u64::from(b))
-        }
-        _ => decode_varint(data).ok(),
-    }
+    decode_varint(data).map_err(|_| FieldError::Truncated)
 }
 
 fn read_fixed64(data: &mut &[u8]) -> Result<u64, FieldError> {
@@ -138,7 +108,7 @@ pub fn next_key(
     if data.is_empty() {
         return Ok(None);
     }
-    let key = varint(data).ok_or(DecodeError::Truncated {
+    let key = decode_varint(data).map_err(|_| DecodeError::Truncated {
         message,
         field: "?",
     })?;
@@ -276,7 +246,6 @@ fn encode_doubles(values: &[f64], number: u32, buf: &mut Vec<u8>) {
     }
     encode_key(number, WireType::LengthDelimited, buf);
     encode_varint(8 * values.len() as u64, buf);
-    buf.reserve(8 * values.len());
     for v in values {
         buf.extend_from_slice(&v.to_le_bytes());
     }
