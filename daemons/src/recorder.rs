@@ -54,6 +54,10 @@
 //! bounded over days. Each segment is complete on its own (its `nav/pose` and `tf` take their
 //! NED origin at its first solution); readers of the recording take the segments in order as
 //! one stream ([`crate::recording::segments_of`]).
+//!
+//! [`RecorderOptions::tap`] hands every message written, in file order and in batches of
+//! [`TAP_BATCH`], to a consumer on another thread ([`Written`]): an offline tool analyses what
+//! it records while it records it instead of reading the file back afterwards.
 
 use crate::foxglove::{self, ToProtobuf};
 use mcap::{WriteOptions, Writer};
@@ -240,6 +244,60 @@ pub struct RecorderOptions {
     /// log time; 0: a view of every solution. The views are for display (the `nav` channel
     /// keeps every solution); at the solution's own rate they would be a third of the file.
     pub view_rate_hz: f64,
+    /// Where to hand every message written, in file order, in batches of up to [`TAP_BATCH`]
+    /// (see [`Written`]); `None`: nowhere. A batch goes when it is full, when the chunk is
+    /// flushed and when the file ends. The recorder waits while the tap's queue is full
+    /// (offline tools: the consumer keeps up or slows the recording down, nothing is skipped)
+    /// and stops tapping once its receiver is gone. A message is tapped when the writer took
+    /// it: a write failure later in the same chunk loses it from the file but not from the tap
+    /// (the recorder counts the loss).
+    pub tap: Option<SyncSender<Vec<Written>>>,
+}
+
+/// A message as written to the recording ([`RecorderOptions::tap`]): its topic and, for a
+/// record of Sextant's own channels (`imu`, …, `nav`, `status`, `fusion/sensor_alive`), the
+/// record itself, exactly as a reader decodes it from the file; `None` for the Foxglove views
+/// derived from a record and for a JSON recording's non-finite placeholder.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Written {
+    /// The message's topic.
+    pub topic: &'static str,
+    /// The record, for Sextant's own channels.
+    pub record: Option<Record>,
+}
+
+/// Most messages per batch handed to [`RecorderOptions::tap`]: one queue hand-over (and
+/// wake-up of the consumer) per batch instead of per message.
+pub const TAP_BATCH: usize = 512;
+
+/// The tap of one file: the batch being filled, handed over when full and when dropped (the
+/// file ends or is abandoned), so that nothing taken by the writer stays behind.
+struct Tap {
+    tx: SyncSender<Vec<Written>>,
+    batch: Vec<Written>,
+}
+
+impl Tap {
+    /// Queue `w`; false once the receiver is gone.
+    fn push(&mut self, w: Written) -> bool {
+        self.batch.push(w);
+        self.batch.len() < TAP_BATCH || self.hand_over()
+    }
+
+    /// Hand the batch over; false once the receiver is gone.
+    fn hand_over(&mut self) -> bool {
+        if self.batch.is_empty() {
+            return true;
+        }
+        let batch = std::mem::replace(&mut self.batch, Vec::with_capacity(TAP_BATCH));
+        self.tx.send(batch).is_ok()
+    }
+}
+
+impl Drop for Tap {
+    fn drop(&mut self) {
+        self.hand_over();
+    }
 }
 
 /// Default of [`RecorderOptions::view_rate_hz`], Hz: smooth on a map and in a 3D view.
@@ -256,6 +314,7 @@ impl Default for RecorderOptions {
             segment_duration: None,
             encoding: RecordingEncoding::default(),
             view_rate_hz: DEFAULT_VIEW_RATE_HZ,
+            tap: None,
         }
     }
 }
@@ -363,6 +422,8 @@ struct Sink {
     unflushed: u64,
     /// Log time of the first message of this file, Unix ns.
     first_log_time: Option<u64>,
+    /// [`RecorderOptions::tap`]; `None` once its receiver is gone.
+    tap: Option<Tap>,
 }
 
 /// The channel ids of a recording file.
@@ -600,6 +661,10 @@ impl Sink {
             dirty: false,
             unflushed: 0,
             first_log_time: None,
+            tap: opts.tap.clone().map(|tx| Tap {
+                tx,
+                batch: Vec::with_capacity(TAP_BATCH),
+            }),
         })
     }
 
@@ -635,6 +700,16 @@ impl Sink {
         self.dirty = true;
         self.unflushed += 1;
         Ok(())
+    }
+
+    /// Hand a message just written to the tap, if any (dropped with the tap when its receiver
+    /// is gone).
+    fn tap(&mut self, topic: &'static str, record: Option<Record>) {
+        if let Some(tap) = &mut self.tap
+            && !tap.push(Written { topic, record })
+        {
+            self.tap = None;
+        }
     }
 
     /// Encode `view` into `self.buf` in the recording's encoding.
@@ -691,9 +766,13 @@ impl Sink {
             )
             .map_err(|e| self.err(e))?;
             self.write_message(non_finite, h.seq, log_time, item.receive_mono_ns)?;
+            self.tap(NON_FINITE_TOPIC, None);
             return Ok(1);
         }
         self.write_message(cid, h.seq, log_time, item.receive_mono_ns)?;
+        if self.tap.is_some() {
+            self.tap(item.record.topic(), Some(item.record.clone()));
+        }
         let mut n = 1;
         let view_slot = log_time
             .checked_div(self.view_period_ns)
@@ -707,16 +786,20 @@ impl Sink {
                 .get_or_insert_with(|| foxglove::NedOrigin::at(nav));
             self.encode_view(&foxglove::location_fix(nav, log_time))?;
             self.write_message(self.location_fix, h.seq, log_time, item.receive_mono_ns)?;
+            self.tap(foxglove::LOCATION_FIX_TOPIC, None);
             self.encode_view(&foxglove::pose_in_frame(nav, &origin, log_time))?;
             self.write_message(self.pose, h.seq, log_time, item.receive_mono_ns)?;
+            self.tap(foxglove::POSE_TOPIC, None);
             let tf = foxglove::frame_transforms(nav, &origin, &self.mounts, log_time);
             self.encode_view(&tf)?;
             self.write_message(self.tf, h.seq, log_time, item.receive_mono_ns)?;
+            self.tap(foxglove::TF_TOPIC, None);
             n += 3;
         }
         if let Record::Status(st) = &item.record {
             self.encode_view(&foxglove::status_plot(st, log_time))?;
             self.write_message(self.status_plot, h.seq, log_time, item.receive_mono_ns)?;
+            self.tap(foxglove::STATUS_PLOT_TOPIC, None);
             n += 1;
         }
         Ok(n)
@@ -727,6 +810,11 @@ impl Sink {
             self.dirty = false;
             self.writer.flush().map_err(|e| self.err(e))?;
             self.unflushed = 0;
+        }
+        if let Some(tap) = &mut self.tap
+            && !tap.hand_over()
+        {
+            self.tap = None;
         }
         Ok(())
     }

@@ -4,10 +4,12 @@
 //! `sextant report` reuses its matching window and thinned series.
 //!
 //! Read through [`crate::recording`]; a recording cut short by a crash is read up to its last
-//! complete chunk (`Summary::recording_truncated` tells).
+//! complete chunk (`Summary::recording_truncated` tells). [`analyze_written`] analyses a
+//! recording while it is written, from the recorder's tap (the same messages in the same
+//! order, so the same figures), instead of reading it back afterwards.
 
 use crate::foxglove::{NedOrigin, ned_offset};
-use crate::recorder::Record;
+use crate::recorder::{Record, Written};
 use crate::recording::{Recording, RecordingError};
 use crate::scenario::TimeWindow;
 use crate::stats::{RmsMax, StreamingPercentiles};
@@ -15,6 +17,8 @@ use msgs::{NavMode, NavSolution, Status, TruthSample};
 use serde::Serialize;
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::mpsc::Receiver;
 
 /// Errors of the analysis.
 #[derive(Debug, thiserror::Error)]
@@ -209,6 +213,71 @@ pub fn analyze_with_progress(
             detail: other.to_string(),
         },
     })?;
+    // Decompressing and decoding on a thread of their own, the matching here.
+    let messages = rec.read_ahead().map(|e| {
+        e.map(|e| Message {
+            offset: e.offset,
+            topic: Topic::Read(e.topic),
+            record: e.record,
+        })
+    });
+    let a = analyze_messages(path, messages, outages, |offset| pb.set_position(offset));
+    pb.finish_and_clear();
+    Ok(a)
+}
+
+/// Analyse the recording at `path` from the messages its recorder hands to
+/// [`crate::recorder::RecorderOptions::tap`] while it writes them (`tap` ends when the recorder
+/// finishes): the same figures as [`analyze`] of the finished file, without reading it back.
+/// Exact as long as the recorder lost nothing (a failed write loses from the file what the tap
+/// still saw: analyse the file then).
+pub fn analyze_written(
+    path: &Path,
+    tap: Receiver<Vec<Written>>,
+    outages: &[TimeWindow],
+) -> Analysis {
+    let messages = tap.into_iter().flatten().map(|w| {
+        Ok::<_, RecordingError>(Message {
+            offset: 0,
+            topic: Topic::Tapped(w.topic),
+            record: w.record,
+        })
+    });
+    analyze_messages(path, messages, outages, |_| {})
+}
+
+/// One message of the recording, read back or tapped.
+struct Message {
+    /// Where it lies in the file, bytes (progress only; 0 when tapped).
+    offset: u64,
+    topic: Topic,
+    record: Option<Record>,
+}
+
+/// A message's topic: as the reader shares it, or as the recorder names it.
+enum Topic {
+    Read(Arc<str>),
+    Tapped(&'static str),
+}
+
+impl std::ops::Deref for Topic {
+    type Target = str;
+    fn deref(&self) -> &str {
+        match self {
+            Self::Read(t) => t,
+            Self::Tapped(t) => t,
+        }
+    }
+}
+
+/// The analysis of the messages of the recording `path`, in file order; a read error ends them
+/// (`recording_truncated`).
+fn analyze_messages(
+    path: &Path,
+    messages: impl Iterator<Item = Result<Message, RecordingError>>,
+    outages: &[TimeWindow],
+    progress: impl Fn(u64),
+) -> Analysis {
     let mut s = Summary {
         recording: path.display().to_string(),
         ..Default::default()
@@ -228,8 +297,7 @@ pub fn analyze_with_progress(
         }
         map.get_mut(topic).expect("inserted above")
     }
-    // Decompressing and decoding on a thread of their own, the matching here.
-    for e in rec.read_ahead() {
+    for e in messages {
         let e = match e {
             Ok(e) => e,
             Err(e) => {
@@ -240,7 +308,7 @@ pub fn analyze_with_progress(
         };
         n += 1;
         if n.is_multiple_of(4096) {
-            pb.set_position(e.offset);
+            progress(e.offset);
         }
         *count(&mut s.messages_per_channel, &e.topic) += 1;
         let Some(record) = e.record else {
@@ -299,7 +367,6 @@ pub fn analyze_with_progress(
             w.evict_before(h.time_ns - MATCH_WINDOW_NS);
         }
     }
-    pb.finish_and_clear();
     if let Some(st) = &last_status {
         s.records_dropped = st.records_dropped;
         s.final_mode = Some(
@@ -355,7 +422,7 @@ pub fn analyze_with_progress(
             )
         })
         .collect();
-    Ok(Analysis { summary: s, series })
+    Analysis { summary: s, series }
 }
 
 /// How far (time of validity) a solution or fix and the truth sample of its time may lie apart
@@ -795,6 +862,102 @@ mod tests {
         assert_eq!(a.series.outages_s, vec![(5.0, 10.0)]);
         let table = format_table(s);
         assert!(table.contains("horizontal error"));
+    }
+
+    /// The analysis of the recorder's tap is that of the finished file read back: the same
+    /// messages in the same order (the records as decoded, the Foxglove views, the held-back
+    /// untimed records), in both encodings, over a segment boundary.
+    #[test]
+    fn the_tapped_recording_analyses_like_the_file() {
+        use crate::recorder::RecordingEncoding;
+        use msgs::{GnssSample, SensorAliveEvent};
+        for encoding in [RecordingEncoding::Protobuf, RecordingEncoding::Json] {
+            let dir = std::env::temp_dir().join(format!(
+                "sextant-analysis-tap-{}-{}",
+                std::process::id(),
+                encoding.name()
+            ));
+            std::fs::create_dir_all(&dir).unwrap();
+            let path = dir.join("recording.mcap");
+            let (tap, written) = std::sync::mpsc::sync_channel(16);
+            let tapped = std::thread::scope(|scope| {
+                let analysis = scope.spawn(|| analyze_written(&path, written, &[]));
+                let rec = Recorder::start(
+                    &path,
+                    &RecorderOptions {
+                        encoding,
+                        tap: Some(tap),
+                        segment_duration: Some(std::time::Duration::from_secs(7)),
+                        ..Default::default()
+                    },
+                )
+                .unwrap();
+                // Untimed first: held back by the recorder until the first timed record.
+                rec.record(Record::Status(Box::default()), 5);
+                rec.record(
+                    Record::SensorAlive(SensorAliveEvent {
+                        sensor: 2,
+                        alive: true,
+                        ..Default::default()
+                    }),
+                    6,
+                );
+                let t0 = 1_400_000_000_000_000_000i64;
+                for k in 0..200i64 {
+                    let t = t0 + k * 100_000_000;
+                    let mut tr = TruthSample::default();
+                    tr.header.time_ns = t;
+                    tr.header.seq = k as u64 + 1 + u64::from(k >= 120);
+                    tr.pos_ecef_m = [6_378_137.0, 0.0, 0.0];
+                    tr.q_ned_body = [1.0, 0.0, 0.0, 0.0];
+                    tr.vel_ned_m_s = [0.1 * k as f64, -0.0, 1e-300];
+                    // The solution before its truth sample every other epoch: the window waits.
+                    let mut n = NavSolution::default();
+                    n.header.time_ns = t;
+                    n.header.seq = k as u64 + 1;
+                    n.header.send_mono_ns = 2_000_000 + 1_000 * k as u64;
+                    n.imu_send_mono_ns = 2_000_000;
+                    n.pos_ecef_m = [6_378_137.0 + 0.01 * k as f64, (k as f64).sin(), 3.0];
+                    n.q_ned_body = [(0.005f64).cos(), 0.0, 0.0, (0.005f64).sin()];
+                    if k % 2 == 0 {
+                        rec.record(Record::Truth(tr), 0);
+                        rec.record(Record::Nav(n), 0);
+                    } else {
+                        rec.record(Record::Nav(n), 0);
+                        rec.record(Record::Truth(tr), 0);
+                    }
+                    if k % 10 == 0 {
+                        let mut g = GnssSample::default();
+                        g.header.time_ns = t;
+                        g.header.seq = k as u64 / 10;
+                        g.fix_valid = 1;
+                        g.pos_ecef_m = [6_378_139.0, 1.0, -2.0];
+                        rec.record(Record::Gnss(Box::new(g)), 7);
+                        let mut st = Status::default();
+                        st.header.time_ns = t;
+                        st.mode = 2;
+                        rec.record(Record::Status(Box::new(st)), 8);
+                    }
+                }
+                let (stats, segments) = rec.finish_with_segments().unwrap();
+                assert_eq!((stats.dropped, stats.errors), (0, 0));
+                assert!(segments.len() >= 2, "{segments:?}");
+                analysis.join().unwrap()
+            });
+            let read = analyze(&path, &[]).unwrap();
+            assert_eq!(tapped.summary, read.summary, "{}", encoding.name());
+            assert_eq!(tapped.series, read.series, "{}", encoding.name());
+            // Not an empty comparison: everything was seen and matched.
+            let s = &tapped.summary;
+            assert_eq!(s.solutions, 200);
+            assert_eq!(s.solutions_matched_with_truth, 200);
+            assert_eq!(s.messages_per_channel["fusion/sensor_alive"], 1);
+            assert_eq!(s.messages_per_channel["status/plot"], 21);
+            assert_eq!(s.sequence_gaps_per_channel["truth"], 1);
+            assert!(s.gnss_fix_horizontal_error_rms_m.is_some());
+            assert!(s.latency_p99_us.is_some());
+            std::fs::remove_dir_all(&dir).ok();
+        }
     }
 
     #[test]

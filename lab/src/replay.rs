@@ -110,6 +110,10 @@ pub struct OfflineOptions {
     /// an MCAP writer holds an index entry per chunk until its file is finished, so one file
     /// for a day-long recording grows the replay's memory with its length. `None`: one file.
     pub segment_duration: Option<std::time::Duration>,
+    /// Hand every message of the replay's recording, as it is written, to this queue (the
+    /// recorder's [`RecorderOptions::tap`]): `sextant replay` analyses the replay while it runs
+    /// ([`crate::analysis::analyze_written`]) instead of reading the new file back afterwards.
+    pub tap: Option<std::sync::mpsc::SyncSender<Vec<crate::recorder::Written>>>,
 }
 
 /// The live recorder's default segment length (`recorder.segment_duration_s`), used by
@@ -155,6 +159,11 @@ pub struct OfflineSummary {
     pub recorded_records_dropped: u64,
     /// True when every recorded solution was reproduced bit for bit (and no other).
     pub bit_exact: bool,
+    /// Records the replay's own recorder dropped, and its write errors (a full disk): its
+    /// recording lacks them.
+    pub replay_records_dropped: u64,
+    /// Write errors of the replay's recorder.
+    pub replay_recorder_errors: u64,
     /// Wall time of the replay, s.
     pub wall_time_s: f64,
     /// IMU samples processed per wall second, 1/s.
@@ -350,6 +359,7 @@ pub fn replay_offline(opts: &OfflineOptions) -> Result<OfflineSummary, ReplayErr
                 TimeBase::GpsMonotonic => None,
             },
             segment_duration: opts.segment_duration,
+            tap: opts.tap.clone(),
             ..Default::default()
         },
     )?;
@@ -494,6 +504,8 @@ pub fn replay_offline(opts: &OfflineOptions) -> Result<OfflineSummary, ReplayErr
     if stats.dropped > 0 {
         tracing::warn!("the replay's recording dropped {} records", stats.dropped);
     }
+    s.replay_records_dropped = stats.dropped;
+    s.replay_recorder_errors = stats.errors;
     s.replayed_segments = segments.iter().map(|p| p.display().to_string()).collect();
     Ok(s)
 }

@@ -65,6 +65,7 @@ fn esbc_hour_imports_and_reads_back() {
             config: None,
             progress: false,
             segment_duration: None,
+            tap: None,
         });
         let replay = replay.unwrap();
         assert!(replay.recording_complete, "{replay:?}");

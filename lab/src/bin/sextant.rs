@@ -1246,17 +1246,32 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
 fn replay(args: ReplayArgs) -> anyhow::Result<()> {
     use sextant_lab::replay as rp;
     if let Some(rec) = args.offline {
-        let s = rp::replay_offline(&rp::OfflineOptions {
-            recording: rec,
-            out_dir: args.out.clone(),
-            config: args.config,
-            progress: true,
-            segment_duration: (args.segment_duration_s > 0.0)
-                .then(|| std::time::Duration::from_secs_f64(args.segment_duration_s)),
-        })?;
+        let replayed = args.out.join("recording.mcap");
+        // The replay's recording is analysed while it is written, on a thread of its own: the
+        // recorder hands it every message it writes (the queue ends with the recorder).
+        let (tap, written) = std::sync::mpsc::sync_channel(8);
+        let (s, tapped) = std::thread::scope(|scope| {
+            let analysis = scope.spawn(|| analysis::analyze_written(&replayed, written, &[]));
+            let s = rp::replay_offline(&rp::OfflineOptions {
+                recording: rec,
+                out_dir: args.out.clone(),
+                config: args.config,
+                progress: true,
+                segment_duration: (args.segment_duration_s > 0.0)
+                    .then(|| std::time::Duration::from_secs_f64(args.segment_duration_s)),
+                tap: Some(tap),
+            });
+            (s, analysis.join())
+        });
+        let s = s?;
         out!("{}", rp::format_offline_table(&s));
         let replayed = std::path::Path::new(&s.replayed_recording);
-        let analysis = analysis::analyze_with_progress(replayed, &[], true).ok();
+        // What the file lacks (a record the recorder dropped or lost to a write error) the tap
+        // may still have seen: then the file is read back, what the figures are about.
+        let analysis = match tapped {
+            Ok(a) if s.replay_records_dropped == 0 && s.replay_recorder_errors == 0 => Some(a),
+            _ => analysis::analyze_with_progress(replayed, &[], true).ok(),
+        };
         if let Some(a) = &analysis {
             out!("{}", analysis::format_table(&a.summary));
             let _ = plots::write_plots(&args.out, &a.series);
