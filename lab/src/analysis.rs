@@ -93,8 +93,10 @@ pub struct Summary {
     /// Largest attitude error angle, deg.
     pub attitude_error_max_deg: Option<f64>,
     /// RMS horizontal error of the GNSS receiver's own fixes over the same run, m: each valid
-    /// fix against the truth sample of its time tag (the IMU's position, which is the
-    /// antenna's when the scenario has no lever arm), to set beside the solution's.
+    /// fix against the antenna's true position at its time tag — the truth sample's (the
+    /// IMU's) moved by the antenna lever arm of the recording's filter configuration (the
+    /// surveyed one; none when the recording carries no configuration) in the true attitude —
+    /// to set beside the solution's.
     pub gnss_fix_horizontal_error_rms_m: Option<f64>,
     /// RMS vertical error of the receiver's own fixes, m.
     pub gnss_fix_vertical_error_rms_m: Option<f64>,
@@ -144,6 +146,28 @@ pub struct Analysis {
 
 /// Seconds after an outage over which the recovery RMS is computed.
 pub const AFTER_OUTAGE_S: f64 = 60.0;
+
+/// `v` rotated by the unit quaternion `q = [w, x, y, z]` (Hamilton): `q ⊗ v ⊗ q*`, i.e. a
+/// body vector into NED for `q = q_ned_body`.
+pub(crate) fn rotate(q: [f64; 4], v: [f64; 3]) -> [f64; 3] {
+    let [w, x, y, z] = q;
+    let u = [x, y, z];
+    let cross = |a: [f64; 3], b: [f64; 3]| {
+        [
+            a[1] * b[2] - a[2] * b[1],
+            a[2] * b[0] - a[0] * b[2],
+            a[0] * b[1] - a[1] * b[0],
+        ]
+    };
+    // v + 2w (u × v) + 2 u × (u × v)
+    let t = cross(u, v).map(|c| 2.0 * c);
+    let ut = cross(u, t);
+    [
+        v[0] + w * t[0] + ut[0],
+        v[1] + w * t[1] + ut[1],
+        v[2] + w * t[2] + ut[2],
+    ]
+}
 
 /// Hamilton product of quaternions `[w, x, y, z]`.
 pub(crate) fn q_mul(a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
@@ -213,6 +237,8 @@ pub fn analyze_with_progress(
             detail: other.to_string(),
         },
     })?;
+    let antenna_lever_arm_b_m =
+        crate::replay::embedded_filter_config(&rec).map_or([0.0; 3], |c| c.gnss.lever_arm_b_m);
     // Decompressing and decoding on a thread of their own, the matching here.
     let messages = rec.read_ahead().map(|e| {
         e.map(|e| Message {
@@ -221,7 +247,9 @@ pub fn analyze_with_progress(
             record: e.record,
         })
     });
-    let a = analyze_messages(path, messages, outages, |offset| pb.set_position(offset));
+    let a = analyze_messages(path, messages, outages, antenna_lever_arm_b_m, |offset| {
+        pb.set_position(offset)
+    });
     pb.finish_and_clear();
     Ok(a)
 }
@@ -230,11 +258,14 @@ pub fn analyze_with_progress(
 /// [`crate::recorder::RecorderOptions::tap`] while it writes them (`tap` ends when the recorder
 /// finishes): the same figures as [`analyze`] of the finished file, without reading it back.
 /// Exact as long as the recorder lost nothing (a failed write loses from the file what the tap
-/// still saw: analyse the file then).
+/// still saw: analyse the file then). `antenna_lever_arm_b_m` is the GNSS antenna's lever arm
+/// of the filter configuration the recording embeds (body axes, m), which [`analyze`] reads
+/// from the file.
 pub fn analyze_written(
     path: &Path,
     tap: Receiver<Vec<Written>>,
     outages: &[TimeWindow],
+    antenna_lever_arm_b_m: [f64; 3],
 ) -> Analysis {
     let messages = tap.into_iter().flatten().map(|w| {
         Ok::<_, RecordingError>(Message {
@@ -243,7 +274,7 @@ pub fn analyze_written(
             record: w.record,
         })
     });
-    analyze_messages(path, messages, outages, |_| {})
+    analyze_messages(path, messages, outages, antenna_lever_arm_b_m, |_| {})
 }
 
 /// One message of the recording, read back or tapped.
@@ -276,6 +307,7 @@ fn analyze_messages(
     path: &Path,
     messages: impl Iterator<Item = Result<Message, RecordingError>>,
     outages: &[TimeWindow],
+    antenna_lever_arm_b_m: [f64; 3],
     progress: impl Fn(u64),
 ) -> Analysis {
     let mut s = Summary {
@@ -288,6 +320,7 @@ fn analyze_messages(
     let (mut t_min, mut t_max) = (i64::MAX, i64::MIN);
     let mut w = Window::default();
     let mut m = Matched::new(outages);
+    m.antenna_lever_arm_b_m = antenna_lever_arm_b_m;
     let (mut first_nav_ns, mut last_nav_ns) = (None::<i64>, 0i64);
     let mut n = 0u64;
     // Per record, by topic: counted without building a key string for every message.
@@ -496,6 +529,8 @@ impl Window {
 /// The figures accumulated over the matched pairs.
 pub(crate) struct Matched<'a> {
     outage_windows: &'a [TimeWindow],
+    /// The GNSS antenna's lever arm from the IMU, body axes, m: where a fix is compared.
+    antenna_lever_arm_b_m: [f64; 3],
     horizontal: RmsMax,
     vertical: RmsMax,
     attitude: RmsMax,
@@ -517,6 +552,7 @@ impl<'a> Matched<'a> {
     pub(crate) fn with_series_points(outage_windows: &'a [TimeWindow], max_points: usize) -> Self {
         Self {
             outage_windows,
+            antenna_lever_arm_b_m: [0.0; 3],
             horizontal: RmsMax::default(),
             vertical: RmsMax::default(),
             attitude: RmsMax::default(),
@@ -560,7 +596,14 @@ impl<'a> Matched<'a> {
     }
 
     fn fix(&mut self, pos: &[f64; 3], tr: &TruthSample) {
-        let e = ned_offset(tr.pos_ecef_m, tr.lat_rad, tr.lon_rad, *pos);
+        // The fix is the antenna's position: compare it with the antenna's, the lever arm
+        // rotated into NED by the true attitude (the NED frame at the IMU and at the antenna
+        // differ by the arm over the Earth's radius, 2e-7 rad: negligible).
+        let arm_n = rotate(tr.q_ned_body, self.antenna_lever_arm_b_m);
+        let mut e = ned_offset(tr.pos_ecef_m, tr.lat_rad, tr.lon_rad, *pos);
+        for (e, a) in e.iter_mut().zip(arm_n) {
+            *e -= a;
+        }
         if e.iter().all(|x| x.is_finite()) {
             self.fix_horizontal.push(e[0].hypot(e[1]));
             self.fix_vertical.push(e[2]);
@@ -881,7 +924,7 @@ mod tests {
             let path = dir.join("recording.mcap");
             let (tap, written) = std::sync::mpsc::sync_channel(16);
             let tapped = std::thread::scope(|scope| {
-                let analysis = scope.spawn(|| analyze_written(&path, written, &[]));
+                let analysis = scope.spawn(|| analyze_written(&path, written, &[], [0.0; 3]));
                 let rec = Recorder::start(
                     &path,
                     &RecorderOptions {
@@ -958,6 +1001,70 @@ mod tests {
             assert!(s.latency_p99_us.is_some());
             std::fs::remove_dir_all(&dir).ok();
         }
+    }
+
+    /// A receiver fix is the antenna's position: its error is taken against the truth moved by
+    /// the lever arm of the recording's filter configuration, in the true attitude (here a
+    /// heading of 90°, so the arm's forward metre points east).
+    #[test]
+    fn fix_errors_are_taken_at_the_antenna() {
+        use crate::recorder::{CONFIG_KEY_FILTER_TOML, CONFIG_METADATA_NAME};
+        use fusion::navigator::NavigatorConfig;
+        use msgs::GnssSample;
+        let dir = std::env::temp_dir().join(format!("sextant-analysis-arm-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut cfg = NavigatorConfig::default();
+        cfg.gnss.lever_arm_b_m = [1.0, 0.0, -2.0];
+        let meta = BTreeMap::from([(
+            CONFIG_KEY_FILTER_TOML.to_string(),
+            toml::to_string(&cfg).unwrap(),
+        )]);
+        let with_config = dir.join("with.mcap");
+        let without_config = dir.join("without.mcap");
+        for (path, metadata) in [
+            (&with_config, vec![(CONFIG_METADATA_NAME.to_string(), meta)]),
+            (&without_config, vec![]),
+        ] {
+            let rec = Recorder::start(
+                path,
+                &RecorderOptions {
+                    metadata,
+                    ..Default::default()
+                },
+            )
+            .unwrap();
+            let h = std::f64::consts::FRAC_PI_4; // half of the 90° heading
+            for k in 0..10i64 {
+                let t = 1_400_000_000_000_000_000i64 + k * 1_000_000_000;
+                let mut tr = TruthSample::default();
+                tr.header.time_ns = t;
+                tr.pos_ecef_m = [6_378_137.0, 0.0, 0.0];
+                tr.q_ned_body = [h.cos(), 0.0, 0.0, h.sin()];
+                rec.record(Record::Truth(tr), 0);
+                // At (0°, 0°) north is ECEF z, east y, down −x: the arm [1, 0, −2] in a body
+                // heading east is 1 m east and 2 m up.
+                let mut g = GnssSample::default();
+                g.header.time_ns = t;
+                g.fix_valid = 1;
+                g.pos_ecef_m = [6_378_139.0, 1.0, 0.0];
+                rec.record(Record::Gnss(Box::new(g)), 0);
+            }
+            rec.finish().unwrap();
+        }
+        let s = analyze_recording(&with_config, &[]).unwrap();
+        assert!(s.gnss_fix_horizontal_error_rms_m.unwrap() < 1e-6, "{s:?}");
+        assert!(s.gnss_fix_vertical_error_rms_m.unwrap() < 1e-6, "{s:?}");
+        // Without a configuration the fix is compared with the IMU's position.
+        let s = analyze_recording(&without_config, &[]).unwrap();
+        assert!(
+            (s.gnss_fix_horizontal_error_rms_m.unwrap() - 1.0).abs() < 1e-6,
+            "{s:?}"
+        );
+        assert!(
+            (s.gnss_fix_vertical_error_rms_m.unwrap() - 2.0).abs() < 1e-6,
+            "{s:?}"
+        );
+        std::fs::remove_dir_all(&dir).ok();
     }
 
     #[test]

@@ -1247,11 +1247,20 @@ fn replay(args: ReplayArgs) -> anyhow::Result<()> {
     use sextant_lab::replay as rp;
     if let Some(rec) = args.offline {
         let replayed = args.out.join("recording.mcap");
+        // The fixes are compared at the antenna of the configuration the replay runs with.
+        let antenna_lever_arm_b_m = match &args.config {
+            Some(p) => rp::load_filter_config(p)?,
+            None => rp::embedded_filter_config(&sextant_lab::recording::Recording::open(&rec)?)?,
+        }
+        .gnss
+        .lever_arm_b_m;
         // The replay's recording is analysed while it is written, on a thread of its own: the
         // recorder hands it every message it writes (the queue ends with the recorder).
         let (tap, written) = std::sync::mpsc::sync_channel(8);
         let (s, tapped) = std::thread::scope(|scope| {
-            let analysis = scope.spawn(|| analysis::analyze_written(&replayed, written, &[]));
+            let analysis = scope.spawn(|| {
+                analysis::analyze_written(&replayed, written, &[], antenna_lever_arm_b_m)
+            });
             let s = rp::replay_offline(&rp::OfflineOptions {
                 recording: rec,
                 out_dir: args.out.clone(),
