@@ -271,6 +271,37 @@ fn csv_and_kfgins_round_trips_reproduce_the_solution() {
             assert!((x - y).abs() < 1e-9 * x, "{a:?} vs {b:?}");
         }
     }
+    // KF-GINS's configuration starts it at Sextant's first solution (the replay's recording),
+    // or without solutions (the simulated source) at the truth's first pose.
+    let k3 = dir.join("kfgins3");
+    sextant(&[
+        "export",
+        "kfgins",
+        s(&dir.join("replay-kfgins1").join("recording.mcap")),
+        "--out",
+        s(&k3),
+    ]);
+    let start = |d: &Path| -> (f64, Vec<f64>) {
+        let text = std::fs::read_to_string(d.join("kf-gins.yaml")).unwrap();
+        let value = |k: &str| {
+            text.lines()
+                .find_map(|l| l.strip_prefix(&format!("{k}: ")))
+                .unwrap_or_else(|| panic!("{k} missing in {}", d.display()))
+                .to_string()
+        };
+        let pos = value("initpos")
+            .trim_matches(|c| c == '[' || c == ']')
+            .split(',')
+            .map(|x| x.trim().parse().unwrap())
+            .collect();
+        (value("starttime").parse().unwrap(), pos)
+    };
+    for (d, reference) in [(&k1, "truth.nav"), (&k3, "nav.nav")] {
+        let first = &rows(&d.join(reference))[0];
+        let (t, pos) = start(d);
+        assert_eq!(t, first[1], "{}", d.display());
+        assert_eq!(pos, first[2..5].to_vec(), "{}", d.display());
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }
 

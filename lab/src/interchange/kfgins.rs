@@ -29,6 +29,7 @@
 //! bit for bit. Only valid fixes are written; their ECEF covariance loses its off-diagonal NED
 //! terms.
 
+use super::kfgins_yaml::{KFGINS_CONFIG_FILE, config_text, imu_rate_hz, start_from_truth};
 use super::text::{self, TextError, WeekTracker, format_f64, format_seconds_ns, number};
 use super::{Counts, InterchangeError, Streams};
 use fusion::attitude::{q_n_b_from_rpy, quat_to_wire};
@@ -488,13 +489,31 @@ pub fn format_nav(nav: &[NavSolution]) -> String {
 }
 
 /// Write a recording out as KF-GINS files in `dir` ([`IMU_FILE`], [`GNSS_FILE`], and when the
-/// recording has them [`TRUTH_FILE`], [`NAV_FILE`], [`FILTER_FILE`]).
+/// recording has them [`TRUTH_FILE`], [`NAV_FILE`], [`FILTER_FILE`] and KF-GINS's own
+/// configuration for these files, [`KFGINS_CONFIG_FILE`]).
 pub fn export(recording: &Path, dir: &Path) -> Result<Counts, InterchangeError> {
     let (s, filter) = super::read_streams(recording)?;
     std::fs::create_dir_all(dir).map_err(InterchangeError::io(dir))?;
     let mut c = s.counts();
     c.gnss = s.gnss.iter().filter(|g| g.fix_valid != 0).count();
+    // KF-GINS starts where Sextant's navigation started, else at the truth's first pose.
+    let kfgins = filter
+        .as_deref()
+        .and_then(|text| crate::config::parse_navigator_config(text, recording).ok())
+        .and_then(|cfg| {
+            let start = s
+                .nav
+                .first()
+                .copied()
+                .or_else(|| s.truth.first().map(|t| start_from_truth(t, &cfg)))?;
+            Some(config_text(&cfg, imu_rate_hz(&s.imu)?, &start))
+        });
     let files = [
+        (
+            KFGINS_CONFIG_FILE,
+            kfgins.is_some(),
+            kfgins.unwrap_or_default(),
+        ),
         (IMU_FILE, !s.imu.is_empty(), format_imu(&s.imu)),
         (GNSS_FILE, !s.gnss.is_empty(), format_gnss(&s.gnss)),
         (TRUTH_FILE, !s.truth.is_empty(), format_truth(&s.truth)),

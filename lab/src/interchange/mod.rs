@@ -16,6 +16,7 @@
 
 pub mod csv_log;
 pub mod kfgins;
+pub mod kfgins_yaml;
 pub mod text;
 
 use crate::recorder::{
