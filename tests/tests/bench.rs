@@ -121,6 +121,27 @@ fn quick_bench_reports_every_figure() {
     assert!(f(&s, "/offline/navigating_imu_samples") > 200.0 * 40.0);
     assert!(f(&s, "/offline/navigating_x_real_time") > 10.0);
     assert_eq!(f(&s, "/offline/rejected_inputs"), 0.0);
+    // Replay: a 130 s drive (its 100 s alignment, then navigation) replayed with every aiding
+    // and, through the KF-GINS files, loosely coupled; every IMU sample replayed, solutions
+    // after the alignment, and the KF-GINS files with KF-GINS's configuration left behind.
+    for leg in ["every_aiding", "loosely_coupled"] {
+        assert_eq!(
+            f(&s, &format!("/replay/{leg}/imu_samples")),
+            200.0 * 130.0,
+            "{leg}"
+        );
+        let solutions = f(&s, &format!("/replay/{leg}/solutions"));
+        assert!(
+            solutions > 200.0 * 20.0 && solutions < 200.0 * 31.0,
+            "{leg}: {solutions}"
+        );
+        assert!(
+            f(&s, &format!("/replay/{leg}/imu_samples_per_s")) > 1000.0,
+            "{leg}"
+        );
+    }
+    assert!(out.join("kfgins").join("kf-gins.yaml").is_file());
+    assert!(stdout.contains("KF-GINS kf-gins.yaml"), "{stdout}");
     // Recorder: every offered record accounted for.
     assert!(f(&s, "/recorder/saturated_records_per_s") > 1000.0);
     assert!(f(&s, "/recorder/saturated_mcap_mb_per_s") > 0.0);
@@ -135,6 +156,7 @@ fn quick_bench_reports_every_figure() {
         "fusion_peak_rss_mib",
         "recorder_10x_dropped",
         "recording_mb_per_600s_at_200hz",
+        "replay_imu_samples_per_s_all_aiding",
     ] {
         assert!(s["targets"][t]["measured"].is_number(), "target {t}");
     }

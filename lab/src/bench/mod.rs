@@ -24,6 +24,11 @@
 //!    that the absolute figures do not.
 //! 6. **Cost curves** ([`cost`]): the offline fusion cost per IMU sample against the IMU rate,
 //!    the active filter states, the satellites of tight coupling and the redundant IMU channels.
+//! 7. **Replay** ([`replay_throughput`]): `replay --offline`'s replay stage (reading, the
+//!    filter, writing its recording; not the analysis) on a simulated drive recorded with every
+//!    aiding sensor, and on its loosely coupled part (IMU and GNSS fixes) exported to the
+//!    KF-GINS formats and imported back — the files and `kf-gins.yaml` stay in `OUT/kfgins`,
+//!    so that KF-GINS can be run on the very same data and its samples per second compared.
 //!
 //! Writes `summary.json`, a latency histogram PNG (Sextant and the floor), the cost curves'
 //! PNG, and returns the summary for the table.
@@ -72,6 +77,8 @@ struct Sizes {
     /// mode (tests), where the comparison is a smoke check.
     floor_s: f64,
     offline_s: f64,
+    /// Simulated seconds of the replayed drive.
+    replay_s: f64,
     record_paced_s: f64,
     record_saturated: usize,
 }
@@ -83,6 +90,7 @@ impl Sizes {
                 live_s: 4.0,
                 floor_s: 1.0,
                 offline_s: 60.0,
+                replay_s: 130.0,
                 record_paced_s: 1.0,
                 record_saturated: 50_000,
             }
@@ -91,6 +99,7 @@ impl Sizes {
                 live_s: 30.0,
                 floor_s: 30.0 - BENCH_ALIGNMENT_S,
                 offline_s: 600.0,
+                replay_s: 600.0,
                 record_paced_s: 5.0,
                 record_saturated: 500_000,
             }
@@ -433,6 +442,82 @@ fn offline_throughput(cfg_dir: &Path, sim_s: f64) -> anyhow::Result<Value> {
     }))
 }
 
+/// The replay stage of `replay --offline` (see the module comment) with the filter
+/// configuration `filter` on the vehicle scenario of `cfg_dir`, simulated for `sim_s`.
+fn replay_throughput(
+    out: &Path,
+    cfg_dir: &Path,
+    filter: &fusion::navigator::NavigatorConfig,
+    sim_s: f64,
+) -> anyhow::Result<Value> {
+    use crate::interchange::kfgins;
+    use crate::recorder::{CONFIG_KEY_FILTER_TOML, CONFIG_METADATA_NAME};
+    use crate::replay::{OfflineOptions, replay_offline};
+    let scn = Scenario::load(&cfg_dir.join("scenarios/vehicle.toml"))?;
+    let dir = out.join("replay");
+    std::fs::create_dir_all(&dir)?;
+    let source = dir.join("drive.mcap");
+    let rec = Recorder::start(
+        &source,
+        &RecorderOptions {
+            metadata: vec![(
+                CONFIG_METADATA_NAME.to_string(),
+                [(CONFIG_KEY_FILTER_TOML.to_string(), toml::to_string(filter)?)].into(),
+            )],
+            ..Default::default()
+        },
+    )?;
+    let channels = [Channel::SENSORS.as_slice(), &[Channel::Truth]].concat();
+    for r in OfflineSim::with_channels(&scn, &channels).with_duration_s(sim_s) {
+        rec.record_blocking(r, 0);
+    }
+    let stats = rec.finish()?;
+    if stats.dropped > 0 {
+        bail!(
+            "the replay bench's recording dropped {} records",
+            stats.dropped
+        );
+    }
+    let replay = |recording: &Path, name: &str| -> anyhow::Result<Value> {
+        let s = replay_offline(&OfflineOptions {
+            recording: recording.to_path_buf(),
+            out_dir: dir.join(name),
+            config: None,
+            progress: false,
+            segment_duration: None,
+            tap: None,
+        })?;
+        Ok(json!({
+            "imu_samples": s.imu_samples,
+            "solutions": s.solutions_replayed,
+            "wall_s": s.wall_time_s,
+            "imu_samples_per_s": s.imu_samples_per_s,
+        }))
+    };
+    let every_aiding = replay(&source, "every_aiding")?;
+    // The loosely coupled part through the KF-GINS files.
+    let kf_dir = out.join("kfgins");
+    kfgins::export(&source, &kf_dir)?;
+    let lc = dir.join("loosely_coupled.mcap");
+    kfgins::import(
+        &kfgins::ImportFiles {
+            imu: Some(kf_dir.join(kfgins::IMU_FILE)),
+            gnss: Some(kf_dir.join(kfgins::GNSS_FILE)),
+            truth: Some(kf_dir.join(kfgins::TRUTH_FILE)),
+            week: None,
+        },
+        Some(&kf_dir.join(kfgins::FILTER_FILE)),
+        &lc,
+    )?;
+    let loosely_coupled = replay(&lc, "loosely_coupled")?;
+    Ok(json!({
+        "simulated_s": sim_s,
+        "every_aiding": every_aiding,
+        "loosely_coupled": loosely_coupled,
+        "kfgins_files": kf_dir.display().to_string(),
+    }))
+}
+
 /// A realistic record mix for the recorder: per second of the default live system at speed 1,
 /// IMU 200, solutions 200, truth 50, star tracker 5, odometer 20, baro 20, GNSS 1, status 1.
 fn record_mix(k: u64) -> Record {
@@ -719,6 +804,10 @@ pub fn run(opts: &BenchOptions) -> anyhow::Result<Value> {
     );
     eprintln!("bench: offline fusion, {} s simulated", sizes.offline_s);
     let offline = offline_throughput(&cfg_dir, sizes.offline_s)?;
+    eprintln!("bench: replay, {} s simulated", sizes.replay_s);
+    // The filter as configured (its own alignment), not the live runs' short one: the
+    // replayed drive navigates as the default run does.
+    let replay = replay_throughput(&opts.out, &cfg_dir, &cfg.navigator, sizes.replay_s)?;
     eprintln!("bench: recorder");
     let recorder = recorder_throughput(&opts.out, sizes.record_saturated, sizes.record_paced_s)?;
     eprintln!("bench: cost curves");
@@ -744,6 +833,7 @@ pub fn run(opts: &BenchOptions) -> anyhow::Result<Value> {
         "latency_p50_us_at_1khz": { "target": 30.0, "measured": l1k["latency_p50_us"] },
         "latency_p99_us_at_1khz": { "target": 100.0, "measured": l1k["latency_p99_us"] },
         "offline_x_real_time_all_aiding": { "target": 1000.0, "measured": offline["navigating_x_real_time"] },
+        "replay_imu_samples_per_s_all_aiding": { "target": 500000.0, "measured": replay["every_aiding"]["imu_samples_per_s"] },
         "fusion_peak_rss_mib": { "target": 30.0, "measured": fusion_rss },
         "recorder_10x_dropped": { "target": 0, "measured": recorder["paced_10x_dropped"] },
         "recording_mb_per_600s_at_200hz": {
@@ -756,6 +846,7 @@ pub fn run(opts: &BenchOptions) -> anyhow::Result<Value> {
         "quick": opts.quick,
         "live": Value::Object(live),
         "offline": offline,
+        "replay": replay,
         "recorder": recorder,
         "bridge": bridge_fig,
         "cost_curves": curves,
@@ -838,6 +929,16 @@ pub fn table(s: &Value) -> String {
         f(&o["navigating_x_real_time"]),
         o["rewinds"],
         o["replayed_imu_steps"]
+    );
+    let rp = &s["replay"];
+    t += &format!(
+        "replay --offline (reading, filter, writing; {} s drive): every aiding {} IMU samples/s, \
+         loosely coupled (IMU + GNSS fixes via the KF-GINS files) {} IMU samples/s; KF-GINS on \
+         the same files: cd {} && KF-GINS kf-gins.yaml\n",
+        rp["simulated_s"],
+        f(&rp["every_aiding"]["imu_samples_per_s"]),
+        f(&rp["loosely_coupled"]["imu_samples_per_s"]),
+        rp["kfgins_files"].as_str().unwrap_or("?"),
     );
     let r = &s["recorder"];
     t += &format!(
