@@ -496,16 +496,19 @@ pub fn export(recording: &Path, dir: &Path) -> Result<Counts, InterchangeError> 
     std::fs::create_dir_all(dir).map_err(InterchangeError::io(dir))?;
     let mut c = s.counts();
     c.gnss = s.gnss.iter().filter(|g| g.fix_valid != 0).count();
-    // KF-GINS starts where Sextant's navigation started, else at the truth's first pose.
+    // KF-GINS starts where Sextant's navigation started, else at the truth's first pose within
+    // the IMU file (KF-GINS refuses a start before its first IMU epoch).
     let kfgins = filter
         .as_deref()
         .and_then(|text| crate::config::parse_navigator_config(text, recording).ok())
         .and_then(|cfg| {
-            let start = s
-                .nav
-                .first()
-                .copied()
-                .or_else(|| s.truth.first().map(|t| start_from_truth(t, &cfg)))?;
+            let first_imu_ns = s.imu.first()?.header.time_ns;
+            let start = s.nav.first().copied().or_else(|| {
+                s.truth
+                    .iter()
+                    .find(|t| t.header.time_ns >= first_imu_ns)
+                    .map(|t| start_from_truth(t, &cfg))
+            })?;
             Some(config_text(&cfg, imu_rate_hz(&s.imu)?, &start))
         });
     let files = [

@@ -5,7 +5,8 @@
 //! - Start: KF-GINS does not align; it starts from a given state. It is given Sextant's first
 //!   solution (the end of Sextant's own alignment: the same starting knowledge, its estimated
 //!   biases and scale factors, its 1-σ), or, in a recording without solutions, the truth's first
-//!   pose with the 1-σ of the filter's `[initial]` (zero biases: the truth's are not given).
+//!   pose at or after the first IMU epoch (KF-GINS refuses to start before it) with the 1-σ of
+//!   the filter's `[initial]` (zero biases: the truth's are not given).
 //!   The level attitude σ is the RMS of Sextant's north and east ones, the heading σ its down.
 //! - The IMU class of the filter's `[imu]` in KF-GINS's units: ARW °/√h, VRW m/s/√h, gyro bias
 //!   °/h, accelerometer bias mGal, scale factors ppm. KF-GINS models the biases and scale
