@@ -94,9 +94,9 @@ pub struct Summary {
     pub attitude_error_max_deg: Option<f64>,
     /// RMS horizontal error of the GNSS receiver's own fixes over the same run, m: each valid
     /// fix against the antenna's true position at its time tag — the truth sample's (the
-    /// IMU's) moved by the antenna lever arm of the recording's filter configuration (the
-    /// surveyed one; none when the recording carries no configuration) in the true attitude —
-    /// to set beside the solution's.
+    /// IMU's) moved by the antenna's lever arm in the true attitude: the simulated world's in
+    /// `sextant run`, else the one of the recording's filter configuration (the surveyed one;
+    /// none when the recording carries no configuration) — to set beside the solution's.
     pub gnss_fix_horizontal_error_rms_m: Option<f64>,
     /// RMS vertical error of the receiver's own fixes, m.
     pub gnss_fix_vertical_error_rms_m: Option<f64>,
@@ -219,14 +219,17 @@ pub fn analyze_recording(path: &Path, outages: &[TimeWindow]) -> Result<Summary,
 
 /// Like [`analyze_recording`], with the time series for plots.
 pub fn analyze(path: &Path, outages: &[TimeWindow]) -> Result<Analysis, AnalysisError> {
-    analyze_with_progress(path, outages, false)
+    analyze_with_progress(path, outages, None, false)
 }
 
 /// [`analyze`] with a progress bar over the file on stderr when `progress` (see
-/// [`crate::progress`]): the analysis at the end of `sextant run` and `replay`.
+/// [`crate::progress`]): the analysis at the end of `sextant run` and `replay`. The receiver's
+/// fixes are compared at `antenna_lever_arm_b_m` (body axes, m; `sextant run` gives its
+/// world's), or when `None` at the lever arm of the filter configuration the recording embeds.
 pub fn analyze_with_progress(
     path: &Path,
     outages: &[TimeWindow],
+    antenna_lever_arm_b_m: Option<[f64; 3]>,
     progress: bool,
 ) -> Result<Analysis, AnalysisError> {
     let pb = crate::progress::bytes(progress, crate::progress::file_len(path), "analysis");
@@ -237,8 +240,9 @@ pub fn analyze_with_progress(
             detail: other.to_string(),
         },
     })?;
-    let antenna_lever_arm_b_m =
-        crate::replay::embedded_filter_config(&rec).map_or([0.0; 3], |c| c.gnss.lever_arm_b_m);
+    let antenna_lever_arm_b_m = antenna_lever_arm_b_m.unwrap_or_else(|| {
+        crate::replay::embedded_filter_config(&rec).map_or([0.0; 3], |c| c.gnss.lever_arm_b_m)
+    });
     // Decompressing and decoding on a thread of their own, the matching here.
     let messages = rec.read_ahead().map(|e| {
         e.map(|e| Message {

@@ -869,7 +869,14 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
     let scenario_path = args.scenario.clone().unwrap_or_else(|| cfg.scenario_path());
     // Validate the whole scenario (every key, grade and range) before starting anything: a
     // malformed file is one clear error naming it and the key, not drivers dying at start-up.
-    drivers_sim::scenario::Scenario::load(&scenario_path)?;
+    let world = drivers_sim::scenario::Scenario::load(&scenario_path)?
+        .spec
+        .world;
+    // The receiver's fixes are judged at the world's antenna (its true lever arm), whatever the
+    // filter is told.
+    let antenna_lever_arm_b_m: [f64; 3] = world
+        .as_ref()
+        .map_or([0.0; 3], |w| w.lever_arm_b_m().into());
     let scen = scenario::ScenarioInfo::load(&scenario_path)?;
     let prefix = args
         .prefix
@@ -1077,7 +1084,12 @@ async fn run(args: RunArgs) -> anyhow::Result<i32> {
         );
         None
     } else if recording.exists() {
-        match analysis::analyze_with_progress(&recording, &scen.gnss_outages, true) {
+        match analysis::analyze_with_progress(
+            &recording,
+            &scen.gnss_outages,
+            Some(antenna_lever_arm_b_m),
+            true,
+        ) {
             Ok(a) => Some(a),
             Err(e) => {
                 tracing::error!("analysis of {}: {e}", recording.display());
@@ -1279,7 +1291,8 @@ fn replay(args: ReplayArgs) -> anyhow::Result<()> {
         // may still have seen: then the file is read back, what the figures are about.
         let analysis = match tapped {
             Ok(a) if s.replay_records_dropped == 0 && s.replay_recorder_errors == 0 => Some(a),
-            _ => analysis::analyze_with_progress(replayed, &[], true).ok(),
+            _ => analysis::analyze_with_progress(replayed, &[], Some(antenna_lever_arm_b_m), true)
+                .ok(),
         };
         if let Some(a) = &analysis {
             out!("{}", analysis::format_table(&a.summary));
