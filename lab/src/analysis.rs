@@ -147,28 +147,6 @@ pub struct Analysis {
 /// Seconds after an outage over which the recovery RMS is computed.
 pub const AFTER_OUTAGE_S: f64 = 60.0;
 
-/// `v` rotated by the unit quaternion `q = [w, x, y, z]` (Hamilton): `q ⊗ v ⊗ q*`, i.e. a
-/// body vector into NED for `q = q_ned_body`.
-pub(crate) fn rotate(q: [f64; 4], v: [f64; 3]) -> [f64; 3] {
-    let [w, x, y, z] = q;
-    let u = [x, y, z];
-    let cross = |a: [f64; 3], b: [f64; 3]| {
-        [
-            a[1] * b[2] - a[2] * b[1],
-            a[2] * b[0] - a[0] * b[2],
-            a[0] * b[1] - a[1] * b[0],
-        ]
-    };
-    // v + 2w (u × v) + 2 u × (u × v)
-    let t = cross(u, v).map(|c| 2.0 * c);
-    let ut = cross(u, t);
-    [
-        v[0] + w * t[0] + ut[0],
-        v[1] + w * t[1] + ut[1],
-        v[2] + w * t[2] + ut[2],
-    ]
-}
-
 /// Hamilton product of quaternions `[w, x, y, z]`.
 pub(crate) fn q_mul(a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
     let [aw, ax, ay, az] = a;
@@ -603,9 +581,10 @@ impl<'a> Matched<'a> {
         // The fix is the antenna's position: compare it with the antenna's, the lever arm
         // rotated into NED by the true attitude (the NED frame at the IMU and at the antenna
         // differ by the arm over the Earth's radius, 2e-7 rad: negligible).
-        let arm_n = rotate(tr.q_ned_body, self.antenna_lever_arm_b_m);
+        let arm_n = fusion::attitude::quat_from_wire(&tr.q_ned_body)
+            * nalgebra::Vector3::from(self.antenna_lever_arm_b_m);
         let mut e = ned_offset(tr.pos_ecef_m, tr.lat_rad, tr.lon_rad, *pos);
-        for (e, a) in e.iter_mut().zip(arm_n) {
+        for (e, a) in e.iter_mut().zip(arm_n.iter()) {
             *e -= a;
         }
         if e.iter().all(|x| x.is_finite()) {
