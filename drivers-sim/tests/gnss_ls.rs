@@ -127,7 +127,9 @@ fn cross_check_run(mode: fusion::navigator::GnssMode, spoof: bool) -> CrossCheck
         ..NavigatorConfig::default()
     })
     .expect("default config");
+    // The fixes by time of validity (the receiver's stamp less its configured latency).
     let mut ls_fixes: Vec<(i64, gnss_ls::GnssFix)> = Vec::new();
+    let mut window_start_ns: Option<i64> = None;
     let mut out = CrossCheckRun {
         nis: Vec::new(),
         checks: 0,
@@ -147,7 +149,13 @@ fn cross_check_run(mode: fusion::navigator::GnssMode, spoof: bool) -> CrossCheck
         if let Record::Gnss(g) = &msg
             && let Ok(fix) = gnss_ls::solve_sample(g)
         {
-            ls_fixes.push((g.header.time_ns, fix));
+            let latency_ns = (nav.config().latency.gnss_s * 1e9).round() as i64;
+            ls_fixes.push((g.header.time_ns - latency_ns, fix));
+        }
+        if let Record::Imu(s) = &msg
+            && window_start_ns.is_none()
+        {
+            window_start_ns = Some(s.header.time_ns - (s.dt_s * 1e9).round() as i64);
         }
         feed(&mut nav, &msg).expect("simulated samples are valid");
         let d = nav.diagnostics();
@@ -161,15 +169,35 @@ fn cross_check_run(mode: fusion::navigator::GnssMode, spoof: bool) -> CrossCheck
         if nav.is_navigating() && !was_navigating {
             was_navigating = true;
             let r = nav.nav_state().r_e;
-            let (t_ls, fix) = ls_fixes
+            let cfg = nav.config();
+            let until = nav.time().ns - (cfg.buffer_window_s * 1e9).round() as i64;
+            let from = window_start_ns.expect("IMU before navigation");
+            let window: Vec<_> = ls_fixes
                 .iter()
-                .min_by(|a, b| {
-                    let da = (a.1.position.r_e_m - r).norm();
-                    let db = (b.1.position.r_e_m - r).norm();
-                    da.total_cmp(&db)
+                .filter(|(t, _)| (from..=until).contains(t))
+                .collect();
+            let n = window.len() as f64;
+            assert!(n > 50.0, "{n} fixes in the alignment window");
+            let mean = window
+                .iter()
+                .fold(Vector3::zeros(), |a, (_, f)| a + f.position.r_e_m)
+                / n;
+            out.start_offset_m = (mean - r).norm();
+            let &&(t_ls, fix) = window.last().expect("fixes during alignment");
+            let tau_s = cfg.gnss.error_correlation_time_s;
+            let share = window
+                .iter()
+                .map(|(t, _)| {
+                    if tau_s > 0.0 {
+                        (-((t_ls - t) as f64 * 1e-9) / tau_s).exp()
+                    } else if *t == t_ls {
+                        1.0
+                    } else {
+                        0.0
+                    }
                 })
-                .expect("fixes during alignment");
-            out.start_offset_m = (fix.position.r_e_m - r).norm();
+                .sum::<f64>()
+                / n;
             if mode == GnssMode::Tight {
                 let dt = (nav.time().ns - t_ls) as f64 * 1e-9;
                 let v = fix.velocity.expect("Doppler on every satellite");
@@ -183,7 +211,8 @@ fn cross_check_run(mode: fusion::navigator::GnssMode, spoof: bool) -> CrossCheck
                     .map(|k| {
                         let scale =
                             (p[(idx::POS + k, idx::POS + k)] * p[(idx::CLK, idx::CLK)]).sqrt();
-                        (p[(idx::POS + k, idx::CLK)] - fix.position.cov_r_clock_m2[k]).abs() / scale
+                        (p[(idx::POS + k, idx::CLK)] - share * fix.position.cov_r_clock_m2[k]).abs()
+                            / scale
                     })
                     .fold(0.0, f64::max);
                 out.start_cross_cov_rel = Some(rel);
@@ -249,8 +278,10 @@ fn cross_check_flags_a_spoofed_jump() {
 /// consistent.
 ///
 /// * Start: the vehicle is static during alignment, so the first navigating position is the
-///   chosen LS fix moved by one IMU step of a static mechanization (< 1 mm); the clock is the
-///   LS bias moved with the LS drift (same arithmetic, 1 mm).
+///   mean of the LS fixes of the static window valid at least `buffer_window_s` before its end
+///   (< 1 mm); the clock is the latest of them moved with its drift (same arithmetic, 1 mm),
+///   its position↔clock covariance the fix's times `Σ_j ρ_jN / N` (ρ the error correlation
+///   between the fixes' epochs: the covariance with the mean of the positions).
 /// * Cross-check: after convergence the filter's P_rr (dm²) is small against the fix's
 ///   covariance (PDOP²σ² ≈ 10 m²), so the NIS of successive epochs are nearly independent
 ///   χ²(3) draws (the fix's noise is white). The mean NIS/dof of N of them has σ √(2/(3N))

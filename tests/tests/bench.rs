@@ -47,11 +47,17 @@ fn quick_bench_reports_every_figure() {
         );
         // A median above one IMU period would mean the loop cannot keep up at all.
         assert!(p50 < 1e6 / hz, "{key}: p50 {p50} us");
+        // Every IMU sample gives a solution once navigating: the rate over the navigating
+        // span is the IMU's. Navigation starts after the 1 s window once a GNSS fix of it is
+        // `buffer_window_s` (1 s) old — at most one GNSS period (1 s) more — so at least 1 s
+        // of the 4 s navigates.
         let n = f(&s, &p("solutions"));
-        let want = hz * 3.0;
+        let span_s = f(&s, &format!("/live/{key}/navigating_s"));
+        assert!(span_s >= 0.9, "{key}: navigated {span_s} s");
+        let rate = f(&s, &p("solutions_per_s"));
         assert!(
-            (n - want).abs() < 0.1 * want,
-            "{key}: {n} solutions, expected about {want}"
+            (rate - hz).abs() < 0.1 * hz,
+            "{key}: {n} solutions over {span_s} s: {rate}/s, expected {hz}"
         );
         // The floor: a bare iceoryx2 round trip at the same rate in the same run (1 s in quick
         // mode); Sextant's figures against it are finite.

@@ -19,6 +19,10 @@ impl Navigator {
         dt_s: f64,
     ) {
         self.check_warm_start_age(t);
+        if self.align.count() == 1 {
+            self.static_position
+                .restart(t - Duration::from_seconds_f64(dt_s));
+        }
         self.carry_star_attitude(dth, dt_s);
         self.gsf_predict(dth, dv, dt_s);
         while let Some((ts, obs, _)) = self.star_q.pop_due(t) {
@@ -35,6 +39,10 @@ impl Navigator {
         // Other aiding is not used before navigation starts.
         while self.odo_q.pop_due(t).is_some() {}
         while self.baro_q.pop_due(t).is_some() {}
+        self.static_position.settle(
+            t - Duration::from_seconds_f64(self.config.buffer_window_s),
+            self.config.gnss.error_correlation_time_s,
+        );
     }
 
     pub(super) fn try_finish_alignment(&mut self, t: GpsTime) {
@@ -55,7 +63,7 @@ impl Navigator {
                 earth::geodetic_to_ecef(&self.ell, &g),
                 Matrix3::identity() * s2,
             )
-        } else if let Some(f) = self.initial_fix() {
+        } else if let Some(f) = self.static_position.position() {
             from_gnss = true;
             f
         } else {
@@ -73,7 +81,7 @@ impl Navigator {
         let a = match alignment::coarse_align(&f_b, &w_b, geo.lat_rad, self.ell.omega_ie_rad_s) {
             Ok(a) => a,
             Err(_) => {
-                // Not static (or polar): start the window again.
+                // Not static (or polar): start the window again (its fixes with it).
                 self.align.reset();
                 return;
             }
@@ -171,31 +179,28 @@ impl Navigator {
         if self.warm.take().is_some() {
             self.warm_outcome = Some(WarmStartOutcome::Refused(WarmStartRefusal::StandingStart));
         }
+        // The tight-mode clock from the window's fixes too, not from whichever arrived last.
+        self.init_ls = self.static_position.clock_fix(from_gnss);
         self.start_navigation(p0, &x0, t);
     }
 
-    /// During alignment: keep the latest least-squares fix of the raw pseudoranges (the
-    /// initial position and clock, [`Self::initialize_from_ls`]); without raw observations,
-    /// the first receiver fix as before.
+    /// During alignment: the least-squares fix of the raw pseudoranges (kept as the next
+    /// one's first guess and for a start in motion) and the receiver's fix, queued for the
+    /// static window's position ([`StaticPosition`]).
     pub(super) fn alignment_gnss(&mut self, ts: GpsTime, obs: &GnssObs) {
         let guess = self
             .init_ls
             .map(|(_, f)| (f.position.r_e_m, f.position.clock_bias_m));
-        if let Some(fix) = self.ls_fix(obs, guess) {
+        let ls = self.ls_fix(obs, guess);
+        if let Some(fix) = ls {
             self.init_ls = Some((ts, fix));
-        } else if self.init_fix.is_none()
-            && let Some(fix) = obs.fix
-        {
-            self.init_fix = Some((fix.pos, fix.pos_cov));
         }
-    }
-
-    /// The alignment position from GNSS: the least-squares fix with its covariance when raw
-    /// observations were received, else the receiver's fix.
-    pub(super) fn initial_fix(&self) -> Option<(Vector3<f64>, Matrix3<f64>)> {
-        self.init_ls
-            .map(|(_, f)| (f.position.r_e_m, f.position.cov_r_e_m2))
-            .or(self.init_fix)
+        self.static_position.push(
+            ts,
+            ls,
+            obs.fix.map(|f| (f.pos, f.pos_cov)),
+            self.config.gnss.error_correlation_time_s,
+        );
     }
 
     /// At the start of navigation (tight mode, a least-squares fix with velocity from the

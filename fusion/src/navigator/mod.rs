@@ -138,6 +138,7 @@ mod odometer;
 mod output;
 mod replay;
 mod star;
+mod static_position;
 mod update;
 mod warm_start;
 mod zupt;
@@ -163,6 +164,7 @@ use obs::*;
 use odometer::*;
 pub use output::ClockEstimate;
 use star::*;
+use static_position::StaticPosition;
 pub use warm_start::{NavSnapshot, WarmStartConfig, WarmStartOutcome, WarmStartRefusal};
 
 const DEG: f64 = std::f64::consts::PI / 180.0;
@@ -232,7 +234,8 @@ pub struct Navigator {
     c_s_b: Matrix3<f64>,
     phase: Phase,
     align: Accumulator,
-    init_fix: Option<(Vector3<f64>, Matrix3<f64>)>,
+    /// The static alignment's GNSS position: the window's fixes by time of validity.
+    static_position: StaticPosition,
     /// The replayable navigation state (a checkpoint is its copy with the time).
     core: Core,
     /// Time of the last IMU sample processed (the epoch of the solution).
@@ -287,7 +290,8 @@ pub struct Navigator {
     /// Non-holonomic constraint counters.
     nhc: NhcHealth,
     /// The latest least-squares GNSS fix of the alignment period and its time of validity
-    /// (initial position and tight-mode clock, `initialize_from_ls`).
+    /// (the next fix's first guess; the tight-mode clock of a start in motion,
+    /// `initialize_from_ls`).
     init_ls: Option<(GpsTime, crate::gnss_ls::GnssFix)>,
     /// While aligning: the latest star-tracker attitude, carried by the gyros
     /// (`motion_align`).
@@ -322,7 +326,7 @@ impl Navigator {
             c_s_b: Matrix3::new(1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, -1.0),
             phase: Phase::Initializing,
             align: Accumulator::default(),
-            init_fix: None,
+            static_position: StaticPosition::default(),
             time: GpsTime::EPOCH,
             last_seq: [None; MAX_SENSORS],
             last_time: [None; MAX_SENSORS],

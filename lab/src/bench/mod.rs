@@ -6,8 +6,9 @@
 //!    solution send time − send time of the IMU sample it was computed from (both
 //!    CLOCK_MONOTONIC, `NavSolution.header.send_mono_ns` − `NavSolution.imu_send_mono_ns`),
 //!    read back from the run's recording. The filter's alignment is shortened (`alignment_s`)
-//!    so that the run navigates within a second: latency is a property of the running loop,
-//!    not of the alignment quality.
+//!    so that the run navigates within about two seconds (the 1 s window, then a GNSS fix of it
+//!    `buffer_window_s` old): latency is a property of the running loop, not of the
+//!    alignment quality. The solution rate is counted over the span the solutions cover.
 //! 2. **CPU and memory of each process**, from `/proc/PID/stat` (user + system time over the
 //!    measurement window) and `/proc/PID/status` (`VmRSS`, `VmHWM`), sampled before the end.
 //! 3. **Offline fusion throughput**: the navigator fed in-process from
@@ -205,11 +206,14 @@ fn stop(child: &mut Child, timeout: Duration) {
 /// the IMU record's reception time on CLOCK_MONOTONIC (from its MCAP publish time) − the IMU
 /// sample's send time: iceoryx2 delivery and the daemon's wake-up. Processing = the solution's
 /// send time − that receive time: the filter step and the recorder hand-off.
-fn latencies_us(recording: &Path) -> anyhow::Result<(Vec<f64>, Vec<f64>, Vec<f64>)> {
+/// Also the span of simulated time the solutions cover, s (first to last solution's time of
+/// validity; 0 without solutions).
+fn latencies_and_span(recording: &Path) -> anyhow::Result<(LatencySeries, f64)> {
     // The project's reader: bounded on corrupt input, errors name the byte offset.
     let rec = Recording::open(recording)?;
     let mut received: std::collections::HashMap<u64, u64> = std::collections::HashMap::new();
     let (mut total, mut transport, mut processing) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut first_ns, mut last_ns) = (i64::MAX, i64::MIN);
     for e in rec {
         let e = e?;
         match e.record {
@@ -219,6 +223,8 @@ fn latencies_us(recording: &Path) -> anyhow::Result<(Vec<f64>, Vec<f64>, Vec<f64
             Some(Record::Nav(nav))
                 if nav.imu_send_mono_ns > 0 && nav.header.send_mono_ns >= nav.imu_send_mono_ns =>
             {
+                first_ns = first_ns.min(nav.header.time_ns);
+                last_ns = last_ns.max(nav.header.time_ns);
                 total.push((nav.header.send_mono_ns - nav.imu_send_mono_ns) as f64 * 1e-3);
                 if let Some(&rx) = received.get(&nav.imu_send_mono_ns)
                     && rx >= nav.imu_send_mono_ns
@@ -231,8 +237,16 @@ fn latencies_us(recording: &Path) -> anyhow::Result<(Vec<f64>, Vec<f64>, Vec<f64
             _ => {}
         }
     }
-    Ok((total, transport, processing))
+    let span_s = if last_ns > first_ns {
+        (last_ns - first_ns) as f64 * 1e-9
+    } else {
+        0.0
+    };
+    Ok(((total, transport, processing), span_s))
 }
+
+/// Latencies in µs: total, transport, processing.
+type LatencySeries = (Vec<f64>, Vec<f64>, Vec<f64>);
 
 /// One live run at `imu_hz`: returns (latencies µs, per-process figures).
 fn live_run(
@@ -339,7 +353,10 @@ fn live_run(
             );
         }
     }
-    let (mut lat, mut transport, mut processing) = latencies_us(&recording)?;
+    let ((mut lat, mut transport, mut processing), span_s) = latencies_and_span(&recording)?;
+    // How long it navigated: the alignment ends when its window is complete and a GNSS fix
+    // is `buffer_window_s` old, not at a fixed time.
+    procs.insert("navigating_s".into(), json!(span_s));
     // The recording's size per 600 s of operation (the default run's length), in the
     // configuration's encoding: this run's files scaled by its simulated duration.
     let bytes = crate::recording::recording_len(&recording);
@@ -756,14 +773,20 @@ pub fn run(opts: &BenchOptions) -> anyhow::Result<Value> {
     let mut floors: Vec<(f64, Vec<f64>)> = Vec::new();
     let logs = opts.out.join("logs");
     std::fs::create_dir_all(&logs)?;
-    let measured_s = sizes.live_s - BENCH_ALIGNMENT_S;
     for hz in [200.0, 1000.0] {
         eprintln!("bench: floor, IMU {hz} Hz, {} s", sizes.floor_s);
         let floor_prefix = format!("{}_floor_{}hz", opts.prefix, hz as u64);
         let fl = floor::run(&opts.bin_dir, &floor_prefix, hz, sizes.floor_s, &logs)?;
         eprintln!("bench: live run, IMU {hz} Hz, {} s", sizes.live_s);
         let (lat, procs) = live_run(opts, &cfg_dir, hz, sizes.live_s)?;
+        let mut procs = procs;
+        let measured_s = procs
+            .as_object_mut()
+            .and_then(|m| m.remove("navigating_s"))
+            .and_then(|v| v.as_f64())
+            .unwrap_or(0.0);
         let mut fig = latency_figures(&lat, hz, measured_s);
+        fig["navigating_s"] = json!(measured_s);
         fig["processes"] = procs;
         if let Some(split) = fig["processes"]
             .as_object_mut()
@@ -967,7 +990,8 @@ mod tests {
     use super::*;
 
     /// Latencies come back from the recording through the project's reader: transport =
-    /// receive (MCAP publish time) − IMU send, processing = solution send − receive; a cut
+    /// receive (MCAP publish time) − IMU send, processing = solution send − receive; the
+    /// solutions' span from their times of validity; a cut
     /// recording is an error naming its byte offset, not a hang or a silent partial read.
     #[test]
     fn latencies_from_a_recording_and_a_cut_one() {
@@ -988,7 +1012,7 @@ mod tests {
         for k in 0..200u64 {
             let send = 1_000_000 + k * 5_000_000;
             let mut imu = ImuSample::default();
-            imu.header.time_ns = 1 + k as i64;
+            imu.header.time_ns = 1 + k as i64 * 5_000_000;
             imu.header.send_mono_ns = send;
             rec.record_blocking(Record::Imu(imu), send + 40_000);
             let mut nav = NavSolution::default();
@@ -998,8 +1022,10 @@ mod tests {
             rec.record_blocking(Record::Nav(nav), nav.header.send_mono_ns);
         }
         rec.finish().expect("finish");
-        let (total, transport, processing) = latencies_us(&path).expect("read");
+        let ((total, transport, processing), span_s) = latencies_and_span(&path).expect("read");
         assert_eq!(total.len(), 200);
+        // 200 solutions 5 ms apart: 199 intervals.
+        assert!((span_s - 0.995).abs() < 1e-12, "{span_s}");
         assert!(total.iter().all(|&x| (x - 55.0).abs() < 1e-9), "{total:?}");
         assert!(transport.iter().all(|&x| (x - 40.0).abs() < 1e-9));
         assert!(processing.iter().all(|&x| (x - 15.0).abs() < 1e-9));
@@ -1007,7 +1033,9 @@ mod tests {
         let bytes = std::fs::read(&path).expect("read back");
         let cut = dir.join("cut.mcap");
         std::fs::write(&cut, &bytes[..bytes.len() / 2]).expect("write");
-        let err = latencies_us(&cut).expect_err("cut recording").to_string();
+        let err = latencies_and_span(&cut)
+            .expect_err("cut recording")
+            .to_string();
         assert!(err.contains("byte offset"), "{err}");
         let _ = std::fs::remove_dir_all(&dir);
     }
