@@ -155,9 +155,18 @@ pub struct RecorderSection {
     #[serde(default)]
     pub encoding: crate::recorder::RecordingEncoding,
     /// Rate of the solution's Foxglove views (map, pose, frame tree), Hz of time of validity;
-    /// 0: a view of every solution (the `nav` channel always holds every solution).
+    /// 0: a view of every solution.
     #[serde(default = "default_view_rate_hz")]
     pub view_rate_hz: f64,
+    /// Rate of the `nav` channel, Hz of time of validity (the first solution of each
+    /// interval); 0 (the default when absent): every solution. Replay recomputes every
+    /// solution from the inputs, which are always recorded in full.
+    #[serde(default)]
+    pub solution_rate_hz: f64,
+    /// Rate of the simulator's `truth` channel, Hz of time of validity; 0 (the default when
+    /// absent): every sample.
+    #[serde(default)]
+    pub truth_rate_hz: f64,
 }
 
 fn default_view_rate_hz() -> f64 {
@@ -462,6 +471,18 @@ impl SystemConfig {
                 "recorder.view_rate_hz",
                 "must be a finite rate >= 0 (0: a view of every solution)",
             ));
+        }
+        for (key, rate) in [
+            ("recorder.solution_rate_hz", rec.solution_rate_hz),
+            ("recorder.truth_rate_hz", rec.truth_rate_hz),
+        ] {
+            if !(rate.is_finite() && rate >= 0.0) {
+                return Err(invalid(
+                    file,
+                    key,
+                    "must be a finite rate >= 0 (0: every message)",
+                ));
+            }
         }
         if !(rec.segment_duration_s.is_finite() && rec.segment_duration_s >= 0.0) {
             return Err(invalid(

@@ -8,6 +8,7 @@
 
 use crate::checkpoint::CheckpointWriter;
 use crate::config::SystemConfig;
+use crate::latency::LatencyHistogram;
 use crate::recorder::{Recorder, RecorderError, RecorderOptions, RecorderStats};
 use crate::staleness::Staleness;
 use fusion::Rejection;
@@ -292,6 +293,9 @@ struct State<'a, E: NavEngine> {
     stale: u64,
     /// Stale solutions since the last fresh one (logged once per backlog).
     stale_run: u64,
+    /// Every solution's IMU-send-to-solution-send latency (reported in the status: the
+    /// recording may keep only some solutions).
+    latency: LatencyHistogram,
 }
 
 impl<E: NavEngine> State<'_, E> {
@@ -372,6 +376,13 @@ impl<E: NavEngine> State<'_, E> {
                 self.solutions += 1;
                 stamp_solution(&mut sol, &s, self.solutions);
                 sol.header.send_mono_ns = msgs::monotonic_ns();
+                if s.header.send_mono_ns > 0 {
+                    self.latency.record(
+                        sol.header
+                            .send_mono_ns
+                            .saturating_sub(s.header.send_mono_ns),
+                    );
+                }
                 self.judge_staleness(&mut sol);
                 if self.solutions.is_multiple_of(self.decimation) {
                     match self.nav_pub.send_raw(sol) {
@@ -478,6 +489,10 @@ impl<E: NavEngine> State<'_, E> {
             records_dropped: self.recorder.dropped(),
             recorder_errors: self.recorder.errors(),
             solutions_stale: self.stale,
+            latency_count: self.latency.count(),
+            latency_p50_us: self.latency.percentile_us(50.0),
+            latency_p99_us: self.latency.percentile_us(99.0),
+            latency_max_us: self.latency.max_us(),
             ..engine_status(&self.engine)
         };
         st.header.time_ns = self.filter_time_ns;
@@ -537,6 +552,8 @@ pub fn run<E: NavEngine>(
             metadata: opts.metadata.clone(),
             encoding: rc.encoding,
             view_rate_hz: rc.view_rate_hz,
+            solution_rate_hz: rc.solution_rate_hz,
+            truth_rate_hz: rc.truth_rate_hz,
             ..Default::default()
         },
     );
@@ -567,6 +584,7 @@ pub fn run<E: NavEngine>(
         ),
         stale: 0,
         stale_run: 0,
+        latency: LatencyHistogram::default(),
     };
     if let Some(path) = &opts.checkpoint
         && opts.system.fusion.checkpoint_interval_s > 0.0
@@ -830,6 +848,9 @@ mod tests {
         system.fusion.status_period_s = 0.1;
         system.fusion.deadlines_ms[SensorId::Imu] = 50.0;
         system.fusion.min_wall_deadline_ms = 20.0;
+        // Every solution and truth sample recorded (the thinning has its own recorder test).
+        system.recorder.solution_rate_hz = 0.0;
+        system.recorder.truth_rate_hz = 0.0;
         system.validate(path).unwrap();
         let opts = DaemonOptions {
             prefix: prefix.clone(),
@@ -890,6 +911,9 @@ mod tests {
         assert_eq!(s.sequence_gaps_per_channel["imu"], 0);
         assert!(s.horizontal_error_max_m.unwrap() < 1e-9);
         assert!(s.latency_p50_us.unwrap() > 0.0);
+        // The latency is the daemon's own, over every solution (its last status).
+        assert_eq!(s.latency_solutions, 100);
+        assert!(s.latency_max_us.unwrap() >= s.latency_p99_us.unwrap());
         assert_eq!(s.final_mode.as_deref(), Some("gnss-inertial"));
         assert!(!s.recording_truncated);
     }

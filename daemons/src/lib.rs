@@ -5,6 +5,7 @@
 //! - [`checkpoint`]: the navigator checkpoint file of a warm restart.
 //! - [`config`]: the system configuration (`config/sextant.toml`) and the filter tuning file.
 //! - [`daemon`]: the fusion daemon's WaitSet loop.
+//! - [`latency`]: the histogram of every solution's latency the daemon reports.
 //! - [`realtime`]: CPU, SCHED_FIFO priority and locked memory for the filter thread.
 //! - [`recorder`]: the MCAP writer thread.
 //! - [`recording`]: the bounded, corruption-tolerant reader of those recordings.
@@ -22,6 +23,7 @@ pub mod config;
 pub mod daemon;
 pub mod exit_report;
 pub mod foxglove;
+pub mod latency;
 pub mod logging;
 pub mod realtime;
 pub mod recorder;

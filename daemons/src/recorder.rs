@@ -244,6 +244,14 @@ pub struct RecorderOptions {
     /// log time; 0: a view of every solution. The views are for display (the `nav` channel
     /// keeps every solution); at the solution's own rate they would be a third of the file.
     pub view_rate_hz: f64,
+    /// Rate of the `nav` channel, Hz of time of validity: the first solution of each
+    /// `1/solution_rate_hz` interval of log time is written; 0: every solution. The inputs are
+    /// always recorded in full, so offline replay recomputes every solution bit for bit and
+    /// checks the recorded ones; the daemon's `Status` carries the latency of every solution.
+    pub solution_rate_hz: f64,
+    /// Rate of the simulator's `truth` channel, Hz of time of validity (first sample of each
+    /// interval); 0: every sample. The filter never sees the truth: only the analysis does.
+    pub truth_rate_hz: f64,
     /// Where to hand every message written, in file order, in batches of up to [`TAP_BATCH`]
     /// (see [`Written`]); `None`: nowhere. A batch goes when it is full, when the chunk is
     /// flushed and when the file ends. The recorder waits while the tap's queue is full
@@ -303,6 +311,77 @@ impl Drop for Tap {
 /// Default of [`RecorderOptions::view_rate_hz`], Hz: smooth on a map and in a 3D view.
 pub const DEFAULT_VIEW_RATE_HZ: f64 = 20.0;
 
+/// Name of the MCAP metadata record stating the rates at which the recorder thinned its
+/// derived channels (keys [`RATES_KEY_SOLUTION_HZ`], [`RATES_KEY_TRUTH_HZ`],
+/// [`RATES_KEY_VIEW_HZ`]; decimal Hz, 0 = every message). Absent in recordings written before
+/// the rates existed: they hold every solution and every truth sample.
+pub const RATES_METADATA_NAME: &str = "sextant/rates";
+/// Key (in [`RATES_METADATA_NAME`]) of [`RecorderOptions::solution_rate_hz`].
+pub const RATES_KEY_SOLUTION_HZ: &str = "solution_rate_hz";
+/// Key (in [`RATES_METADATA_NAME`]) of [`RecorderOptions::truth_rate_hz`].
+pub const RATES_KEY_TRUTH_HZ: &str = "truth_rate_hz";
+/// Key (in [`RATES_METADATA_NAME`]) of [`RecorderOptions::view_rate_hz`].
+pub const RATES_KEY_VIEW_HZ: &str = "view_rate_hz";
+
+/// Keeps the first message of each `1/rate` interval of time (intervals counted from time
+/// zero, so that two recorders of the same stream keep the same messages), or every message
+/// at rate 0: how the recorder thins the channels it does not need in full.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RateGate {
+    /// Interval, ns (0: every message).
+    period_ns: u64,
+    /// Interval index of the last message kept.
+    last_slot: Option<u64>,
+}
+
+impl RateGate {
+    /// A gate at `rate_hz` (≤ 0 or not finite: every message).
+    pub fn new(rate_hz: f64) -> Self {
+        let period_ns = if rate_hz.is_finite() && rate_hz > 0.0 {
+            (1e9 / rate_hz).round().max(1.0) as u64
+        } else {
+            0
+        };
+        Self {
+            period_ns,
+            last_slot: None,
+        }
+    }
+
+    /// Whether the message at `time_ns` is kept (then its interval is taken).
+    pub fn admit(&mut self, time_ns: u64) -> bool {
+        if self.period_ns == 0 {
+            return true;
+        }
+        let slot = time_ns / self.period_ns;
+        if self.last_slot == Some(slot) {
+            return false;
+        }
+        self.last_slot = Some(slot);
+        true
+    }
+}
+
+/// The rates of a recording's thinned channels, from its [`RATES_METADATA_NAME`] record
+/// (solution, truth, views, Hz; 0 = every message). A recording without the record holds
+/// every solution and truth sample and its views at [`DEFAULT_VIEW_RATE_HZ`].
+pub fn recorded_rates(metadata: &BTreeMap<String, BTreeMap<String, String>>) -> (f64, f64, f64) {
+    let Some(m) = metadata.get(RATES_METADATA_NAME) else {
+        return (0.0, 0.0, DEFAULT_VIEW_RATE_HZ);
+    };
+    let get = |k: &str, default: f64| {
+        m.get(k)
+            .and_then(|v| v.parse::<f64>().ok())
+            .filter(|v| v.is_finite() && *v >= 0.0)
+            .unwrap_or(default)
+    };
+    (
+        get(RATES_KEY_SOLUTION_HZ, 0.0),
+        get(RATES_KEY_TRUTH_HZ, 0.0),
+        get(RATES_KEY_VIEW_HZ, DEFAULT_VIEW_RATE_HZ),
+    )
+}
+
 impl Default for RecorderOptions {
     fn default() -> Self {
         Self {
@@ -314,6 +393,8 @@ impl Default for RecorderOptions {
             segment_duration: None,
             encoding: RecordingEncoding::default(),
             view_rate_hz: DEFAULT_VIEW_RATE_HZ,
+            solution_rate_hz: 0.0,
+            truth_rate_hz: 0.0,
             tap: None,
         }
     }
@@ -409,10 +490,12 @@ struct Sink {
     /// [`NON_FINITE_TOPIC`]'s channel (JSON recordings only).
     non_finite: Option<u16>,
     encoding: RecordingEncoding,
-    /// Interval of the solution's views, ns of log time (0: every solution), and the interval
-    /// index of the last view written.
-    view_period_ns: u64,
-    last_view_slot: Option<u64>,
+    /// Which solutions get their views written ([`RecorderOptions::view_rate_hz`]).
+    view_gate: RateGate,
+    /// Which solutions are written on `nav` ([`RecorderOptions::solution_rate_hz`]).
+    nav_gate: RateGate,
+    /// Which truth samples are written ([`RecorderOptions::truth_rate_hz`]).
+    truth_gate: RateGate,
     /// CLOCK_REALTIME − CLOCK_MONOTONIC, ns (publish_time = reception + this).
     unix_minus_monotonic_ns: i64,
     buf: Vec<u8>,
@@ -603,10 +686,24 @@ impl Sink {
             ),
         ]);
         let own = (TIME_METADATA_NAME.to_string(), time_meta);
-        for (name, metadata) in std::iter::once(&own).chain(
+        let rates = (
+            RATES_METADATA_NAME.to_string(),
+            BTreeMap::from([
+                (
+                    RATES_KEY_SOLUTION_HZ.to_string(),
+                    opts.solution_rate_hz.to_string(),
+                ),
+                (
+                    RATES_KEY_TRUTH_HZ.to_string(),
+                    opts.truth_rate_hz.to_string(),
+                ),
+                (RATES_KEY_VIEW_HZ.to_string(), opts.view_rate_hz.to_string()),
+            ]),
+        );
+        for (name, metadata) in [&own, &rates].into_iter().chain(
             opts.metadata
                 .iter()
-                .filter(|(name, _)| name != TIME_METADATA_NAME),
+                .filter(|(name, _)| name != TIME_METADATA_NAME && name != RATES_METADATA_NAME),
         ) {
             writer
                 .write_metadata(&mcap::records::Metadata {
@@ -650,12 +747,9 @@ impl Sink {
             sensor_alive,
             non_finite,
             encoding: opts.encoding,
-            view_period_ns: if opts.view_rate_hz > 0.0 {
-                (1e9 / opts.view_rate_hz).round() as u64
-            } else {
-                0
-            },
-            last_view_slot: None,
+            view_gate: RateGate::new(opts.view_rate_hz),
+            nav_gate: RateGate::new(opts.solution_rate_hz),
+            truth_gate: RateGate::new(opts.truth_rate_hz),
             unix_minus_monotonic_ns,
             buf: Vec::with_capacity(16 * 1024),
             dirty: false,
@@ -726,8 +820,42 @@ impl Sink {
         }
     }
 
-    /// Write one record at `log_time` (Unix ns); returns the number of messages written.
+    /// Write one record at `log_time` (Unix ns); returns the number of messages written (0
+    /// for a solution or truth sample the rates leave out).
     fn write(&mut self, item: &Item, log_time: u64) -> Result<u64, RecorderError> {
+        let nav_kept = match &item.record {
+            Record::Truth(_) if !self.truth_gate.admit(log_time) => return Ok(0),
+            Record::Nav(_) => self.nav_gate.admit(log_time),
+            _ => true,
+        };
+        let mut n = 0;
+        if nav_kept {
+            n += self.write_record(item, log_time)?;
+        }
+        if let Record::Nav(nav) = &item.record
+            && self.view_gate.admit(log_time)
+        {
+            let h = nav.header;
+            let origin = *self
+                .ned_origin
+                .get_or_insert_with(|| foxglove::NedOrigin::at(nav));
+            self.encode_view(&foxglove::location_fix(nav, log_time))?;
+            self.write_message(self.location_fix, h.seq, log_time, item.receive_mono_ns)?;
+            self.tap(foxglove::LOCATION_FIX_TOPIC, None);
+            self.encode_view(&foxglove::pose_in_frame(nav, &origin, log_time))?;
+            self.write_message(self.pose, h.seq, log_time, item.receive_mono_ns)?;
+            self.tap(foxglove::POSE_TOPIC, None);
+            let tf = foxglove::frame_transforms(nav, &origin, &self.mounts, log_time);
+            self.encode_view(&tf)?;
+            self.write_message(self.tf, h.seq, log_time, item.receive_mono_ns)?;
+            self.tap(foxglove::TF_TOPIC, None);
+            n += 3;
+        }
+        Ok(n)
+    }
+
+    /// Write the record itself (and the status's plot view); returns the messages written.
+    fn write_record(&mut self, item: &Item, log_time: u64) -> Result<u64, RecorderError> {
         let cid = match item.record.channel() {
             Some(ch) => *self
                 .channels
@@ -774,28 +902,6 @@ impl Sink {
             self.tap(item.record.topic(), Some(item.record.clone()));
         }
         let mut n = 1;
-        let view_slot = log_time
-            .checked_div(self.view_period_ns)
-            .unwrap_or(log_time);
-        if let Record::Nav(nav) = &item.record
-            && self.last_view_slot != Some(view_slot)
-        {
-            self.last_view_slot = Some(view_slot);
-            let origin = *self
-                .ned_origin
-                .get_or_insert_with(|| foxglove::NedOrigin::at(nav));
-            self.encode_view(&foxglove::location_fix(nav, log_time))?;
-            self.write_message(self.location_fix, h.seq, log_time, item.receive_mono_ns)?;
-            self.tap(foxglove::LOCATION_FIX_TOPIC, None);
-            self.encode_view(&foxglove::pose_in_frame(nav, &origin, log_time))?;
-            self.write_message(self.pose, h.seq, log_time, item.receive_mono_ns)?;
-            self.tap(foxglove::POSE_TOPIC, None);
-            let tf = foxglove::frame_transforms(nav, &origin, &self.mounts, log_time);
-            self.encode_view(&tf)?;
-            self.write_message(self.tf, h.seq, log_time, item.receive_mono_ns)?;
-            self.tap(foxglove::TF_TOPIC, None);
-            n += 3;
-        }
         if let Record::Status(st) = &item.record {
             self.encode_view(&foxglove::status_plot(st, log_time))?;
             self.write_message(self.status_plot, h.seq, log_time, item.receive_mono_ns)?;
@@ -1460,6 +1566,90 @@ mod tests {
         ] {
             assert_eq!(views[topic], expected, "{topic}");
         }
+    }
+
+    /// With solution and truth rates, `nav` and `truth` hold the first message of each
+    /// interval of log time, the inputs and the views are untouched, and the file states the
+    /// rates for replay.
+    #[test]
+    fn solutions_and_truth_follow_their_rates_and_the_rates_are_stated() {
+        let path = tmp("rates");
+        let opts = RecorderOptions {
+            solution_rate_hz: 10.0,
+            truth_rate_hz: 4.0,
+            view_rate_hz: 20.0,
+            ..Default::default()
+        };
+        let rec = Recorder::start(&path, &opts).unwrap();
+        // 1 s at 200 Hz from 3 ms: IMU, solution and (every 20 ms) truth.
+        for k in 0..200i64 {
+            let t = 3_000_000 + k * 5_000_000;
+            let mut imu = ImuSample::default();
+            imu.header.time_ns = t;
+            assert!(rec.record(Record::Imu(imu), 0));
+            let mut nav = NavSolution::default();
+            nav.header.time_ns = t;
+            nav.header.seq = k as u64 + 1;
+            nav.q_ned_body = [1.0, 0.0, 0.0, 0.0];
+            assert!(rec.record(Record::Nav(nav), 0));
+            if k % 4 == 0 {
+                let mut truth = TruthSample::default();
+                truth.header.time_ns = t;
+                assert!(rec.record(Record::Truth(truth), 0));
+            }
+        }
+        rec.finish().unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        let mut times: BTreeMap<String, Vec<u64>> = BTreeMap::new();
+        for m in MessageStream::new(&bytes).unwrap() {
+            let m = m.unwrap();
+            times
+                .entry(m.channel.topic.clone())
+                .or_default()
+                .push(m.log_time);
+        }
+        let t0 = 315_964_800_000_000_000u64 + 3_000_000;
+        assert_eq!(times["imu"].len(), 200);
+        // Solutions: intervals of 100 ms, the first of each at 3, 103, 203 … ms.
+        let nav: Vec<u64> = (0..10).map(|k| t0 + k * 100_000_000).collect();
+        assert_eq!(times["nav"], nav);
+        // Truth every 20 ms from 3 ms, intervals of 250 ms: 3, 263 (the first ≥ 250), 503, 763.
+        let truth: Vec<u64> = [0, 260, 500, 760]
+            .iter()
+            .map(|ms| t0 + ms * 1_000_000)
+            .collect();
+        assert_eq!(times["truth"], truth);
+        assert_eq!(
+            times[foxglove::POSE_TOPIC].len(),
+            20,
+            "views at their own rate"
+        );
+        let meta: BTreeMap<String, BTreeMap<String, String>> =
+            mcap::read::LinearReader::new(&bytes)
+                .unwrap()
+                .filter_map(|r| match r.unwrap() {
+                    mcap::records::Record::Metadata(m) => Some((m.name, m.metadata)),
+                    _ => None,
+                })
+                .collect();
+        assert_eq!(recorded_rates(&meta), (10.0, 4.0, 20.0));
+        assert_eq!(
+            recorded_rates(&BTreeMap::new()),
+            (0.0, 0.0, DEFAULT_VIEW_RATE_HZ)
+        );
+    }
+
+    #[test]
+    fn a_rate_gate_keeps_the_first_message_of_each_interval() {
+        let mut g = RateGate::new(10.0);
+        let kept: Vec<u64> = [0u64, 5, 99, 100, 150, 250, 251, 1000]
+            .into_iter()
+            .filter(|ms| g.admit(ms * 1_000_000))
+            .collect();
+        assert_eq!(kept, [0, 100, 250, 1000]);
+        let mut every = RateGate::new(0.0);
+        assert!((0..5).all(|_| every.admit(7)));
+        assert!(RateGate::new(f64::NAN).admit(1) && RateGate::new(-1.0).admit(1));
     }
 
     fn reads_back_with_schemas_in_order(encoding: RecordingEncoding) {

@@ -112,6 +112,10 @@ pub struct Summary {
     pub latency_p99_us: Option<f64>,
     /// Largest latency, µs.
     pub latency_max_us: Option<f64>,
+    /// Solutions the latency figures are over: every solution the fusion daemon computed when
+    /// its status reports them (its own histogram, so they hold for a recording that keeps
+    /// only some solutions), else the recorded solutions.
+    pub latency_solutions: u64,
 }
 
 /// Time series behind the summary, for the plots.
@@ -221,6 +225,7 @@ pub fn analyze_with_progress(
     let antenna_lever_arm_b_m = antenna_lever_arm_b_m.unwrap_or_else(|| {
         crate::replay::embedded_filter_config(&rec).map_or([0.0; 3], |c| c.gnss.lever_arm_b_m)
     });
+    let thinned = thinned_topics(rec.metadata());
     // Decompressing and decoding on a thread of their own, the matching here.
     let messages = rec.read_ahead().map(|e| {
         e.map(|e| Message {
@@ -229,9 +234,14 @@ pub fn analyze_with_progress(
             record: e.record,
         })
     });
-    let a = analyze_messages(path, messages, outages, antenna_lever_arm_b_m, |offset| {
-        pb.set_position(offset)
-    });
+    let a = analyze_messages(
+        path,
+        messages,
+        outages,
+        antenna_lever_arm_b_m,
+        &thinned,
+        |offset| pb.set_position(offset),
+    );
     pb.finish_and_clear();
     Ok(a)
 }
@@ -242,12 +252,14 @@ pub fn analyze_with_progress(
 /// Exact as long as the recorder lost nothing (a failed write loses from the file what the tap
 /// still saw: analyse the file then). `antenna_lever_arm_b_m` is the GNSS antenna's lever arm
 /// of the filter configuration the recording embeds (body axes, m), which [`analyze`] reads
-/// from the file.
+/// from the file; `thinned` the topics the recorder keeps one message per interval of
+/// ([`thinned_topics`] of the recording's metadata).
 pub fn analyze_written(
     path: &Path,
     tap: Receiver<Vec<Written>>,
     outages: &[TimeWindow],
     antenna_lever_arm_b_m: [f64; 3],
+    thinned: &[&str],
 ) -> Analysis {
     let messages = tap.into_iter().flatten().map(|w| {
         Ok::<_, RecordingError>(Message {
@@ -256,7 +268,29 @@ pub fn analyze_written(
             record: w.record,
         })
     });
-    analyze_messages(path, messages, outages, antenna_lever_arm_b_m, |_| {})
+    analyze_messages(
+        path,
+        messages,
+        outages,
+        antenna_lever_arm_b_m,
+        thinned,
+        |_| {},
+    )
+}
+
+/// The topics a recording keeps one message per interval of time of validity (its
+/// `[recorder]` solution and truth rates, from its metadata): their sequence numbers skip by
+/// design, so their gaps are not counted.
+pub fn thinned_topics(metadata: &BTreeMap<String, BTreeMap<String, String>>) -> Vec<&'static str> {
+    let (solution_hz, truth_hz, _) = crate::recorder::recorded_rates(metadata);
+    let mut v = Vec::new();
+    if solution_hz > 0.0 {
+        v.push(msgs::Channel::Nav.name());
+    }
+    if truth_hz > 0.0 {
+        v.push(msgs::Channel::Truth.name());
+    }
+    v
 }
 
 /// One message of the recording, read back or tapped.
@@ -290,6 +324,7 @@ fn analyze_messages(
     messages: impl Iterator<Item = Result<Message, RecordingError>>,
     outages: &[TimeWindow],
     antenna_lever_arm_b_m: [f64; 3],
+    thinned: &[&str],
     progress: impl Fn(u64),
 ) -> Analysis {
     let mut s = Summary {
@@ -299,6 +334,8 @@ fn analyze_messages(
     let mut last_seq: HashMap<&'static str, u64> = HashMap::new();
     let mut first_truth: Option<TruthSample> = None;
     let mut last_status: Option<Status> = None;
+    // The final status of each earlier life of the fusion daemon (restarts).
+    let mut latency_lives: Vec<Status> = Vec::new();
     let (mut t_min, mut t_max) = (i64::MAX, i64::MIN);
     let mut w = Window::default();
     let mut m = Matched::new(outages);
@@ -340,7 +377,7 @@ fn analyze_messages(
         }
         let gaps = count(&mut s.sequence_gaps_per_channel, topic);
         if let Some(prev) = last_seq.insert(topic, h.seq) {
-            if h.seq > prev + 1 {
+            if h.seq > prev + 1 && !thinned.contains(&topic) {
                 *gaps += h.seq - prev - 1;
             } else if h.seq <= prev {
                 *count(&mut s.sequence_restarts_per_channel, topic) += 1;
@@ -375,7 +412,15 @@ fn analyze_messages(
             Record::Gnss(g) if g.fix_valid == 1 => {
                 w.fix(g.header.time_ns, g.pos_ecef_m, |pos, tr| m.fix(pos, tr))
             }
-            Record::Status(st) => last_status = Some(*st),
+            Record::Status(st) => {
+                // A restarted daemon counts from zero: keep the last report of each life.
+                if let Some(prev) = &last_status
+                    && st.latency_count < prev.latency_count
+                {
+                    latency_lives.push(*prev);
+                }
+                last_status = Some(*st);
+            }
             _ => {}
         }
         if h.time_ns > 0 {
@@ -411,9 +456,31 @@ fn analyze_messages(
     s.vertical_error_max_m = m.vertical.max_abs();
     s.attitude_error_rms_deg = m.attitude.rms();
     s.attitude_error_max_deg = m.attitude.max_abs();
-    s.latency_p50_us = m.latency_us.percentile(50.0);
-    s.latency_p99_us = m.latency_us.percentile(99.0);
-    s.latency_max_us = m.latency_us.max();
+    latency_lives.extend(last_status);
+    let daemon_count: u64 = latency_lives.iter().map(|st| st.latency_count).sum();
+    if daemon_count > 0 {
+        // Several lives (a restart): their percentiles weighted by their counts, an
+        // approximation of the percentile of the union; exact for one life.
+        let weighted = |f: fn(&Status) -> f64| {
+            latency_lives
+                .iter()
+                .map(|st| f(st) * st.latency_count as f64)
+                .sum::<f64>()
+                / daemon_count as f64
+        };
+        s.latency_p50_us = Some(weighted(|st| st.latency_p50_us));
+        s.latency_p99_us = Some(weighted(|st| st.latency_p99_us));
+        s.latency_max_us = latency_lives
+            .iter()
+            .map(|st| st.latency_max_us)
+            .reduce(f64::max);
+        s.latency_solutions = daemon_count;
+    } else {
+        s.latency_p50_us = m.latency_us.percentile(50.0);
+        s.latency_p99_us = m.latency_us.percentile(99.0);
+        s.latency_max_us = m.latency_us.max();
+        s.latency_solutions = m.latency_us.count();
+    }
     let (mut all_during, mut all_after) = (RmsMax::default(), RmsMax::default());
     for (w, (during, after)) in outages.iter().zip(&m.outages) {
         s.gnss_outages.push(OutageSummary {
@@ -775,7 +842,10 @@ pub fn format_table(s: &Summary) -> String {
         ));
     }
     rows.push((
-        "latency p50 / p99 / max [µs]".into(),
+        format!(
+            "latency p50 / p99 / max [µs] ({} solutions)",
+            s.latency_solutions
+        ),
         format!(
             "{} / {} / {}",
             opt(s.latency_p50_us, 0),
@@ -907,7 +977,7 @@ mod tests {
             let path = dir.join("recording.mcap");
             let (tap, written) = std::sync::mpsc::sync_channel(16);
             let tapped = std::thread::scope(|scope| {
-                let analysis = scope.spawn(|| analyze_written(&path, written, &[], [0.0; 3]));
+                let analysis = scope.spawn(|| analyze_written(&path, written, &[], [0.0; 3], &[]));
                 let rec = Recorder::start(
                     &path,
                     &RecorderOptions {

@@ -3,9 +3,12 @@
 //! - **Offline** ([`replay_offline`]): rebuild the engine from the configuration embedded in the
 //!   recording (or another filter file), push the recorded inputs — sensor samples and the
 //!   daemon's alive/dead decisions — in file order through [`crate::daemon::feed`], the same
-//!   function the live daemon uses, at full speed; compare every solution with the recorded one
-//!   bit for bit (all fields but `header.send_mono_ns`, the wall clock of publication) and write
-//!   a new recording of the replay.
+//!   function the live daemon uses, at full speed; compare every recorded solution with the
+//!   replayed one of the same number bit for bit (all fields but `header.send_mono_ns`, the
+//!   wall clock of publication) and write a new recording of the replay at the source's rates.
+//!   A recording whose `nav` channel holds one solution per interval (`[recorder]
+//!   solution_rate_hz`) is checked on those: the replay computes every solution, and one the
+//!   source's rate keeps but the file lacks is a mismatch.
 //! - **Live** ([`replay_live`]): republish the recorded sensor channels (and the truth) on their
 //!   iceoryx2 services with the recorded timing — sample k at `start + (t_k − t_0)/speed` where
 //!   `t_k` is its time of validity, as the simulated drivers do — so that a running
@@ -44,8 +47,8 @@ use crate::config;
 use crate::daemon::{engine_status, feed, stamp_solution};
 use crate::recorder::{
     CALIBRATION_KEY_ELAPSED_S, CALIBRATION_KEY_SNAPSHOT, CALIBRATION_METADATA_NAME,
-    CONFIG_KEY_FILTER_TOML, CONFIG_METADATA_NAME, Record, Recorder, RecorderOptions,
-    WARM_START_KEY_SNAPSHOT, WARM_START_METADATA_NAME,
+    CONFIG_KEY_FILTER_TOML, CONFIG_METADATA_NAME, RateGate, Record, Recorder, RecorderOptions,
+    WARM_START_KEY_SNAPSHOT, WARM_START_METADATA_NAME, log_time_of, recorded_rates,
 };
 use crate::recording::{Recording, RecordingError, TimeBase};
 use fusion::navigator::{NavSnapshot, Navigator, NavigatorConfig};
@@ -148,6 +151,8 @@ pub struct OfflineSummary {
     pub solutions_recorded: u64,
     /// Solutions the replay computed.
     pub solutions_replayed: u64,
+    /// Rate of the recording's `nav` channel, Hz (0: every solution).
+    pub solution_rate_hz: f64,
     /// Solutions compared (recorded and replayed pairs).
     pub solutions_compared: u64,
     /// Compared solutions identical bit for bit (all fields but `header.send_mono_ns`).
@@ -347,6 +352,9 @@ pub fn replay_offline(opts: &OfflineOptions) -> Result<OfflineSummary, ReplayErr
         }
     }
     let out = opts.out_dir.join("recording.mcap");
+    let (solution_rate_hz, truth_rate_hz, view_rate_hz) = recorded_rates(rec.metadata());
+    // Which replayed solutions the source's recorder kept: the same gate on the same times.
+    let mut kept = RateGate::new(solution_rate_hz);
     let recorder = Recorder::start(
         &out,
         &RecorderOptions {
@@ -360,6 +368,9 @@ pub fn replay_offline(opts: &OfflineOptions) -> Result<OfflineSummary, ReplayErr
             },
             segment_duration: opts.segment_duration,
             tap: opts.tap.clone(),
+            solution_rate_hz,
+            truth_rate_hz,
+            view_rate_hz,
             ..Default::default()
         },
     )?;
@@ -367,11 +378,13 @@ pub fn replay_offline(opts: &OfflineOptions) -> Result<OfflineSummary, ReplayErr
         recording: opts.recording.display().to_string(),
         replayed_recording: out.display().to_string(),
         config_source: source,
+        solution_rate_hz,
         ..Default::default()
     };
     let pb = progress_bar(file_len, opts.progress, "replay");
     let started = Instant::now();
-    let mut pending: VecDeque<NavSolution> = VecDeque::new();
+    // Replayed solutions not yet met in the file, each with whether the source's rate kept it.
+    let mut pending: VecDeque<(NavSolution, bool)> = VecDeque::new();
     let mut alive = [false; MAX_SENSORS];
     let (mut t_first, mut t_last) = (None::<i64>, 0i64);
     let mut n = 0u64;
@@ -398,8 +411,21 @@ pub fn replay_offline(opts: &OfflineOptions) -> Result<OfflineSummary, ReplayErr
                 if !compare {
                     continue;
                 }
+                // Replayed solutions before this one: left out by the source's rate, or missing.
+                while let Some((mine, expected)) = pending
+                    .front()
+                    .filter(|(m, _)| m.header.seq < recorded.header.seq)
+                {
+                    if *expected && s.first_mismatch.is_none() {
+                        s.first_mismatch = Some(format!(
+                            "replayed solution {} (time {} ns) is missing from the recording",
+                            mine.header.seq, mine.header.time_ns
+                        ));
+                    }
+                    pending.pop_front();
+                }
                 match pending.pop_front() {
-                    Some(mine) => {
+                    Some((mine, _)) if mine.header.seq == recorded.header.seq => {
                         s.solutions_compared += 1;
                         match compare_solutions(recorded, &mine) {
                             Ok(()) => s.solutions_bit_identical += 1,
@@ -413,7 +439,10 @@ pub fn replay_offline(opts: &OfflineOptions) -> Result<OfflineSummary, ReplayErr
                             }
                         }
                     }
-                    None => {
+                    other => {
+                        if let Some(o) = other {
+                            pending.push_front(o);
+                        }
                         if s.first_mismatch.is_none() {
                             s.first_mismatch = Some(format!(
                                 "recorded solution {} (time {} ns) has no replayed counterpart",
@@ -425,12 +454,17 @@ pub fn replay_offline(opts: &OfflineOptions) -> Result<OfflineSummary, ReplayErr
             }
             Record::Status(st) => {
                 s.recorded_records_dropped = s.recorded_records_dropped.max(st.records_dropped);
+                // The latency is the live run's (the replay keeps its reception clock).
                 let mut mine = Status {
                     header: st.header,
                     solutions_published: s.solutions_replayed,
                     records_written: recorder.written(),
                     records_dropped: recorder.dropped(),
                     recorder_errors: recorder.errors(),
+                    latency_count: st.latency_count,
+                    latency_p50_us: st.latency_p50_us,
+                    latency_p99_us: st.latency_p99_us,
+                    latency_max_us: st.latency_max_us,
                     ..engine_status(&engine)
                 };
                 for (i, a) in alive.iter().enumerate() {
@@ -471,7 +505,8 @@ pub fn replay_offline(opts: &OfflineOptions) -> Result<OfflineSummary, ReplayErr
                         sol.header.send_mono_ns = e.receive_mono_ns;
                         recorder.record_blocking(Record::Nav(sol), e.receive_mono_ns);
                         if compare {
-                            pending.push_back(sol);
+                            let t = log_time_of(sol.header.time_ns).unwrap_or(0);
+                            pending.push_back((sol, kept.admit(t)));
                         }
                     }
                     Ok(None) => {}
@@ -489,7 +524,7 @@ pub fn replay_offline(opts: &OfflineOptions) -> Result<OfflineSummary, ReplayErr
     }
     // Solutions replayed after the last recorded one are expected only when the recording was
     // cut short (the IMU sample reached the file, its solution did not).
-    let unmatched = pending.len() as u64;
+    let unmatched = pending.iter().filter(|(_, expected)| *expected).count() as u64;
     if compare && unmatched > 0 && s.recording_complete && s.first_mismatch.is_none() {
         s.first_mismatch = Some(format!(
             "{unmatched} replayed solutions have no recorded counterpart"
@@ -499,6 +534,7 @@ pub fn replay_offline(opts: &OfflineOptions) -> Result<OfflineSummary, ReplayErr
         && s.solutions_compared > 0
         && s.solutions_bit_identical == s.solutions_compared
         && s.solutions_compared == s.solutions_recorded
+        && s.first_mismatch.is_none()
         && (!s.recording_complete || unmatched == 0);
     let (stats, segments) = recorder.finish_with_segments()?;
     if stats.dropped > 0 {
@@ -539,6 +575,12 @@ pub fn format_offline_table(s: &OfflineSummary) -> String {
         "solutions recorded / replayed",
         format!("{} / {}", s.solutions_recorded, s.solutions_replayed),
     );
+    if s.solution_rate_hz > 0.0 {
+        row(
+            "recorded solution rate [Hz]",
+            format!("{} (one solution per interval)", s.solution_rate_hz),
+        );
+    }
     if s.config_source == "embedded" && s.solutions_recorded == 0 {
         row(
             "bit exact",

@@ -173,6 +173,10 @@ impl StreamingPercentiles {
     pub fn max(&self) -> Option<f64> {
         self.max
     }
+    /// Values taken.
+    pub fn count(&self) -> u64 {
+        self.n
+    }
 }
 
 #[cfg(test)]

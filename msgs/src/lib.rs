@@ -651,6 +651,21 @@ pub struct Status {
     /// per confirmed discontinuity, fewer for a candidate run that was cut short.
     #[serde(default)]
     pub imu_held_at_time_jump: u64,
+    /// Solutions whose latency (IMU sample's `send_mono_ns` to the solution's) this daemon
+    /// has measured since it started: every solution it computed from a stamped IMU sample,
+    /// recorded or not (a recording may hold only some of them).
+    #[serde(default)]
+    pub latency_count: u64,
+    /// Median of that latency over the `latency_count` solutions, µs (from a histogram of
+    /// 64 logarithmic bins per octave: within 0.6 %).
+    #[serde(default)]
+    pub latency_p50_us: f64,
+    /// 99th percentile of that latency, µs (same histogram).
+    #[serde(default)]
+    pub latency_p99_us: f64,
+    /// Largest of that latency, µs (exact).
+    #[serde(default)]
+    pub latency_max_us: f64,
 }
 
 /// The logical channels of the system.

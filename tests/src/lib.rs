@@ -39,6 +39,42 @@ pub fn tempdir(tag: &str) -> PathBuf {
     d
 }
 
+/// A copy of `config/` in `dir` whose recorder keeps every solution and truth sample
+/// (`[recorder] solution_rate_hz = 0`, `truth_rate_hz = 0`; shipped: 10 Hz); the copy's
+/// `sextant.toml`. For tests that check the solution at every IMU sample (its continuity
+/// through a fault, its stale flags), which a recording at 10 Hz does not show.
+pub fn every_solution_config(dir: &Path) -> PathBuf {
+    let cfg = dir.join("config-every-solution");
+    let _ = std::fs::remove_dir_all(&cfg);
+    copy_dir(&repo_root().join("config"), &cfg);
+    let sys = cfg.join("sextant.toml");
+    let text = std::fs::read_to_string(&sys).unwrap();
+    let mut changed = text.clone();
+    for key in ["solution_rate_hz", "truth_rate_hz"] {
+        let line = format!("\n{key} = 10.0\n");
+        assert!(
+            changed.contains(&line),
+            "config/sextant.toml has no `{key} = 10.0` line"
+        );
+        changed = changed.replacen(&line, &format!("\n{key} = 0.0\n"), 1);
+    }
+    std::fs::write(&sys, changed).unwrap();
+    sys
+}
+
+fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for e in std::fs::read_dir(from).unwrap() {
+        let e = e.unwrap();
+        let dst = to.join(e.file_name());
+        if e.file_type().unwrap().is_dir() {
+            copy_dir(&e.path(), &dst);
+        } else {
+            std::fs::copy(e.path(), &dst).unwrap();
+        }
+    }
+}
+
 /// Start `sextant run` from the repository root on `prefix` into `out`, with `extra`
 /// arguments; its stdout and stderr go to `out/sextant.log`.
 pub fn start_run(out: &Path, prefix: &str, extra: &[&str]) -> Result<std::process::Child> {

@@ -87,7 +87,8 @@ fn relay(to: u16) -> Relay {
     Relay { port, forwarding }
 }
 
-/// A copy of the shipped system configuration with absolute paths and `[bridge]` appended.
+/// A copy of the shipped system configuration with absolute paths, every solution recorded and
+/// `[bridge]` appended.
 fn config_with_bridge(dir: &Path, key: &str, port: u16) -> PathBuf {
     let root = repo_root().join("config");
     let text = std::fs::read_to_string(root.join("sextant.toml")).unwrap();
@@ -102,6 +103,17 @@ fn config_with_bridge(dir: &Path, key: &str, port: u16) -> PathBuf {
             &format!("scenario = {:?}", abs("scenarios/vehicle.toml")),
         );
     assert!(text.contains(&abs("filter.toml")) && text.contains(&abs("scenarios/vehicle.toml")));
+    // Every solution recorded: each one the far side receives is compared with A's recording.
+    let every = text.replacen(
+        "\nsolution_rate_hz = 10.0\n",
+        "\nsolution_rate_hz = 0.0\n",
+        1,
+    );
+    assert_ne!(
+        every, text,
+        "config/sextant.toml has no `solution_rate_hz = 10.0` line"
+    );
+    let text = every;
     let text = format!(
         "{text}\n[bridge]\nkey_prefix = \"{key}\"\nlisten = [\"tcp/127.0.0.1:{port}\"]\n\
          export = [\"nav\", \"status\"]\nlease_ms = {LEASE_MS}\n"

@@ -37,8 +37,11 @@ fn run_fusion(tag: &str, out: &Path, fsize_limit: Option<u64>) -> Outcome {
     let log_path = dir.join("fusion.log");
     let log = std::fs::File::create(&log_path).unwrap();
     let fusion_bin = bin("sextant-fusion").unwrap();
+    // Every solution recorded: the limits below are sized for the full data rate.
+    let config = every_solution_config(&dir);
     let args = format!(
-        "--config config/sextant.toml --prefix {prefix} --speed {SPEED} --out {}",
+        "--config {} --prefix {prefix} --speed {SPEED} --out {}",
+        config.display(),
         out.display()
     );
     let mut fusion: Child = match fsize_limit {
@@ -322,7 +325,8 @@ fn run_on_small_fs(
     let run = format!(
         "{} run --config {} --scenario {} --duration {duration} --speed 25 --prefix {prefix} --out {}/run",
         bin("sextant").unwrap().display(),
-        root.join("config/sextant.toml").display(),
+        // Every solution recorded: the file system's size is for the full data rate.
+        every_solution_config(&dir).display(),
         root.join("config/scenarios/vehicle.toml").display(),
         mnt.display(),
     );

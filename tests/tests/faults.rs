@@ -66,10 +66,14 @@ fn killed_driver_is_reported_degrades_and_is_used_again_after_restart() {
     let speed = 20.0;
     let kill_at_sim_s = 180.0;
     let restart_delay_s = 2.0;
+    // Every solution recorded: the continuity through the gap is checked at each IMU sample.
+    let config = every_solution_config(&out);
     let mut child = start_run(
         &out,
         &prefix,
         &[
+            "--config",
+            config.to_str().unwrap(),
             "--scenario",
             "config/scenarios/vehicle.toml",
             "--duration",
@@ -119,7 +123,7 @@ fn killed_driver_is_reported_degrades_and_is_used_again_after_restart() {
     );
 
     // The fusion kept publishing through the gap: no hole in the solutions longer than two IMU
-    // periods (200 Hz, every solution recorded with nav_decimation = 1).
+    // periods (200 Hz, every solution recorded: `every_solution_config`).
     let nav: Vec<&serde_json::Value> = rec.topic("nav").map(|r| &r.json).collect();
     let nav_t: Vec<i64> = nav
         .iter()

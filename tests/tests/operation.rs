@@ -153,9 +153,14 @@ fn one_bus_per_prefix_and_an_earlier_run_is_never_overwritten() {
     let s = summary_json(&a_out);
     assert_eq!(s["recording_complete"], true, "{s}");
     assert_eq!(s["records_dropped"], 0, "{s}");
-    assert!(s["solutions"].as_u64().unwrap() > 1000, "{s}");
+    // 10 s of navigation: 2 000 solutions at 200 Hz, 100 recorded at 10 Hz.
+    assert!(s["solutions_computed"].as_u64().unwrap() > 1000, "{s}");
     let rec = read_recording(&a_out.join("recording.mcap")).unwrap();
-    assert!(rec.count("nav") > 1000);
+    assert!(
+        rec.count("nav") > 50,
+        "{} solutions recorded",
+        rec.count("nav")
+    );
     // The earlier run is untouched.
     assert_eq!(
         std::fs::read(old.join("recording.mcap")).unwrap(),

@@ -81,7 +81,8 @@ fn report_of_a_live_recording_matches_an_independent_computation() {
     }
     let te = &s["truth_errors"];
     assert_eq!(te["solutions_matched"].as_u64(), Some(e[0].len() as u64));
-    assert!(e[0].len() > 500);
+    // 15 s of navigation, solutions and truth recorded at 10 Hz: 150 pairs.
+    assert!(e[0].len() > 100, "{} pairs", e[0].len());
     for (i, axis) in ["position_north_m", "position_east_m", "position_down_m"]
         .iter()
         .enumerate()

@@ -43,7 +43,11 @@ fn run_at(tag: &str, speed: f64, extra: &[&str]) -> (std::path::PathBuf, String,
     let scenario = driving_scenario(&out).display().to_string();
     let speed = speed.to_string();
     let duration = DURATION_S.to_string();
+    // Every solution recorded: holes and stale flags are checked at each IMU sample.
+    let config = every_solution_config(&out).display().to_string();
     let mut args = vec![
+        "--config",
+        &config,
         "--scenario",
         &scenario,
         "--duration",

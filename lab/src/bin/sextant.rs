@@ -1260,18 +1260,22 @@ fn replay(args: ReplayArgs) -> anyhow::Result<()> {
     if let Some(rec) = args.offline {
         let replayed = args.out.join("recording.mcap");
         // The fixes are compared at the antenna of the configuration the replay runs with.
+        let source = sextant_lab::recording::Recording::open(&rec)?;
         let antenna_lever_arm_b_m = match &args.config {
             Some(p) => rp::load_filter_config(p)?,
-            None => rp::embedded_filter_config(&sextant_lab::recording::Recording::open(&rec)?)?,
+            None => rp::embedded_filter_config(&source)?,
         }
         .gnss
         .lever_arm_b_m;
+        // The replay records at the source's rates.
+        let thinned = analysis::thinned_topics(source.metadata());
+        drop(source);
         // The replay's recording is analysed while it is written, on a thread of its own: the
         // recorder hands it every message it writes (the queue ends with the recorder).
         let (tap, written) = std::sync::mpsc::sync_channel(8);
         let (s, tapped) = std::thread::scope(|scope| {
             let analysis = scope.spawn(|| {
-                analysis::analyze_written(&replayed, written, &[], antenna_lever_arm_b_m)
+                analysis::analyze_written(&replayed, written, &[], antenna_lever_arm_b_m, &thinned)
             });
             let s = rp::replay_offline(&rp::OfflineOptions {
                 recording: rec,

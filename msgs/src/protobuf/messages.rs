@@ -62,7 +62,8 @@ crate::proto_message!(Status = "sextant.Status" {
     15 => gnss_ls_pdop, 16 => reinitializations, 17 => zupt_fused, 18 => zupt_rejected_gate,
     19 => nhc_fused, 20 => nhc_rejected_gate, 21 => nhc_nis_sum, 22 => solutions_stale,
     23 => motion_alignments, 24 => gnss_heading_alignments, 25 => warm_starts,
-    26 => imu_held_at_time_jump,
+    26 => imu_held_at_time_jump, 27 => latency_count, 28 => latency_p50_us,
+    29 => latency_p99_us, 30 => latency_max_us,
 });
 crate::proto_message!(SensorAliveEvent = "sextant.SensorAliveEvent" {
     1 => header, 2 => sensor, 3 => alive,

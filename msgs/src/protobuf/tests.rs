@@ -47,6 +47,8 @@ fn every_kind() -> Vec<Record> {
         records_written: 1 << 40,
         gnss_ls_last_nis: 0.1 + 0.2,
         imu_held_at_time_jump: 3,
+        latency_count: 7,
+        latency_p99_us: 123.25,
         ..Default::default()
     };
     status.sensors[2].nis_sum = 1234.5;
