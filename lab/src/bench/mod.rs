@@ -460,11 +460,14 @@ fn offline_throughput(cfg_dir: &Path, sim_s: f64) -> anyhow::Result<Value> {
 }
 
 /// The replay stage of `replay --offline` (see the module comment) with the filter
-/// configuration `filter` on the vehicle scenario of `cfg_dir`, simulated for `sim_s`.
+/// configuration `filter` on the vehicle scenario of `cfg_dir`, simulated for `sim_s`, the
+/// drive recorded at the rates of `recorder` (the configuration's: the replay then writes its
+/// solutions at the same rate, as it would for a recording of `sextant run`).
 fn replay_throughput(
     out: &Path,
     cfg_dir: &Path,
     filter: &fusion::navigator::NavigatorConfig,
+    recorder: &crate::config::RecorderSection,
     sim_s: f64,
 ) -> anyhow::Result<Value> {
     use crate::interchange::kfgins;
@@ -481,6 +484,9 @@ fn replay_throughput(
                 CONFIG_METADATA_NAME.to_string(),
                 [(CONFIG_KEY_FILTER_TOML.to_string(), toml::to_string(filter)?)].into(),
             )],
+            solution_rate_hz: recorder.solution_rate_hz,
+            truth_rate_hz: recorder.truth_rate_hz,
+            view_rate_hz: recorder.view_rate_hz,
             ..Default::default()
         },
     )?;
@@ -839,7 +845,15 @@ pub fn run(opts: &BenchOptions) -> anyhow::Result<Value> {
     eprintln!("bench: replay, {} s simulated", sizes.replay_s);
     // The filter as configured (its own alignment), not the live runs' short one: the
     // replayed drive navigates as the default run does.
-    let replay = replay_throughput(&opts.out, &cfg_dir, &cfg.navigator, sizes.replay_s)?;
+    // At the configuration's recording rates, read before the live runs' copy was set to
+    // record every solution.
+    let replay = replay_throughput(
+        &opts.out,
+        &cfg_dir,
+        &cfg.navigator,
+        &cfg.system.recorder,
+        sizes.replay_s,
+    )?;
     eprintln!("bench: recorder");
     let recorder = recorder_throughput(&opts.out, sizes.record_saturated, sizes.record_paced_s)?;
     eprintln!("bench: cost curves");
