@@ -795,7 +795,7 @@ pub fn format_table(s: &Summary) -> String {
             s.final_mode.clone().unwrap_or_else(|| "—".into()),
         ),
         (
-            "solutions (matched with truth)".into(),
+            "solutions recorded (matched with truth)".into(),
             format!("{} ({})", s.solutions, s.solutions_matched_with_truth),
         ),
         (
