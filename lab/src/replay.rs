@@ -117,6 +117,9 @@ pub struct OfflineOptions {
     /// recorder's [`RecorderOptions::tap`]): `sextant replay` analyses the replay while it runs
     /// ([`crate::analysis::analyze_written`]) instead of reading the new file back afterwards.
     pub tap: Option<std::sync::mpsc::SyncSender<Vec<crate::recorder::Written>>>,
+    /// Rate of the solutions in the replay's recording, Hz (0: every solution); `None`: the
+    /// replayed recording's rate. The comparison always takes the recorded solutions it holds.
+    pub solution_rate_hz: Option<f64>,
 }
 
 /// The live recorder's default segment length (`recorder.segment_duration_s`), used by
@@ -368,7 +371,7 @@ pub fn replay_offline(opts: &OfflineOptions) -> Result<OfflineSummary, ReplayErr
             },
             segment_duration: opts.segment_duration,
             tap: opts.tap.clone(),
-            solution_rate_hz,
+            solution_rate_hz: opts.solution_rate_hz.unwrap_or(solution_rate_hz),
             truth_rate_hz,
             view_rate_hz,
             ..Default::default()

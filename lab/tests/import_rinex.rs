@@ -66,6 +66,7 @@ fn esbc_hour_imports_and_reads_back() {
             progress: false,
             segment_duration: None,
             tap: None,
+            solution_rate_hz: None,
         });
         let replay = replay.unwrap();
         assert!(replay.recording_complete, "{replay:?}");

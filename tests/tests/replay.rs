@@ -206,6 +206,25 @@ fn offline_replay_reproduces_the_live_solution_bit_for_bit() {
             .unwrap_or(0.0)
     );
 
+    // `--solution-rate 0` writes every replayed solution, still checking the recorded ones.
+    let every = out.join("every");
+    let o = Command::new(bin("sextant").unwrap())
+        .args(["replay", "--offline"])
+        .arg(&rec)
+        .args(["--solution-rate", "0", "--out"])
+        .arg(&every)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let s: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(every.join("summary.json")).unwrap())
+            .unwrap();
+    assert_eq!(s["replay"]["bit_exact"], true, "{s}");
+    assert_eq!(
+        s["analysis"]["messages_per_channel"]["nav"], s["replay"]["solutions_replayed"],
+        "{s}"
+    );
+
     // A recorded solution missing from the file is found although every recorded one that is
     // there matches: the replay knows which solutions the recording's rate keeps.
     let holed = out.join("holed.mcap");

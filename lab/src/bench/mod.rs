@@ -509,6 +509,7 @@ fn replay_throughput(
             progress: false,
             segment_duration: None,
             tap: None,
+            solution_rate_hz: None,
         })?;
         Ok(json!({
             "imu_samples": s.imu_samples,

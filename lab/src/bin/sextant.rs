@@ -265,6 +265,11 @@ struct ReplayArgs {
     /// one segment (offline; 0: one file).
     #[arg(long, default_value_t = sextant_lab::replay::DEFAULT_SEGMENT_DURATION_S, value_parser = parse_non_negative_s)]
     segment_duration_s: f64,
+    /// Rate of the solutions written to the replay's recording, Hz of time of validity (0:
+    /// every solution; offline). Default: the replayed recording's `[recorder]
+    /// solution_rate_hz`. The replay computes every solution either way.
+    #[arg(long, value_name = "HZ", value_parser = parse_rate_hz)]
+    solution_rate: Option<f64>,
     /// Speed-up of simulated over wall time (live).
     #[arg(long, default_value_t = 1.0)]
     speed: f64,
@@ -291,6 +296,17 @@ fn parse_non_negative_s(s: &str) -> Result<f64, String> {
     match s.parse::<f64>() {
         Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
         Ok(v) => Err(format!("{v} s: a duration is finite and not negative")),
+        Err(e) => Err(format!("{s:?}: {e}")),
+    }
+}
+
+/// A rate in Hz: finite and not negative (0: every message).
+fn parse_rate_hz(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
+        Ok(v) => Err(format!(
+            "{v} Hz: a rate is finite and not negative (0: every message)"
+        )),
         Err(e) => Err(format!("{s:?}: {e}")),
     }
 }
@@ -1267,8 +1283,13 @@ fn replay(args: ReplayArgs) -> anyhow::Result<()> {
         }
         .gnss
         .lever_arm_b_m;
-        // The replay records at the source's rates.
-        let thinned = analysis::thinned_topics(source.metadata());
+        // The replay records at the source's rates, unless told another solution rate.
+        let mut thinned = analysis::thinned_topics(source.metadata());
+        if args.solution_rate == Some(0.0) {
+            thinned.retain(|t| *t != msgs::Channel::Nav.name());
+        } else if args.solution_rate.is_some() && !thinned.contains(&msgs::Channel::Nav.name()) {
+            thinned.push(msgs::Channel::Nav.name());
+        }
         drop(source);
         // The replay's recording is analysed while it is written, on a thread of its own: the
         // recorder hands it every message it writes (the queue ends with the recorder).
@@ -1285,6 +1306,7 @@ fn replay(args: ReplayArgs) -> anyhow::Result<()> {
                 segment_duration: (args.segment_duration_s > 0.0)
                     .then(|| std::time::Duration::from_secs_f64(args.segment_duration_s)),
                 tap: Some(tap),
+                solution_rate_hz: args.solution_rate,
             });
             (s, analysis.join())
         });
