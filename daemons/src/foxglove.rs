@@ -205,6 +205,10 @@ pub struct StatusPlot {
     pub warm_starts: u64,
     /// Solutions published stale so far.
     pub solutions_stale: u64,
+    /// Median latency (IMU sample sent → solution sent) over every solution so far, µs.
+    pub latency_p50_us: f64,
+    /// 99th percentile of that latency so far, µs.
+    pub latency_p99_us: f64,
 }
 
 /// A view's protobuf form (recordings of [`crate::recorder::RecordingEncoding::Protobuf`]):
@@ -350,7 +354,7 @@ msgs::proto_message!(StatusPlot = "sextant.StatusPlot" {
     6 => odometer_alive, 7 => baro_alive, 8 => deadline_misses, 9 => solutions_published,
     10 => records_written, 11 => records_dropped, 12 => recorder_errors,
     13 => imu_channels_excluded, 14 => reinitializations, 15 => motion_alignments,
-    16 => warm_starts, 17 => solutions_stale,
+    16 => warm_starts, 17 => solutions_stale, 18 => latency_p50_us, 19 => latency_p99_us,
 });
 
 impl ToProtobuf for StatusPlot {
@@ -390,6 +394,8 @@ pub fn status_plot(st: &Status, unix_ns: u64) -> StatusPlot {
         motion_alignments: st.motion_alignments,
         warm_starts: st.warm_starts,
         solutions_stale: st.solutions_stale,
+        latency_p50_us: st.latency_p50_us,
+        latency_p99_us: st.latency_p99_us,
     }
 }
 
