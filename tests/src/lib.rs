@@ -46,7 +46,13 @@ pub fn tempdir(tag: &str) -> PathBuf {
 pub fn every_solution_config(dir: &Path) -> PathBuf {
     let cfg = dir.join("config-every-solution");
     let _ = std::fs::remove_dir_all(&cfg);
-    copy_dir(&repo_root().join("config"), &cfg);
+    let st = std::process::Command::new("cp")
+        .arg("-r")
+        .arg(repo_root().join("config"))
+        .arg(&cfg)
+        .status()
+        .unwrap();
+    assert!(st.success(), "cp -r config {}", cfg.display());
     let sys = cfg.join("sextant.toml");
     let text = std::fs::read_to_string(&sys).unwrap();
     let mut changed = text.clone();
@@ -60,19 +66,6 @@ pub fn every_solution_config(dir: &Path) -> PathBuf {
     }
     std::fs::write(&sys, changed).unwrap();
     sys
-}
-
-fn copy_dir(from: &Path, to: &Path) {
-    std::fs::create_dir_all(to).unwrap();
-    for e in std::fs::read_dir(from).unwrap() {
-        let e = e.unwrap();
-        let dst = to.join(e.file_name());
-        if e.file_type().unwrap().is_dir() {
-            copy_dir(&e.path(), &dst);
-        } else {
-            std::fs::copy(e.path(), &dst).unwrap();
-        }
-    }
 }
 
 /// Start `sextant run` from the repository root on `prefix` into `out`, with `extra`
