@@ -12,6 +12,10 @@
 //!   (`foxglove.PoseInFrame`) and `tf` (`foxglove.FrameTransforms`) at
 //!   [`RecorderOptions::view_rate_hz`], the status also on `status/plot` (plain numbers), see
 //!   [`crate::foxglove`];
+//! - `nav` and `truth` at [`RecorderOptions::solution_rate_hz`] and
+//!   [`RecorderOptions::truth_rate_hz`] (the first message of each interval of log time,
+//!   [`RateGate`]; 0: every message), stated in the metadata record [`RATES_METADATA_NAME`];
+//!   every input is recorded;
 //! - times follow MCAP's and Foxglove's convention, Unix nanoseconds (UTC, leap seconds not
 //!   counted), stated in the metadata record [`TIME_METADATA_NAME`]:
 //!   - **log_time = the message's time of validity** (its header's GPS time converted to UTC
@@ -242,7 +246,8 @@ pub struct RecorderOptions {
     /// Rate of the solution's Foxglove views (`nav/location_fix`, `nav/pose`, `tf`), Hz of
     /// time of validity: the view of the first solution in each `1/view_rate_hz` interval of
     /// log time; 0: a view of every solution. The views are for display (the `nav` channel
-    /// keeps every solution); at the solution's own rate they would be a third of the file.
+    /// has its own rate, [`Self::solution_rate_hz`]); at the solution's own rate they would be
+    /// a third of the file.
     pub view_rate_hz: f64,
     /// Rate of the `nav` channel, Hz of time of validity: the first solution of each
     /// `1/solution_rate_hz` interval of log time is written; 0: every solution. The inputs are
@@ -828,11 +833,14 @@ impl Sink {
             Record::Nav(_) => self.nav_gate.admit(log_time),
             _ => true,
         };
-        let mut n = 0;
-        if nav_kept {
-            n += self.write_record(item, log_time)?;
-        }
+        // A JSON recording writes a non-finite record as its placeholder: no view of it.
+        let (mut n, as_itself) = if nav_kept {
+            self.write_record(item, log_time)?
+        } else {
+            (0, true)
+        };
         if let Record::Nav(nav) = &item.record
+            && as_itself
             && self.view_gate.admit(log_time)
         {
             let h = nav.header;
@@ -854,8 +862,9 @@ impl Sink {
         Ok(n)
     }
 
-    /// Write the record itself (and the status's plot view); returns the messages written.
-    fn write_record(&mut self, item: &Item, log_time: u64) -> Result<u64, RecorderError> {
+    /// Write the record itself (and the status's plot view); returns the messages written and
+    /// whether the record went as itself (false: as [`NON_FINITE_TOPIC`]'s placeholder).
+    fn write_record(&mut self, item: &Item, log_time: u64) -> Result<(u64, bool), RecorderError> {
         let cid = match item.record.channel() {
             Some(ch) => *self
                 .channels
@@ -895,7 +904,7 @@ impl Sink {
             .map_err(|e| self.err(e))?;
             self.write_message(non_finite, h.seq, log_time, item.receive_mono_ns)?;
             self.tap(NON_FINITE_TOPIC, None);
-            return Ok(1);
+            return Ok((1, false));
         }
         self.write_message(cid, h.seq, log_time, item.receive_mono_ns)?;
         if self.tap.is_some() {
@@ -908,7 +917,7 @@ impl Sink {
             self.tap(foxglove::STATUS_PLOT_TOPIC, None);
             n += 1;
         }
-        Ok(n)
+        Ok((n, true))
     }
 
     fn flush(&mut self) -> Result<(), RecorderError> {
