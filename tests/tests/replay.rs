@@ -421,15 +421,11 @@ fn live_replay_drives_a_real_fusion_daemon_like_the_drivers() {
         .expect("shipped configuration")
         .navigator
         .latency;
+    // The navigator's own mapping from a sensor to its latency.
     let latency_ns = |topic: &str| {
-        let s = match topic {
-            "gnss" => latency.gnss_s,
-            "star_tracker" => latency.star_tracker_s,
-            "odometer" => latency.odometer_s,
-            "baro" => latency.baro_s,
-            _ => 0.0,
-        };
-        (s * 1e9).round() as i64
+        msgs::Channel::from_name(topic)
+            .and_then(msgs::Channel::sensor)
+            .map_or(0, |sensor| latency.of(sensor).ns)
     };
     let (pend_orig, pend_live) = (
         epochs_with_a_sample_pending(&in_orig, latency_ns),
