@@ -43,18 +43,22 @@
 //! Samples more than [`FOLLOW_MAX_LATE_S`] older than the bus's time at the start are skipped
 //! (counted), younger late ones are sent at once and the navigator's delayed fusion takes them.
 
+mod matching;
+
+use matching::SolutionMatcher;
+
 use crate::config;
 use crate::daemon::{engine_status, feed, stamp_solution};
 use crate::recorder::{
     CALIBRATION_KEY_ELAPSED_S, CALIBRATION_KEY_SNAPSHOT, CALIBRATION_METADATA_NAME,
-    CONFIG_KEY_FILTER_TOML, CONFIG_METADATA_NAME, RateGate, Record, Recorder, RecorderOptions,
-    WARM_START_KEY_SNAPSHOT, WARM_START_METADATA_NAME, log_time_of, recorded_rates,
+    CONFIG_KEY_FILTER_TOML, CONFIG_METADATA_NAME, Record, Recorder, RecorderOptions,
+    WARM_START_KEY_SNAPSHOT, WARM_START_METADATA_NAME, recorded_rates,
 };
 use crate::recording::{Recording, RecordingError, TimeBase};
 use fusion::navigator::{NavSnapshot, Navigator, NavigatorConfig};
 use msgs::{MAX_SENSORS, NavSolution, Status};
 use serde::Serialize;
-use std::collections::{BTreeMap, VecDeque};
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -357,7 +361,6 @@ pub fn replay_offline(opts: &OfflineOptions) -> Result<OfflineSummary, ReplayErr
     let out = opts.out_dir.join("recording.mcap");
     let (solution_rate_hz, truth_rate_hz, view_rate_hz) = recorded_rates(rec.metadata());
     // Which replayed solutions the source's recorder kept: the same gate on the same times.
-    let mut kept = RateGate::new(solution_rate_hz);
     let recorder = Recorder::start(
         &out,
         &RecorderOptions {
@@ -386,8 +389,7 @@ pub fn replay_offline(opts: &OfflineOptions) -> Result<OfflineSummary, ReplayErr
     };
     let pb = progress_bar(file_len, opts.progress, "replay");
     let started = Instant::now();
-    // Replayed solutions not yet met in the file, each with whether the source's rate kept it.
-    let mut pending: VecDeque<(NavSolution, bool)> = VecDeque::new();
+    let mut matcher = SolutionMatcher::new(solution_rate_hz);
     let mut alive = [false; MAX_SENSORS];
     let (mut t_first, mut t_last) = (None::<i64>, 0i64);
     let mut n = 0u64;
@@ -414,46 +416,7 @@ pub fn replay_offline(opts: &OfflineOptions) -> Result<OfflineSummary, ReplayErr
                 if !compare {
                     continue;
                 }
-                // Replayed solutions before this one: left out by the source's rate, or missing.
-                while let Some((mine, expected)) = pending
-                    .front()
-                    .filter(|(m, _)| m.header.seq < recorded.header.seq)
-                {
-                    if *expected && s.first_mismatch.is_none() {
-                        s.first_mismatch = Some(format!(
-                            "replayed solution {} (time {} ns) is missing from the recording",
-                            mine.header.seq, mine.header.time_ns
-                        ));
-                    }
-                    pending.pop_front();
-                }
-                match pending.pop_front() {
-                    Some((mine, _)) if mine.header.seq == recorded.header.seq => {
-                        s.solutions_compared += 1;
-                        match compare_solutions(recorded, &mine) {
-                            Ok(()) => s.solutions_bit_identical += 1,
-                            Err(d) => {
-                                if s.first_mismatch.is_none() {
-                                    s.first_mismatch = Some(format!(
-                                        "solution {} (time {} ns): {d}",
-                                        recorded.header.seq, recorded.header.time_ns
-                                    ));
-                                }
-                            }
-                        }
-                    }
-                    other => {
-                        if let Some(o) = other {
-                            pending.push_front(o);
-                        }
-                        if s.first_mismatch.is_none() {
-                            s.first_mismatch = Some(format!(
-                                "recorded solution {} (time {} ns) has no replayed counterpart",
-                                recorded.header.seq, recorded.header.time_ns
-                            ));
-                        }
-                    }
-                }
+                matcher.recorded(recorded);
             }
             Record::Status(st) => {
                 s.recorded_records_dropped = s.recorded_records_dropped.max(st.records_dropped);
@@ -508,8 +471,7 @@ pub fn replay_offline(opts: &OfflineOptions) -> Result<OfflineSummary, ReplayErr
                         sol.header.send_mono_ns = e.receive_mono_ns;
                         recorder.record_blocking(Record::Nav(sol), e.receive_mono_ns);
                         if compare {
-                            let t = log_time_of(sol.header.time_ns).unwrap_or(0);
-                            pending.push_back((sol, kept.admit(t)));
+                            matcher.replayed(sol);
                         }
                     }
                     Ok(None) => {}
@@ -527,12 +489,11 @@ pub fn replay_offline(opts: &OfflineOptions) -> Result<OfflineSummary, ReplayErr
     }
     // Solutions replayed after the last recorded one are expected only when the recording was
     // cut short (the IMU sample reached the file, its solution did not).
-    let unmatched = pending.iter().filter(|(_, expected)| *expected).count() as u64;
-    if compare && unmatched > 0 && s.recording_complete && s.first_mismatch.is_none() {
-        s.first_mismatch = Some(format!(
-            "{unmatched} replayed solutions have no recorded counterpart"
-        ));
-    }
+    let m = matcher.finish(s.recording_complete);
+    s.solutions_compared = m.solutions_compared;
+    s.solutions_bit_identical = m.solutions_bit_identical;
+    s.first_mismatch = m.first_mismatch;
+    let unmatched = m.unmatched_expected;
     s.bit_exact = compare
         && s.solutions_compared > 0
         && s.solutions_bit_identical == s.solutions_compared
