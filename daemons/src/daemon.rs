@@ -1,7 +1,14 @@
-//! The fusion daemon's filter thread: subscribes to every sensor channel and the truth, blocks in
-//! an iceoryx2 WaitSet (one deadline per sensor, intervals for the status and for the stop flag),
-//! pushes samples into the navigator, publishes the solution and the status, and hands every
-//! input and output to the [`Recorder`].
+//! The fusion daemon's filter thread: subscribes to every sensor channel and the truth, blocks on
+//! the IMU channel's wake-ups (with a timeout at the next sensor deadline, status or stop check:
+//! the loop keeps those clocks itself), pushes samples into the navigator, publishes the
+//! solution and the status, and hands every input and output to the [`Recorder`].
+//!
+//! Why not an iceoryx2 WaitSet over every channel: each of its waits allocates twice (0.10), on
+//! the path of every IMU sample, and the aiding's own wake-ups change nothing: the navigator
+//! fuses an aiding sample at its time of validity, and the loop takes every channel's samples
+//! at each wake-up, aiding first — one that arrives between two IMU samples is taken before the
+//! second, as it was when it woke the loop itself. While the IMU is silent, the timeout (at
+//! most [`STOP_CHECK`]) drains the other channels.
 //!
 //! The navigator is reached through the [`NavEngine`] trait, so that the loop can be tested with
 //! a stand-in before (and independently of) the real filter.
@@ -13,8 +20,7 @@ use crate::recorder::{Recorder, RecorderError, RecorderOptions, RecorderStats};
 use crate::staleness::Staleness;
 use fusion::Rejection;
 use fusion::navigator::{Input, NavSnapshot, Navigator, WarmStartOutcome};
-use iceoryx2::prelude::*;
-use msgs::ipc::{Bus, NodeError, PublisherError, Sub, SubscriberError, WaitSetError};
+use msgs::ipc::{Bus, NodeError, PublisherError, Sub, SubscriberError, WaitError};
 use msgs::{
     BaroSample, Channel, GnssSample, ImuSample, MAX_SENSORS, Message, NavSolution, OdometerSample,
     PerSensor, Record, SensorAliveEvent, SensorHealth, SensorId, StarTrackerSample, Status,
@@ -24,6 +30,10 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
+
+/// Longest wait for the IMU's wake-up: how soon a stop request (the signal handler's flag) is
+/// seen, and the other channels are drained, while the IMU is silent.
+const STOP_CHECK: Duration = Duration::from_millis(100);
 
 /// What the daemon needs from the fusion engine ([`Navigator`] implements it).
 pub trait NavEngine {
@@ -211,9 +221,9 @@ pub enum DaemonError {
     /// Recorder.
     #[error(transparent)]
     Recorder(#[from] RecorderError),
-    /// WaitSet creation, attachment or wait.
+    /// The wait for the IMU channel's wake-ups.
     #[error(transparent)]
-    WaitSet(#[from] WaitSetError),
+    Wait(#[from] WaitError),
     /// A real-time setting the system refused (`[fusion.realtime]`).
     #[error(transparent)]
     Realtime(#[from] crate::realtime::RealtimeError),
@@ -596,29 +606,11 @@ pub fn run<E: NavEngine>(
         }
     }
 
-    let ws = msgs::ipc::waitset()?;
-    let attach = WaitSetError::Attach;
     let dl = |s: SensorId| opts.system.wall_deadline(s, opts.speed);
-    let listeners = PerSensor([
-        imu.listener(),
-        star.listener(),
-        gnss.listener(),
-        odo.listener(),
-        baro.listener(),
-    ]);
-    let mut deadline_guards = Vec::with_capacity(SensorId::COUNT);
-    for (s, listener) in listeners.iter() {
+    for s in SensorId::ALL {
         tracing::info!("{} deadline {:?} (wall)", s.name(), dl(s));
-        let guard = ws.attach_deadline(*listener, dl(s)).map_err(attach)?;
-        deadline_guards.push((s, guard));
     }
-    let g_truth = ws.attach_notification(truth.listener()).map_err(attach)?;
-    let g_status = ws
-        .attach_interval(Duration::from_secs_f64(opts.system.fusion.status_period_s))
-        .map_err(attach)?;
-    let _g_stop = ws
-        .attach_interval(Duration::from_millis(100))
-        .map_err(attach)?;
+    let status_period = Duration::from_secs_f64(opts.system.fusion.status_period_s);
     tracing::info!(
         "fusion running: prefix {}, recording {}",
         opts.prefix,
@@ -635,23 +627,10 @@ pub fn run<E: NavEngine>(
     // Readiness, status and watchdog for a service manager (no-op without NOTIFY_SOCKET).
     let mut service = crate::sd_notify::Service::from_env();
 
-    // `fired`: the sensors whose listener the WaitSet saw woken, then the truth's. Only those
-    // wake-ups are consumed before draining (one system call each; at 1 kHz most wake-ups are
-    // the IMU's alone, and five needless reads sat between its arrival and its solution). A
-    // wake-up that comes after the WaitSet looked stays pending: the next wait returns at once
-    // and consumes it. Every subscriber is drained whatever fired.
-    let drain_all = |st: &mut State<'_, E>, fired: &PerSensor<bool>, truth_fired: bool| {
+    // Every subscriber is drained at each wake-up, in `Channel` order, aiding first: the
+    // navigator buffers it until the inertial solution reaches its time.
+    let drain_all = |st: &mut State<'_, E>| {
         st.got = PerSensor::splat(false);
-        for (s, l) in listeners.iter() {
-            if fired[s] {
-                let _ = l.try_wait(|_| {});
-            }
-        }
-        if truth_fired {
-            let _ = truth.listener().try_wait(|_| {});
-        }
-        // In `Channel` order, aiding first: the navigator buffers it until the inertial
-        // solution reaches its time.
         st.drain(&star);
         st.drain(&gnss);
         st.drain(&odo);
@@ -662,50 +641,47 @@ pub fn run<E: NavEngine>(
 
     // Spin-then-block: after each wake-up, poll the IMU listener's wake-up for up to `spin_us`
     // (a `poll` with no timeout: no sleep, no allocation, nothing consumed), so that the next
-    // sample is met awake: the WaitSet wait after it returns at once instead of sleeping and
-    // being woken, and still sees every wake-up (its deadlines count them). A core's worth of
-    // CPU while spinning: for a computer that has one to give.
+    // sample is met awake: the wait after it returns at once instead of sleeping and being
+    // woken. A core's worth of CPU while spinning: for a computer that has one to give.
     let spin = Duration::from_micros(opts.system.fusion.spin_us);
+    // A sensor silent for its deadline is declared dead, and again each deadline after while
+    // it stays silent (its misses are counted); the status goes out every period.
+    let mut deadline_at = PerSensor::splat(started);
+    for s in SensorId::ALL {
+        deadline_at[s] = started + dl(s);
+    }
+    let mut status_at = started + status_period;
     while !st.stop.load(Ordering::SeqCst) {
-        let mut missed = PerSensor::splat(false);
-        let mut fired = PerSensor::splat(false);
-        let mut truth_fired = false;
-        let mut status_due = false;
         if !spin.is_zero() {
             let until = Instant::now() + spin;
             while !imu.wake_up_pending() && Instant::now() < until {
                 std::hint::spin_loop();
             }
         }
-        ws.wait_and_process_once_with_timeout(
-            |id| {
-                for (s, g) in &deadline_guards {
-                    if id.has_missed_deadline(g) {
-                        missed[*s] = true;
-                    }
-                    if id.has_event_from(g) {
-                        fired[*s] = true;
-                    }
-                }
-                if id.has_event_from(&g_truth) {
-                    truth_fired = true;
-                }
-                if id.has_event_from(&g_status) {
-                    status_due = true;
-                }
-                CallbackProgression::Continue
-            },
-            Duration::from_secs(1),
-        )
-        .map_err(WaitSetError::Wait)?;
-        drain_all(&mut st, &fired, truth_fired);
+        let now = Instant::now();
+        let mut wake_by = (now + STOP_CHECK).min(status_at);
         for s in SensorId::ALL {
-            if missed[s] {
+            wake_by = wake_by.min(deadline_at[s]);
+        }
+        // At least a microsecond: the socket's receive timeout counts whole microseconds, and
+        // zero would mean no timeout at all.
+        let timeout = wake_by
+            .saturating_duration_since(now)
+            .max(Duration::from_micros(1));
+        imu.wait_for_wake_up(timeout)?;
+        drain_all(&mut st);
+        let now = Instant::now();
+        for s in SensorId::ALL {
+            if st.got[s] {
+                deadline_at[s] = now + dl(s);
+            } else if now >= deadline_at[s] {
                 st.deadline_missed(s);
+                deadline_at[s] = now + dl(s);
             }
         }
-        if status_due {
+        if now >= status_at {
             st.publish_status();
+            status_at = (status_at + status_period).max(now);
         }
         service.tick(st.engine.mode(), st.solutions, st.recorder.dropped());
     }
@@ -715,7 +691,7 @@ pub fn run<E: NavEngine>(
         started.elapsed().as_secs_f64(),
         crate::signals::last_signal()
     );
-    drain_all(&mut st, &PerSensor::splat(true), true);
+    drain_all(&mut st);
     st.publish_status();
     st.log_warm_start();
     let report_base = (st.imu_received, st.solutions, st.published, st.stale);

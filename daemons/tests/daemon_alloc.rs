@@ -9,9 +9,11 @@
 //!   (`Publisher::loan_uninit` allocates an `Rc` of shared state per sample). It was 3: its two
 //!   `map_err(ice(format!(..)))` built the error-context string on every send; they now format
 //!   only on failure. The daemon publishes one solution per IMU step (decimation 1).
-//! - each WaitSet wake-up: 2 allocations inside iceoryx2 0.10 (`WaitSet::wait_and_process_once*`
+//! - each wake-up: none. The loop waits on the IMU listener itself (`Sub::wait_for_wake_up`, a
+//!   receive with a timeout on its socket). It used to wait on a WaitSet over every channel,
+//!   whose waits allocate twice each inside iceoryx2 0.10 (`WaitSet::wait_and_process_once*`
 //!   collects the triggered file descriptors into a `vec![]` and builds a second `Vec` in
-//!   `handle_all_attachments`).
+//!   `handle_all_attachments`): 3.0–3.4 allocations per IMU step then, 1.05 now.
 //! - `Record::Gnss(Box::new(..))` and `Record::Status(Box::new(..))`: 1 per GNSS sample / status.
 //! - receiving a sample, building the other records, the recorder hand-off (`try_send` into the
 //!   bounded channel): none.
@@ -192,22 +194,16 @@ impl NavEngine for Probe {
 /// Allocations per published message (`Pub::send_raw`): iceoryx2's per-loan `Rc` only (its
 /// error contexts are formatted on failure only; they were 2 eager `format!`s).
 const PER_SEND: u64 = 1;
-/// Allocations per WaitSet wake-up inside iceoryx2 0.10.
-const PER_WAKEUP: u64 = 2;
+/// Allocations per wake-up of the loop's wait (`Sub::wait_for_wake_up`).
+const PER_WAKEUP: u64 = 0;
 
 /// Each step of the loop measured on its own, on this thread.
 #[test]
 fn each_step_of_the_loop_costs_what_it_costs() {
-    use iceoryx2::prelude::*;
     let prefix = format!("sextant-test-alloc-parts-{}", std::process::id());
     let bus = Bus::new(&prefix, "alloc-parts").expect("bus");
     let mut nav_pub = bus.publisher::<NavSolution>().expect("pub");
     let nav_sub = bus.subscriber::<NavSolution>().expect("sub");
-    let ws = WaitSetBuilder::new()
-        .signal_handling_mode(SignalHandlingMode::Disabled)
-        .create::<ipc::Service>()
-        .expect("waitset");
-    let _guard = ws.attach_notification(nav_sub.listener()).expect("attach");
     let dir = std::env::temp_dir().join(&prefix);
     std::fs::create_dir_all(&dir).expect("temp dir");
     let rec = Recorder::start(
@@ -241,12 +237,9 @@ fn each_step_of_the_loop_costs_what_it_costs() {
     });
     let wake = cost(&mut || {
         nav_pub.send_raw(sol).expect("send");
-        ws.wait_and_process_once_with_timeout(
-            |_| CallbackProgression::Continue,
-            Duration::from_secs(1),
-        )
-        .expect("wait");
-        let _ = nav_sub.listener().try_wait(|_| {});
+        nav_sub
+            .wait_for_wake_up(Duration::from_secs(1))
+            .expect("wait");
         while let Ok(Some(_)) = nav_sub.receive() {}
     }) - (n * PER_SEND);
     let record_imu = cost(&mut || {
@@ -270,7 +263,7 @@ fn each_step_of_the_loop_costs_what_it_costs() {
     assert_eq!(stats.dropped, 0);
     assert_eq!(send, PER_SEND * n, "Pub::send_raw");
     assert_eq!(receive, 0, "Sub::receive");
-    assert_eq!(wake, PER_WAKEUP * n, "WaitSet wake-up");
+    assert_eq!(wake, PER_WAKEUP * n, "Sub::wait_for_wake_up");
     assert_eq!(record_imu, 0, "Recorder::record of an unboxed record");
     assert_eq!(record_gnss, n, "Record::Gnss boxes its sample");
 }
@@ -385,16 +378,14 @@ fn daemon_loop_allocations() {
         }
     }
     // Between the first and the last engine call of the window: every IMU step published
-    // one solution (PER_SEND each); every sample published in the window (IMU, truth and the
-    // aiding) woke the daemon at most once (PER_WAKEUP each, fewer when it found several
-    // samples at one wake-up); every GNSS sample was boxed; at most 4 statuses (1 Hz over
-    // ≈ 3 s: a box and a send each).
+    // one solution (PER_SEND each); the wake-ups (at most one per IMU sample, and the
+    // timeouts) allocate nothing (PER_WAKEUP); every GNSS sample was boxed; at most 4
+    // statuses (1 Hz over ≈ 3 s: a box and a send each).
     let imu_steps = tally.calls(0);
-    let samples: u64 = (0..5).map(|i| tally.calls(i)).sum::<u64>() + imu_steps; // + truth
     let gnss_n = tally.calls(2);
     let total = tally.last.load(Ordering::SeqCst) - tally.first.load(Ordering::SeqCst);
     let lower = PER_SEND * (imu_steps - 1) + gnss_n - 1;
-    let upper = PER_SEND * imu_steps + PER_WAKEUP * samples + gnss_n + 4 * (1 + PER_SEND);
+    let upper = (PER_SEND + PER_WAKEUP) * imu_steps + gnss_n + 4 * (1 + PER_SEND);
     eprintln!(
         "daemon loop: {total} allocations over {imu_steps} IMU steps = {:.2} per step \
          (bounds from the parts: {lower} ≤ n ≤ {upper})",

@@ -2,12 +2,13 @@
 //! are configured, so that publishers and subscribers in different binaries always agree.
 //!
 //! Each channel is a publish-subscribe service paired with an event service of the same name:
-//! a publisher notifies after every send, so that a subscriber can block on a WaitSet (with a
-//! deadline for silent sensors) instead of polling (iceoryx2 0.10 subscribers cannot block).
+//! a publisher notifies after every send, so that a subscriber can block on the listener
+//! ([`Sub::wait_for_wake_up`]) or a WaitSet instead of polling (iceoryx2 0.10 subscribers
+//! cannot block).
 
 use crate::{Channel, Message};
 use iceoryx2::node::{NodeCreationFailure, NodeListFailure, NodeState};
-use iceoryx2::port::listener::{Listener, ListenerCreateError};
+use iceoryx2::port::listener::{Listener, ListenerCreateError, ListenerWaitError};
 use iceoryx2::port::notifier::{Notifier, NotifierCreateError, NotifierNotifyError};
 use iceoryx2::port::publisher::{Publisher, PublisherCreateError};
 use iceoryx2::port::subscriber::{Subscriber, SubscriberCreateError};
@@ -18,6 +19,7 @@ use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenOrCreateE
 use iceoryx2::service::port_factory::{event, publish_subscribe};
 use iceoryx2::service::service_name::ServiceNameError;
 use iceoryx2::waitset::{WaitSetAttachmentError, WaitSetCreateError, WaitSetRunError};
+use std::time::Duration;
 
 /// Failure to join the bus ([`Bus::new`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
@@ -137,6 +139,16 @@ pub struct ReceiveError {
     pub channel: Channel,
     /// The iceoryx2 error.
     pub error: IceReceiveError,
+}
+
+/// Failure of the wait on a channel's wake-ups ([`Sub::wait_for_wake_up`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[error("wait for {} wake-ups: {error}", channel.name())]
+pub struct WaitError {
+    /// The channel.
+    pub channel: Channel,
+    /// The iceoryx2 error.
+    pub error: ListenerWaitError,
 }
 
 /// Failure of a WaitSet ([`waitset`] and the attachments and waits of the caller).
@@ -359,6 +371,20 @@ impl<T: Message> Sub<T> {
     /// The event listener, to attach to a WaitSet.
     pub fn listener(&self) -> &Listener<ipc::Service> {
         &self.listener
+    }
+
+    /// Block until this channel's publisher wakes the listener or `timeout` passes, and
+    /// consume the wake-ups. The listener's own wait (a receive with a timeout on its socket),
+    /// not a WaitSet's: no allocation, where every WaitSet wait allocates twice in iceoryx2
+    /// 0.10. A signal ends the wait early, as a timeout does.
+    pub fn wait_for_wake_up(&self, timeout: Duration) -> Result<(), WaitError> {
+        match self.listener.timed_wait(|_| {}, timeout) {
+            Ok(_) | Err(ListenerWaitError::InterruptSignal) => Ok(()),
+            Err(error) => Err(WaitError {
+                channel: T::CHANNEL,
+                error,
+            }),
+        }
     }
 
     /// Consume pending wake-ups (call before draining samples).

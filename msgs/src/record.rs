@@ -17,7 +17,7 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 /// Topic of the sensor alive/dead transitions in recordings (not a channel: the fusion daemon
-/// decides them from its WaitSet deadlines, nothing publishes them).
+/// decides them from each sensor's deadline, nothing publishes them).
 pub const SENSOR_ALIVE_TOPIC: &str = "fusion/sensor_alive";
 
 /// Schema name of [`SensorAliveEvent`] in recordings.

@@ -4,7 +4,8 @@
 //! Process A (the bench) publishes an [`ImuSample`] on `<prefix>/imu` at the IMU rate, paced
 //! like the simulated IMU driver (absolute `clock_nanosleep` on CLOCK_MONOTONIC), stamped by
 //! [`msgs::ipc::Pub::send`] and followed by a notification. Process B ([`echo`], the hidden
-//! `sextant bench-echo` command) blocks in a WaitSet on the channel's listener, wakes, drains
+//! `sextant bench-echo` command) blocks on the channel's listener as the fusion daemon does
+//! ([`Sub::wait_for_wake_up`], at most 100 ms at a time), wakes, drains
 //! the subscriber and publishes for each sample a [`NavSolution`] carrying the sample's send time
 //! in `imu_send_mono_ns`, stamped and notified the same way. Both ends are [`msgs::ipc::Bus`]
 //! ports, so the services, queue depths, overflow policy and message sizes are exactly those of
@@ -30,9 +31,9 @@ pub enum EchoError {
     /// The solution publisher.
     #[error("echo: {0}")]
     Publisher(#[from] msgs::ipc::PublisherError),
-    /// The WaitSet.
+    /// The wait for the IMU channel's wake-ups.
     #[error("echo: {0}")]
-    WaitSet(#[from] msgs::ipc::WaitSetError),
+    Wait(#[from] msgs::ipc::WaitError),
     /// Receiving an IMU sample.
     #[error("echo: {0}")]
     Receive(#[from] msgs::ipc::ReceiveError),
@@ -50,22 +51,10 @@ pub fn echo(prefix: &str, stop: &AtomicBool) -> Result<u64, EchoError> {
     let bus = Bus::new(prefix, ECHO_NODE)?;
     let imu: Sub<ImuSample> = bus.subscriber()?;
     let mut nav: Pub<NavSolution> = bus.publisher()?;
-    let ws = msgs::ipc::waitset()?;
-    let _guard = ws
-        .attach_notification(imu.listener())
-        .map_err(msgs::ipc::WaitSetError::Attach)?;
-    // The stop flag is looked at at least every 100 ms, as in the fusion daemon.
-    let _tick = ws
-        .attach_interval(Duration::from_millis(100))
-        .map_err(msgs::ipc::WaitSetError::Attach)?;
     let mut replies = 0u64;
+    // The stop flag is looked at at least every 100 ms, as in the fusion daemon.
     while !stop.load(Ordering::SeqCst) {
-        ws.wait_and_process_once_with_timeout(
-            |_| iceoryx2::prelude::CallbackProgression::Continue,
-            Duration::from_secs(1),
-        )
-        .map_err(msgs::ipc::WaitSetError::Wait)?;
-        imu.clear_events();
+        imu.wait_for_wake_up(Duration::from_millis(100))?;
         while let Some(s) = imu.receive()? {
             let mut reply = NavSolution::default();
             reply.header.time_ns = s.header.time_ns;

@@ -231,7 +231,10 @@ mod tests {
         assert_eq!(out.solutions_bit_identical, kept - 1);
         let missing = missing.unwrap();
         let msg = out.first_mismatch.expect("the missing solution is named");
-        assert!(msg.contains(&format!("replayed solution {missing} ")), "{msg}");
+        assert!(
+            msg.contains(&format!("replayed solution {missing} ")),
+            "{msg}"
+        );
         assert_eq!(out.unmatched_expected, 1);
     }
 
