@@ -39,12 +39,10 @@ pub fn tempdir(tag: &str) -> PathBuf {
     d
 }
 
-/// A copy of `config/` in `dir` whose recorder keeps every solution and truth sample
-/// (`[recorder] solution_rate_hz = 0`, `truth_rate_hz = 0`; shipped: 10 Hz); the copy's
-/// `sextant.toml`. For tests that check the solution at every IMU sample (its continuity
-/// through a fault, its stale flags), which a recording at 10 Hz does not show.
-pub fn every_solution_config(dir: &Path) -> PathBuf {
-    let cfg = dir.join("config-every-solution");
+/// A fresh copy of the repository's `config/` as `dir/name` (`cp -r`, as a user would copy
+/// it to change a setting); the copy's `sextant.toml`.
+pub fn config_copy(dir: &Path, name: &str) -> PathBuf {
+    let cfg = dir.join(name);
     let _ = std::fs::remove_dir_all(&cfg);
     let st = std::process::Command::new("cp")
         .arg("-r")
@@ -53,7 +51,15 @@ pub fn every_solution_config(dir: &Path) -> PathBuf {
         .status()
         .unwrap();
     assert!(st.success(), "cp -r config {}", cfg.display());
-    let sys = cfg.join("sextant.toml");
+    cfg.join("sextant.toml")
+}
+
+/// A copy of `config/` in `dir` whose recorder keeps every solution and truth sample
+/// (`[recorder] solution_rate_hz = 0`, `truth_rate_hz = 0`; shipped: 10 Hz); the copy's
+/// `sextant.toml`. For tests that check the solution at every IMU sample (its continuity
+/// through a fault, its stale flags), which a recording at 10 Hz does not show.
+pub fn every_solution_config(dir: &Path) -> PathBuf {
+    let sys = config_copy(dir, "config-every-solution");
     let text = std::fs::read_to_string(&sys).unwrap();
     let mut changed = text.clone();
     for key in ["solution_rate_hz", "truth_rate_hz"] {

@@ -11,15 +11,7 @@ use std::time::{Duration, Instant};
 
 /// A copy of `config/` whose `sextant.toml` ends with `extra`; the copy's `sextant.toml`.
 fn config_with(dir: &Path, extra: &str) -> PathBuf {
-    let cfg = dir.join("config");
-    let st = Command::new("cp")
-        .arg("-r")
-        .arg(repo_root().join("config"))
-        .arg(&cfg)
-        .status()
-        .unwrap();
-    assert!(st.success());
-    let sys = cfg.join("sextant.toml");
+    let sys = config_copy(dir, "config");
     let mut text = std::fs::read_to_string(&sys).unwrap();
     text.push_str(extra);
     std::fs::write(&sys, text).unwrap();

@@ -290,27 +290,30 @@ struct ReplayArgs {
     follow_bus: bool,
 }
 
-/// A channel name of `--only`.
 /// A duration in seconds: finite and not negative.
 fn parse_non_negative_s(s: &str) -> Result<f64, String> {
-    match s.parse::<f64>() {
-        Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
-        Ok(v) => Err(format!("{v} s: a duration is finite and not negative")),
-        Err(e) => Err(format!("{s:?}: {e}")),
-    }
+    parse_non_negative(s, "s: a duration is finite and not negative")
 }
 
 /// A rate in Hz: finite and not negative (0: every message).
 fn parse_rate_hz(s: &str) -> Result<f64, String> {
+    parse_non_negative(
+        s,
+        "Hz: a rate is finite and not negative (0: every message)",
+    )
+}
+
+/// A finite, non-negative number; otherwise the value followed by `rule` (its unit and what
+/// the option accepts).
+fn parse_non_negative(s: &str, rule: &str) -> Result<f64, String> {
     match s.parse::<f64>() {
         Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
-        Ok(v) => Err(format!(
-            "{v} Hz: a rate is finite and not negative (0: every message)"
-        )),
+        Ok(v) => Err(format!("{v} {rule}")),
         Err(e) => Err(format!("{s:?}: {e}")),
     }
 }
 
+/// A channel name of `--only`.
 fn parse_channel(s: &str) -> Result<msgs::Channel, String> {
     msgs::Channel::from_name(s).ok_or_else(|| {
         let known: Vec<&str> = msgs::Channel::ALL.iter().map(|c| c.name()).collect();
