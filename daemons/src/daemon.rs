@@ -65,6 +65,9 @@ pub trait NavEngine {
     fn push_baro(&mut self, s: &BaroSample) -> Result<(), Rejection>;
     /// Tell whether a sensor delivers within its deadline.
     fn set_sensor_alive(&mut self, sensor: usize, alive: bool);
+    /// Fuse the late samples held out of the last solution now, off the next IMU sample's
+    /// path ([`Navigator::catch_up`]; the next input would do it first otherwise).
+    fn catch_up(&mut self) {}
     /// Per-sensor counters.
     fn health(&self) -> [SensorHealth; MAX_SENSORS];
     /// Navigation mode (`msgs::NavMode` as u32).
@@ -156,6 +159,9 @@ impl NavEngine for Navigator {
     }
     fn set_sensor_alive(&mut self, sensor: usize, alive: bool) {
         Navigator::set_sensor_alive(self, sensor, alive)
+    }
+    fn catch_up(&mut self) {
+        Navigator::catch_up(self)
     }
     fn health(&self) -> [SensorHealth; MAX_SENSORS] {
         Navigator::health(self)
@@ -416,6 +422,9 @@ impl<E: NavEngine> State<'_, E> {
         if let Some(sol) = solution {
             self.recorder
                 .record(Record::Nav(sol), sol.header.send_mono_ns);
+            // The solution is out: the late samples held out of it are fused now, before the
+            // next IMU sample comes (and before a checkpoint is taken of the state).
+            self.engine.catch_up();
             self.maybe_checkpoint(sol.header.time_ns);
         }
     }

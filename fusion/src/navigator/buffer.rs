@@ -176,6 +176,51 @@ pub(super) const IMU_LOG_MAX_CAP: usize = 65_536;
 
 pub(super) const GNSS_CAP: usize = 32;
 
+/// Late samples held per sensor until the next IMU step's solution is formed
+/// ([`hold_late`]); a sensor late more often than this between two IMU samples has its oldest
+/// one queued at once.
+pub(super) const INBOX_CAP: usize = 8;
+
+/// Hold the late sample (`ts`, `v`) in `inbox`, out of the step about to be formed. When the
+/// inbox is full its oldest sample goes to `q` at once, its rewind due (`rewind_to`). Returns
+/// the queue entries evicted to make room (counted as dropped by the caller).
+pub(super) fn hold_late<T: Copy + Default, const Q: usize>(
+    inbox: &mut TimeQueue<T, INBOX_CAP>,
+    q: &mut TimeQueue<T, Q>,
+    rewind_to: &mut Option<GpsTime>,
+    ts: GpsTime,
+    v: T,
+) -> u64 {
+    match inbox.insert(ts, v) {
+        Some((t_old, v_old, _)) => queue_late(q, rewind_to, t_old, v_old),
+        None => 0,
+    }
+}
+
+/// Move every held sample of `inbox` into `q`, each making its rewind due (`rewind_to`).
+/// Returns the queue entries evicted to make room.
+pub(super) fn ripen<T: Copy + Default, const Q: usize>(
+    inbox: &mut TimeQueue<T, INBOX_CAP>,
+    q: &mut TimeQueue<T, Q>,
+    rewind_to: &mut Option<GpsTime>,
+) -> u64 {
+    let mut evicted = 0;
+    while let Some((t, v, _)) = inbox.pop_oldest() {
+        evicted += queue_late(q, rewind_to, t, v);
+    }
+    evicted
+}
+
+fn queue_late<T: Copy + Default, const Q: usize>(
+    q: &mut TimeQueue<T, Q>,
+    rewind_to: &mut Option<GpsTime>,
+    t: GpsTime,
+    v: T,
+) -> u64 {
+    *rewind_to = Some(rewind_to.map_or(t, |r| r.min(t)));
+    u64::from(q.insert(t, v).is_some())
+}
+
 pub(super) const STAR_CAP: usize = 64;
 
 pub(super) const ODO_CAP: usize = 256;

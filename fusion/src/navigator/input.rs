@@ -9,6 +9,7 @@ impl Navigator {
     /// (None while initializing/aligning). Buffered aiding samples whose time of validity is
     /// reached are fused before the solution is formed. Allocates nothing.
     pub fn push_imu(&mut self, s: &ImuSample) -> Result<Option<NavSolution>, Rejection> {
+        self.catch_up();
         let id = sid(SensorId::Imu);
         self.health[id].received += 1;
         if let Err(e) = self
@@ -45,9 +46,6 @@ impl Navigator {
                 self.try_finish_alignment(t);
             }
             Phase::Navigating => {
-                if let Some(ts) = self.rewind_to.take() {
-                    self.replay_from(ts);
-                }
                 let e = ImuLogEntry {
                     t,
                     prev_t,
@@ -69,11 +67,14 @@ impl Navigator {
             return Ok(None);
         }
         self.update_mode(t);
-        Ok(Some(self.solution(s)))
+        let sol = self.solution(s);
+        self.ripen_late();
+        Ok(Some(sol))
     }
 
     /// Queue a star-tracker sample for fusion at its time of validity.
     pub fn push_star_tracker(&mut self, s: &StarTrackerSample) -> Result<(), Rejection> {
+        self.catch_up();
         let id = sid(SensorId::StarTracker);
         self.health[id].received += 1;
         let ts = GpsTime::from_ns(s.header.time_ns);
@@ -110,10 +111,18 @@ impl Navigator {
                 sigma_roll: s.sigma_roll_rad,
             };
             let valid = ts - self.config.latency.of(SensorId::StarTracker);
-            if self.too_late(valid) || self.star_q.insert(valid, obs).is_some() {
+            if self.too_late(valid) {
                 self.health[id].dropped_late += 1;
-            } else {
-                self.note_arrival(valid);
+            } else if self.is_late(valid) {
+                self.health[id].dropped_late += hold_late(
+                    &mut self.star_inbox,
+                    &mut self.star_q,
+                    &mut self.rewind_to,
+                    valid,
+                    obs,
+                );
+            } else if self.star_q.insert(valid, obs).is_some() {
+                self.health[id].dropped_late += 1;
             }
         }
         Ok(())
@@ -121,6 +130,7 @@ impl Navigator {
 
     /// Queue a GNSS sample.
     pub fn push_gnss(&mut self, s: &GnssSample) -> Result<(), Rejection> {
+        self.catch_up();
         let id = sid(SensorId::Gnss);
         self.health[id].received += 1;
         let fix = match self
@@ -148,16 +158,25 @@ impl Navigator {
             sats,
         };
         let ts = GpsTime::from_ns(s.header.time_ns) - self.config.latency.of(SensorId::Gnss);
-        if self.too_late(ts) || self.gnss_q.insert(ts, obs).is_some() {
+        if self.too_late(ts) {
             self.health[id].dropped_late += 1;
-        } else {
-            self.note_arrival(ts);
+        } else if self.is_late(ts) {
+            self.health[id].dropped_late += hold_late(
+                &mut self.gnss_inbox,
+                &mut self.gnss_q,
+                &mut self.rewind_to,
+                ts,
+                obs,
+            );
+        } else if self.gnss_q.insert(ts, obs).is_some() {
+            self.health[id].dropped_late += 1;
         }
         Ok(())
     }
 
     /// Queue an odometer sample.
     pub fn push_odometer(&mut self, s: &OdometerSample) -> Result<(), Rejection> {
+        self.catch_up();
         let id = sid(SensorId::Odometer);
         self.health[id].received += 1;
         let ts = GpsTime::from_ns(s.header.time_ns);
@@ -182,16 +201,25 @@ impl Navigator {
         }
         self.accept_header(id, &s.header);
         let valid = ts - self.config.latency.of(SensorId::Odometer);
-        if self.too_late(valid) || self.odo_q.insert(valid, s.speed_m_s).is_some() {
+        if self.too_late(valid) {
             self.health[id].dropped_late += 1;
-        } else {
-            self.note_arrival(valid);
+        } else if self.is_late(valid) {
+            self.health[id].dropped_late += hold_late(
+                &mut self.odo_inbox,
+                &mut self.odo_q,
+                &mut self.rewind_to,
+                valid,
+                s.speed_m_s,
+            );
+        } else if self.odo_q.insert(valid, s.speed_m_s).is_some() {
+            self.health[id].dropped_late += 1;
         }
         Ok(())
     }
 
     /// Queue a baro sample.
     pub fn push_baro(&mut self, s: &BaroSample) -> Result<(), Rejection> {
+        self.catch_up();
         let id = sid(SensorId::Baro);
         self.health[id].received += 1;
         let ts = GpsTime::from_ns(s.header.time_ns);
@@ -223,10 +251,18 @@ impl Navigator {
             ));
         }
         let valid = ts - self.config.latency.of(SensorId::Baro);
-        if self.too_late(valid) || self.baro_q.insert(valid, h).is_some() {
+        if self.too_late(valid) {
             self.health[id].dropped_late += 1;
-        } else {
-            self.note_arrival(valid);
+        } else if self.is_late(valid) {
+            self.health[id].dropped_late += hold_late(
+                &mut self.baro_inbox,
+                &mut self.baro_q,
+                &mut self.rewind_to,
+                valid,
+                h,
+            );
+        } else if self.baro_q.insert(valid, h).is_some() {
+            self.health[id].dropped_late += 1;
         }
         Ok(())
     }

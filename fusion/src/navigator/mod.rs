@@ -50,27 +50,33 @@
 //!
 //! A sample that arrives after the inertial solution has passed its time (but within
 //! [`NavigatorConfig::buffer_window_s`]) is fused by **re-propagation from buffered IMU
-//! data**: every 100 ms of IMU time the replayable filter state (inertial state, error-state
+//! data**: every 20 ms of IMU time the replayable filter state (inertial state, error-state
 //! filter with its covariance and pending transition, strapdown history, ZUPT/baro
 //! schedulers) is checkpointed; the validated IMU increments and every fused aiding sample
-//! are kept for the window. At the next IMU sample the navigator restores the latest
-//! checkpoint before the late sample's time, re-queues the aiding fused since then and
-//! replays the logged IMU steps, fusing everything — the late sample included — at the epoch,
-//! with the state *and covariance* that an in-time arrival would have met. The result is the
+//! are kept for the window. A late sample is held out of the next IMU step (its solution is
+//! formed without it, so that the work below is not between that sample's arrival and its
+//! solution); once that solution is formed, the navigator — at the start of the next input,
+//! or earlier when told ([`Navigator::catch_up`], which the daemon calls once it has
+//! published) — restores the latest checkpoint before the late sample's time, re-queues the
+//! aiding fused since then and replays the logged IMU steps, fusing everything — the late
+//! sample included — at the epoch, with the state *and covariance* that an in-time arrival
+//! would have met. So a late sample reaches the solutions one IMU interval after the one it
+//! arrived with; when the rewind runs changes nothing (test
+//! `catching_up_early_changes_no_solution`). The result is the
 //! in-time result up to floating-point rounding (test
 //! `late_gnss_sample_gives_the_in_time_update`), unlike the usual shortcut of applying a
 //! correction computed with the current covariance (which ignores the cross-covariance
-//! between the delayed and the current error). Cost: one replay of up to window + 100 ms of
-//! IMU steps (≈ 2 µs each) per burst of late samples. Samples older than the window are
+//! between the delayed and the current error). Cost: one replay of up to window + 20 ms of
+//! IMU steps (≈ 2 µs each) per IMU interval with late samples. Samples older than the window are
 //! counted in `dropped_late` and never fused. The IMU log is sized from the configuration
 //! ([`NavigatorConfig::imu_log_capacity`]: `max_imu_rate_hz × (window + 0.2 s)` steps); should
 //! a faster IMU leave it too short for a replay, the late samples are dropped (`dropped_late`)
 //! and the event counted (`replays_impossible`), never fused at a later epoch. The first checkpoint is the start of navigation,
-//! so a sample late in the first 100 ms is replayed from there too; a sample whose time of
+//! so a sample late in the first 20 ms is replayed from there too; a sample whose time of
 //! validity is at or before the start belongs to the alignment period and is discarded
 //! whenever it arrives, as alignment discards it in time. So the solution at an epoch depends
-//! only on which samples had arrived by then, not on the order (test
-//! `arrival_order_changes_only_the_epochs_with_a_sample_pending`). Health counters count every
+//! only on which samples had arrived by the IMU sample before it (and on the in-time ones),
+//! not on the order (test `arrival_order_changes_only_the_epochs_with_a_sample_pending`). Health counters count every
 //! sample once (re-fused samples do not count again).
 //!
 //! # Input validation
@@ -260,8 +266,14 @@ pub struct Navigator {
     star_done: TimeQueue<StarObs, STAR_CAP>,
     odo_done: TimeQueue<f64, ODO_CAP>,
     baro_done: TimeQueue<f64, BARO_CAP>,
-    /// Earliest time of validity of a sample that arrived after the IMU passed it.
+    /// Earliest time of validity of a late sample queued and not yet fused by a rewind.
     rewind_to: Option<GpsTime>,
+    /// Late samples (the IMU had passed their time of validity when they arrived), held out
+    /// of the next IMU step until its solution is formed (module docs, "Delayed fusion").
+    gnss_inbox: Box<TimeQueue<GnssObs, INBOX_CAP>>,
+    star_inbox: TimeQueue<StarObs, INBOX_CAP>,
+    odo_inbox: TimeQueue<f64, INBOX_CAP>,
+    baro_inbox: TimeQueue<f64, INBOX_CAP>,
     /// Time of validity at which navigation started (the end of alignment; None before):
     /// aiding up to it belongs to the alignment period, whenever it arrives (`fuse_due`).
     nav_start: Option<GpsTime>,
@@ -350,6 +362,10 @@ impl Navigator {
             odo_done: TimeQueue::new(),
             baro_done: TimeQueue::new(),
             rewind_to: None,
+            gnss_inbox: Box::new(TimeQueue::new()),
+            star_inbox: TimeQueue::new(),
+            odo_inbox: TimeQueue::new(),
+            baro_inbox: TimeQueue::new(),
             nav_start: None,
             core,
             zupt: ZuptHealth::default(),
@@ -395,6 +411,7 @@ impl Navigator {
     /// Tell the navigator whether a sensor (index = `msgs::SensorId`) is delivering within its
     /// deadline (decided by the daemon, which owns the clock).
     pub fn set_sensor_alive(&mut self, sensor: usize, alive: bool) {
+        self.catch_up();
         if let Some(h) = self.health.get_mut(sensor) {
             if h.alive != 0 && !alive {
                 h.deadline_misses = h.deadline_misses.saturating_add(1);

@@ -291,5 +291,9 @@ impl Navigator {
         self.rewind_to = None;
         self.take_checkpoint(t);
         self.gnss_q.clear();
+        self.gnss_inbox.clear();
+        self.star_inbox.clear();
+        self.odo_inbox.clear();
+        self.baro_inbox.clear();
     }
 }

@@ -49,11 +49,50 @@ impl Navigator {
         }
     }
 
-    /// A sample queued at time of validity `ts`: if the inertial solution has already passed
-    /// it, the filter must rewind (done at the next IMU sample, once for a burst).
-    pub(super) fn note_arrival(&mut self, ts: GpsTime) {
-        if self.phase == Phase::Navigating && ts <= self.time {
-            self.rewind_to = Some(self.rewind_to.map_or(ts, |r| r.min(ts)));
+    /// Whether a sample of time of validity `ts` arrives late: the inertial solution has
+    /// already passed it. It is then held ([`hold_late`]) until the next IMU step's solution
+    /// is formed, and fused by a rewind after it ([`Self::ripen_late`], [`Self::catch_up`]).
+    pub(super) fn is_late(&self, ts: GpsTime) -> bool {
+        self.phase == Phase::Navigating && ts <= self.time
+    }
+
+    /// After an IMU step's solution is formed: the late samples held out of it go to their
+    /// queues, their rewind due ([`Self::catch_up`], or at the start of the next push).
+    pub(super) fn ripen_late(&mut self) {
+        let evicted = [
+            (
+                SensorId::Gnss,
+                ripen(&mut self.gnss_inbox, &mut self.gnss_q, &mut self.rewind_to),
+            ),
+            (
+                SensorId::StarTracker,
+                ripen(&mut self.star_inbox, &mut self.star_q, &mut self.rewind_to),
+            ),
+            (
+                SensorId::Odometer,
+                ripen(&mut self.odo_inbox, &mut self.odo_q, &mut self.rewind_to),
+            ),
+            (
+                SensorId::Baro,
+                ripen(&mut self.baro_inbox, &mut self.baro_q, &mut self.rewind_to),
+            ),
+        ];
+        for (s, n) in evicted {
+            self.health[sid(s)].dropped_late += n;
+        }
+    }
+
+    /// Fuse now the late samples whose rewind is due (module docs, "Delayed fusion"): the
+    /// rewind the next input would otherwise start with, the same steps and the same state.
+    /// Every input begins with it, so that each meets the state the late samples made; a
+    /// caller that has published the current solution and waits for the next IMU sample (the
+    /// daemon) calls it then, which takes the replay of the IMU steps off the next sample's
+    /// path from arrival to solution. Allocates nothing.
+    pub fn catch_up(&mut self) {
+        if self.phase == Phase::Navigating
+            && let Some(ts) = self.rewind_to.take()
+        {
+            self.replay_from(ts);
         }
     }
 
