@@ -338,11 +338,12 @@ fn engine_inputs(rec: &Recording) -> Vec<(String, i64, i64)> {
         .collect()
 }
 
-/// IMU epochs at which an aiding sample of time of validity ≤ the epoch had not arrived yet
-/// when the IMU sample of the epoch was fused: the solution of such an epoch cannot contain
-/// that sample's update (the navigator fuses it at its time of validity by rewinding at the
-/// next IMU sample). A sample's time of validity is its stamp less its sensor's configured
-/// latency (`latency_ns`).
+/// IMU epochs whose solution cannot contain the update of an aiding sample of time of
+/// validity ≤ the epoch: those whose IMU sample was fused before the aiding sample arrived,
+/// and the next one (the navigator holds a late sample out of the IMU step it comes with and
+/// fuses it at its time of validity by a rewind once that step's solution is formed). A
+/// sample's time of validity is its stamp less its sensor's configured latency
+/// (`latency_ns`).
 fn epochs_with_a_sample_pending(
     inputs: &[(String, i64, i64)],
     latency_ns: impl Fn(&str) -> i64,
@@ -361,9 +362,15 @@ fn epochs_with_a_sample_pending(
             }
         }
     }
-    imu.into_iter()
-        .filter(|t| pending.iter().any(|(from, to)| from <= t && t <= to))
-        .collect()
+    // IMU times increase: the epochs from the sample's time of validity to the last IMU
+    // sample before its arrival, and the one after.
+    let mut out = std::collections::HashSet::new();
+    for (from, to) in pending {
+        let first = imu.partition_point(|t| *t < from);
+        let after = imu.partition_point(|t| *t <= to);
+        out.extend(&imu[first..(after + 1).min(imu.len())]);
+    }
+    out
 }
 
 #[test]
@@ -440,9 +447,10 @@ fn live_replay_drives_a_real_fusion_daemon_like_the_drivers() {
     // Why they differ, and by how much they may (the arrival order is the only difference:
     // same samples, same filter; the alive/dead decisions only touch health counters). An
     // aiding sample of time t_s that reaches the daemon after the IMU sample of an epoch
-    // t ≥ t_s is fused at t_s by a rewind at the next IMU sample, exactly as if in time
-    // (fusion::navigator, "Delayed fusion"); only the solutions published at the epochs in
-    // between lack its update. So:
+    // t ≥ t_s is held out of the next IMU step and fused at t_s by a rewind once that step's
+    // solution is formed, exactly as if in time (fusion::navigator, "Delayed fusion"); only
+    // the solutions published at the epochs in between, and at that next one, lack its
+    // update. So:
     // - at an epoch with nothing pending in either run the solutions are bit-identical;
     // - at an epoch with samples pending in one run, the difference is the missing update
     //   δx = K·ν, whose covariance K·S·Kᵀ = P⁻HᵀS⁻¹HP⁻ ≼ P⁻ (the prior). By Anderson's

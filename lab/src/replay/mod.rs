@@ -18,8 +18,8 @@
 //! order relative to the IMU — the bus interleaves the publishers by wall-clock timing, so an
 //! aiding sample stamped t may arrive after the IMU sample of t in one run and before it in the
 //! other. The navigator fuses every sample at its time of validity whatever the order (a late
-//! one by rewinding at the next IMU sample), so the solution of an epoch depends only on which
-//! samples had arrived by then: it is bit-identical to the original at every epoch where no
+//! one, held out of the next IMU step, by a rewind once that step's solution is formed), so the
+//! solution of an epoch depends only on which samples had arrived by the IMU sample before it: it is bit-identical to the original at every epoch where no
 //! sample was pending in either run, and elsewhere differs by the update still missing, at most
 //! a few σ of the filter's own position uncertainty (measured on a 20 s navigation run: ≈ 95 %
 //! of the epochs bit-identical, the rest ≤ 0.23 σ; `tests/tests/replay.rs` derives the bound).
