@@ -181,10 +181,40 @@ pub(super) const GNSS_CAP: usize = 32;
 /// one queued at once.
 pub(super) const INBOX_CAP: usize = 8;
 
+/// When an aiding sample arrives relative to the inertial solution ([`Navigator::arrival`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Arrival {
+    /// Before its time of validity is reached: queued, fused in the IMU step that reaches it.
+    InTime,
+    /// After the solution passed its time of validity: held out of the next IMU step
+    /// ([`hold_late`]), fused by a rewind once that step's solution is formed.
+    Late,
+    /// Older than the delayed-fusion window: dropped.
+    TooLate,
+}
+
+/// Queue an aiding sample (`ts`, `v`) as its `arrival` asks: into `q`, held in `inbox`, or
+/// not at all. Returns the samples dropped (the sample itself when too late, or the oldest
+/// queued one evicted to make room), for the sensor's `dropped_late`.
+pub(super) fn enqueue<T: Copy + Default, const Q: usize>(
+    q: &mut TimeQueue<T, Q>,
+    inbox: &mut TimeQueue<T, INBOX_CAP>,
+    rewind_to: &mut Option<GpsTime>,
+    arrival: Arrival,
+    ts: GpsTime,
+    v: T,
+) -> u64 {
+    match arrival {
+        Arrival::TooLate => 1,
+        Arrival::Late => hold_late(inbox, q, rewind_to, ts, v),
+        Arrival::InTime => u64::from(q.insert(ts, v).is_some()),
+    }
+}
+
 /// Hold the late sample (`ts`, `v`) in `inbox`, out of the step about to be formed. When the
 /// inbox is full its oldest sample goes to `q` at once, its rewind due (`rewind_to`). Returns
 /// the queue entries evicted to make room (counted as dropped by the caller).
-pub(super) fn hold_late<T: Copy + Default, const Q: usize>(
+fn hold_late<T: Copy + Default, const Q: usize>(
     inbox: &mut TimeQueue<T, INBOX_CAP>,
     q: &mut TimeQueue<T, Q>,
     rewind_to: &mut Option<GpsTime>,

@@ -111,19 +111,15 @@ impl Navigator {
                 sigma_roll: s.sigma_roll_rad,
             };
             let valid = ts - self.config.latency.of(SensorId::StarTracker);
-            if self.too_late(valid) {
-                self.health[id].dropped_late += 1;
-            } else if self.is_late(valid) {
-                self.health[id].dropped_late += hold_late(
-                    &mut self.star_inbox,
-                    &mut self.star_q,
-                    &mut self.rewind_to,
-                    valid,
-                    obs,
-                );
-            } else if self.star_q.insert(valid, obs).is_some() {
-                self.health[id].dropped_late += 1;
-            }
+            let arrival = self.arrival(valid);
+            self.health[id].dropped_late += enqueue(
+                &mut self.star_q,
+                &mut self.star_inbox,
+                &mut self.rewind_to,
+                arrival,
+                valid,
+                obs,
+            );
         }
         Ok(())
     }
@@ -158,19 +154,15 @@ impl Navigator {
             sats,
         };
         let ts = GpsTime::from_ns(s.header.time_ns) - self.config.latency.of(SensorId::Gnss);
-        if self.too_late(ts) {
-            self.health[id].dropped_late += 1;
-        } else if self.is_late(ts) {
-            self.health[id].dropped_late += hold_late(
-                &mut self.gnss_inbox,
-                &mut self.gnss_q,
-                &mut self.rewind_to,
-                ts,
-                obs,
-            );
-        } else if self.gnss_q.insert(ts, obs).is_some() {
-            self.health[id].dropped_late += 1;
-        }
+        let arrival = self.arrival(ts);
+        self.health[id].dropped_late += enqueue(
+            &mut self.gnss_q,
+            &mut self.gnss_inbox,
+            &mut self.rewind_to,
+            arrival,
+            ts,
+            obs,
+        );
         Ok(())
     }
 
@@ -201,19 +193,15 @@ impl Navigator {
         }
         self.accept_header(id, &s.header);
         let valid = ts - self.config.latency.of(SensorId::Odometer);
-        if self.too_late(valid) {
-            self.health[id].dropped_late += 1;
-        } else if self.is_late(valid) {
-            self.health[id].dropped_late += hold_late(
-                &mut self.odo_inbox,
-                &mut self.odo_q,
-                &mut self.rewind_to,
-                valid,
-                s.speed_m_s,
-            );
-        } else if self.odo_q.insert(valid, s.speed_m_s).is_some() {
-            self.health[id].dropped_late += 1;
-        }
+        let arrival = self.arrival(valid);
+        self.health[id].dropped_late += enqueue(
+            &mut self.odo_q,
+            &mut self.odo_inbox,
+            &mut self.rewind_to,
+            arrival,
+            valid,
+            s.speed_m_s,
+        );
         Ok(())
     }
 
@@ -251,19 +239,15 @@ impl Navigator {
             ));
         }
         let valid = ts - self.config.latency.of(SensorId::Baro);
-        if self.too_late(valid) {
-            self.health[id].dropped_late += 1;
-        } else if self.is_late(valid) {
-            self.health[id].dropped_late += hold_late(
-                &mut self.baro_inbox,
-                &mut self.baro_q,
-                &mut self.rewind_to,
-                valid,
-                h,
-            );
-        } else if self.baro_q.insert(valid, h).is_some() {
-            self.health[id].dropped_late += 1;
-        }
+        let arrival = self.arrival(valid);
+        self.health[id].dropped_late += enqueue(
+            &mut self.baro_q,
+            &mut self.baro_inbox,
+            &mut self.rewind_to,
+            arrival,
+            valid,
+            h,
+        );
         Ok(())
     }
 

@@ -49,11 +49,17 @@ impl Navigator {
         }
     }
 
-    /// Whether a sample of time of validity `ts` arrives late: the inertial solution has
-    /// already passed it. It is then held ([`hold_late`]) until the next IMU step's solution
-    /// is formed, and fused by a rewind after it ([`Self::ripen_late`], [`Self::catch_up`]).
-    pub(super) fn is_late(&self, ts: GpsTime) -> bool {
-        self.phase == Phase::Navigating && ts <= self.time
+    /// How a sample of time of validity `ts` arrives: too late (older than the window), late
+    /// (the inertial solution has passed it: held until the next IMU step's solution is
+    /// formed, then fused by a rewind, [`Self::ripen_late`], [`Self::catch_up`]) or in time.
+    pub(super) fn arrival(&self, ts: GpsTime) -> Arrival {
+        if self.too_late(ts) {
+            Arrival::TooLate
+        } else if self.phase == Phase::Navigating && ts <= self.time {
+            Arrival::Late
+        } else {
+            Arrival::InTime
+        }
     }
 
     /// After an IMU step's solution is formed: the late samples held out of it go to their
