@@ -77,16 +77,7 @@ impl SolutionMatcher {
             .kept
             .admit(log_time_of(sol.header.time_ns).unwrap_or(0));
         let horizon = sol.header.time_ns.saturating_sub(MATCH_HORIZON_NS);
-        while let Some((old, expected)) = self
-            .waiting
-            .front()
-            .filter(|(old, _)| old.header.time_ns < horizon)
-        {
-            if *expected {
-                self.missing(old.header.seq, old.header.time_ns);
-            }
-            self.waiting.pop_front();
-        }
+        self.give_up_while(|old| old.header.time_ns < horizon);
         self.waiting.push_back((sol, expected));
     }
 
@@ -94,16 +85,7 @@ impl SolutionMatcher {
     pub fn recorded(&mut self, recorded: &NavSolution) {
         self.recorded += 1;
         // Replayed solutions before this one: left out by the source's rate, or missing.
-        while let Some((mine, expected)) = self
-            .waiting
-            .front()
-            .filter(|(m, _)| m.header.seq < recorded.header.seq)
-        {
-            if *expected {
-                self.missing(mine.header.seq, mine.header.time_ns);
-            }
-            self.waiting.pop_front();
-        }
+        self.give_up_while(|mine| mine.header.seq < recorded.header.seq);
         match self.waiting.pop_front() {
             Some((mine, _)) if mine.header.seq == recorded.header.seq => {
                 self.out.solutions_compared += 1;
@@ -149,6 +131,17 @@ impl SolutionMatcher {
             self.mismatch(|| format!("{left} replayed solutions have no recorded counterpart"));
         }
         self.out
+    }
+
+    /// Stop waiting for the solutions at the front for which `gone` holds: those the source's
+    /// rate keeps are missing from the file.
+    fn give_up_while(&mut self, gone: impl Fn(&NavSolution) -> bool) {
+        while let Some(&(old, expected)) = self.waiting.front().filter(|(old, _)| gone(old)) {
+            if expected {
+                self.missing(old.header.seq, old.header.time_ns);
+            }
+            self.waiting.pop_front();
+        }
     }
 
     /// A kept solution absent from the file.
