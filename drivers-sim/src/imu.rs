@@ -78,6 +78,8 @@ struct SensorSigmas {
     white_per_rt_s: f64,
     /// ADC least significant bit of the rate output (0 = none).
     lsb: f64,
+    /// Count of the integrated output, rad or m/s (0 = none).
+    increment_lsb: f64,
 }
 
 /// The grade's gyro and accelerometer 1-σ values in SI units (one conversion for the triad
@@ -102,6 +104,7 @@ fn grade_sigmas(grade: &ImuGrade) -> (SensorSigmas, SensorSigmas) {
             misalignment_rad: g.misalignment_arcsec * ARCSEC_TO_RAD,
             white_per_rt_s: g.arw_deg_per_rt_h.to_radians() / 60.0,
             lsb: lsb(g.adc_bits, g.full_scale_deg_s.to_radians()),
+            increment_lsb: g.delta_angle_lsb_rad,
         },
         SensorSigmas {
             bias: a.bias_ug * ug,
@@ -111,6 +114,7 @@ fn grade_sigmas(grade: &ImuGrade) -> (SensorSigmas, SensorSigmas) {
             misalignment_rad: a.misalignment_arcsec * ARCSEC_TO_RAD,
             white_per_rt_s: a.vrw_ug_per_rt_hz * ug,
             lsb: lsb(a.adc_bits, a.full_scale_g * G0_M_S2),
+            increment_lsb: a.delta_velocity_lsb_m_s,
         },
     )
 }
@@ -150,6 +154,11 @@ struct TriadErrors {
     white_per_rt_s: f64,
     /// ADC least significant bit of the rate output (0 = none), rad/s or m/s².
     lsb: f64,
+    /// Count of the integrated output (0 = none), rad or m/s.
+    increment_lsb: f64,
+    /// What the output's counts have not yet carried of the integrated increments, per axis,
+    /// rad or m/s (within half a count).
+    residual: Vector3<f64>,
 }
 
 impl TriadErrors {
@@ -169,6 +178,8 @@ impl TriadErrors {
             mis,
             white_per_rt_s: s.white_per_rt_s,
             lsb: s.lsb,
+            increment_lsb: s.increment_lsb,
+            residual: Vector3::zeros(),
         }
     }
 
@@ -185,9 +196,10 @@ impl TriadErrors {
         self.bias0 + self.bias_rw + self.temp_coeff * dtemp_c
     }
 
-    /// Corrupt the true increment `x` (rad or m/s) over `dt` with `bias` and white draw `w`.
+    /// Corrupt the true increment `x` (rad or m/s) over `dt` with `bias` and white draw `w`,
+    /// then digitise it: the rate ADC, then the output counts (whose remainder carries over).
     fn apply(
-        &self,
+        &mut self,
         x: &Vector3<f64>,
         dt: f64,
         bias: &Vector3<f64>,
@@ -195,8 +207,16 @@ impl TriadErrors {
     ) -> Vector3<f64> {
         let scaled = (Matrix3::from_diagonal(&(Vector3::repeat(1.0) + self.scale)) * self.mis) * x;
         let y = scaled + bias * dt + w * (self.white_per_rt_s * dt.sqrt());
-        if self.lsb > 0.0 {
+        let y = if self.lsb > 0.0 {
             y.map(|v| (v / dt / self.lsb).round() * self.lsb * dt)
+        } else {
+            y
+        };
+        if self.increment_lsb > 0.0 {
+            let v = y + self.residual;
+            let counted = v.map(|c| count(c, self.increment_lsb));
+            self.residual = v - counted;
+            counted
         } else {
             y
         }
@@ -323,7 +343,11 @@ impl ImuErrorModel {
     }
 
     /// Measured (delta-angle rad, delta-velocity m/s) from the true increments.
-    pub fn corrupt(&self, e: &IntervalErrors, inc: &Increments) -> (Vector3<f64>, Vector3<f64>) {
+    pub fn corrupt(
+        &mut self,
+        e: &IntervalErrors,
+        inc: &Increments,
+    ) -> (Vector3<f64>, Vector3<f64>) {
         if !self.enabled {
             return (inc.delta_angle_b_rad, inc.delta_velocity_b_m_s);
         }
@@ -365,6 +389,9 @@ struct AxisErrors {
     true_axis: Vector3<f64>,
     white_per_rt_s: f64,
     lsb: f64,
+    increment_lsb: f64,
+    /// What the output's counts have not yet carried, rad or m/s.
+    residual: f64,
 }
 
 impl AxisErrors {
@@ -385,8 +412,33 @@ impl AxisErrors {
             true_axis,
             white_per_rt_s: s.white_per_rt_s,
             lsb: s.lsb,
+            increment_lsb: s.increment_lsb,
+            residual: 0.0,
         }
     }
+
+    /// Digitise the analog increment `y` (rad or m/s) over `dt`: the rate ADC, then the
+    /// output counts with their carried remainder.
+    fn digitise(&mut self, y: f64, dt: f64) -> f64 {
+        let y = if self.lsb > 0.0 {
+            (y / dt / self.lsb).round() * self.lsb * dt
+        } else {
+            y
+        };
+        if self.increment_lsb > 0.0 {
+            let v = y + self.residual;
+            let counted = count(v, self.increment_lsb);
+            self.residual = v - counted;
+            counted
+        } else {
+            y
+        }
+    }
+}
+
+/// `v` (rad or m/s) as the nearest whole number of counts of `lsb`.
+fn count(v: f64, lsb: f64) -> f64 {
+    (v / lsb).round() * lsb
 }
 
 /// 1-σ of one interval's output error from white noise `white_per_rt_s` and an ADC step
@@ -608,13 +660,6 @@ impl ChannelErrorModel {
             let wa: f64 = self.rng.sample(StandardNormal);
             let rg: f64 = self.rng.sample(StandardNormal);
             let ra: f64 = self.rng.sample(StandardNormal);
-            let quant = |y: f64, lsb: f64| {
-                if lsb > 0.0 {
-                    (y / dt / lsb).round() * lsb * dt
-                } else {
-                    y
-                }
-            };
             let (g, a) = (&mut self.gyro[i], &mut self.accel[i]);
             if !self.enabled {
                 let e = Vector3::from(self.axes[i]);
@@ -636,8 +681,8 @@ impl ChannelErrorModel {
             let ya = (1.0 + a.scale) * a.true_axis.dot(&inc.delta_velocity_b_m_s)
                 + ab * dt
                 + a.white_per_rt_s * sq * wa;
-            out.delta_angle_rad[i] = quant(yg, g.lsb);
-            out.delta_velocity_m_s[i] = quant(ya, a.lsb);
+            out.delta_angle_rad[i] = g.digitise(yg, dt);
+            out.delta_velocity_m_s[i] = a.digitise(ya, dt);
             g.bias_rw += g.bias_rw_per_rt_s * sq * rg;
             a.bias_rw += a.bias_rw_per_rt_s * sq * ra;
         }
@@ -753,6 +798,7 @@ mod tests {
             for e in m.gyro.iter_mut().chain(m.accel.iter_mut()) {
                 e.white_per_rt_s = 0.0;
                 e.lsb = 0.0;
+                e.increment_lsb = 0.0;
             }
         }
         let dt = 0.01;

@@ -547,6 +547,12 @@ pub struct GyroGrade {
     /// Full-scale range ± of the rate output, deg/s (used when `adc_bits` > 0).
     #[serde(default)]
     pub full_scale_deg_s: f64,
+    /// Resolution of the delta-angle output, rad per count (0 = none). The output is a whole
+    /// number of counts and the remainder carries into the next interval, as in a sensor that
+    /// integrates (or counts pulses) before it digitises: the error of the summed angle stays
+    /// within half a count.
+    #[serde(default)]
+    pub delta_angle_lsb_rad: f64,
 }
 
 /// Error model of one accelerometer triad (grade file `[imu.accel]`).
@@ -573,6 +579,10 @@ pub struct AccelGrade {
     /// Full-scale range ± of the specific-force output, g (used when `adc_bits` > 0).
     #[serde(default)]
     pub full_scale_g: f64,
+    /// Resolution of the delta-velocity output, m/s per count (0 = none; carried remainder
+    /// as for the gyros' `delta_angle_lsb_rad`).
+    #[serde(default)]
+    pub delta_velocity_lsb_m_s: f64,
 }
 
 /// IMU grade (`[imu]` of a grade file).
@@ -1354,6 +1364,7 @@ impl Scenario {
             ("imu.gyro.misalignment_arcsec", g.misalignment_arcsec),
             ("imu.gyro.temp_coeff_deg_h_per_c", g.temp_coeff_deg_h_per_c),
             ("imu.gyro.full_scale_deg_s", g.full_scale_deg_s),
+            ("imu.gyro.delta_angle_lsb_rad", g.delta_angle_lsb_rad),
             ("imu.accel.bias_ug", imu.accel.bias_ug),
             (
                 "imu.accel.bias_rw_ug_per_rt_h",
@@ -1370,6 +1381,10 @@ impl Scenario {
                 imu.accel.temp_coeff_ug_per_c,
             ),
             ("imu.accel.full_scale_g", imu.accel.full_scale_g),
+            (
+                "imu.accel.delta_velocity_lsb_m_s",
+                imu.accel.delta_velocity_lsb_m_s,
+            ),
             ("imu.warmup_time_s", imu.warmup_time_s),
         ] {
             if !(v.is_finite() && v >= 0.0) {

@@ -171,7 +171,8 @@ fn same_seed_is_bit_identical() {
 }
 
 /// The truth process's IMU biases are the ones the IMU process applies: with the white noise,
-/// scale factor and misalignment switched off, IMU output minus the error-free increment is
+/// scale factor, misalignment and output counts switched off, IMU output minus the error-free
+/// increment is
 /// exactly bias·dt, and the truth driver reports that bias.
 #[test]
 fn truth_biases_match_imu_stream() {
@@ -182,6 +183,8 @@ fn truth_biases_match_imu_stream() {
     scn.imu.accel.vrw_ug_per_rt_hz = 0.0;
     scn.imu.accel.scale_factor_ppm = 0.0;
     scn.imu.accel.misalignment_arcsec = 0.0;
+    scn.imu.gyro.delta_angle_lsb_rad = 0.0;
+    scn.imu.accel.delta_velocity_lsb_m_s = 0.0;
     let mut imu = ImuSource::new(&scn, 0);
     let mut clean = ImuSource::new(&scn, 0);
     clean.model.enabled = false;
@@ -511,6 +514,59 @@ fn mems_outputs_are_quantised() {
             assert!((qw - qw.round()).abs() < 1e-6 && (qf - qf.round()).abs() < 1e-6);
         }
     }
+}
+
+/// Navigation grade: every increment is a whole number of output counts (2^-33 rad,
+/// 2^-29 m/s), and the counts carry their remainder, so the summed output stays within half
+/// a count of what the same sensor would give undigitised.
+#[test]
+fn navigation_grade_outputs_whole_counts_that_carry_the_remainder() {
+    let counted = load_shipped("vehicle");
+    let (lsb_w, lsb_f) = (
+        counted.imu.gyro.delta_angle_lsb_rad,
+        counted.imu.accel.delta_velocity_lsb_m_s,
+    );
+    assert_eq!((lsb_w, lsb_f), (2f64.powi(-33), 2f64.powi(-29)));
+    let mut analog = counted.clone();
+    analog.imu.gyro.delta_angle_lsb_rad = 0.0;
+    analog.imu.accel.delta_velocity_lsb_m_s = 0.0;
+    let (mut a, mut b) = (ImuSource::new(&counted, 0), ImuSource::new(&analog, 0));
+    let p = period_ns(counted.spec.imu.rate_hz);
+    // Σ(output − undigitised) per axis: minus the remainder the counts still owe.
+    let mut owed = [0.0f64; 6];
+    let mut differ = 0;
+    for k in 1..=20_000 {
+        let (m, u) = (a.sample(k * p), b.sample(k * p));
+        for (i, owed) in owed.iter_mut().enumerate() {
+            let (v, w, lsb) = if i < 3 {
+                (m.delta_angle_rad[i], u.delta_angle_rad[i], lsb_w)
+            } else {
+                (
+                    m.delta_velocity_m_s[i - 3],
+                    u.delta_velocity_m_s[i - 3],
+                    lsb_f,
+                )
+            };
+            assert_eq!(
+                (v / lsb).fract(),
+                0.0,
+                "sample {k} axis {i}: {v} is not whole counts"
+            );
+            differ += usize::from(v != w);
+            *owed += v - w;
+            // Half a count, and the rounding of ≤ 20 000 differences of terms ≤ 0.1 rad or
+            // m/s (each exact to ≈ 1e-17).
+            assert!(
+                owed.abs() <= 0.5 * lsb + 1e-12,
+                "sample {k} axis {i}: the summed output is {} off the undigitised (count {lsb})",
+                *owed
+            );
+        }
+    }
+    assert!(
+        differ > 6 * 20_000 * 9 / 10,
+        "digitising changed only {differ} values"
+    );
 }
 
 /// The static site with the GNSS part of the vehicle scenario's `[world]` (every effect on the

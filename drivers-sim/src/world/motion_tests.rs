@@ -328,7 +328,7 @@ fn specific_force_sees_the_gravity_disturbance() {
 }
 
 /// The actual unit reaches the IMU's output and the truth's biases: with the grade's noise,
-/// scale factor, misalignment and bias walk off, a standing IMU's output minus the true
+/// scale factor, misalignment, bias walk and output counts off, a standing IMU's output minus the true
 /// increment is `b·dt + G·Δv` with `b` the bias the truth process reports (turn-on,
 /// temperature and the warm-up, which decays by e^{−1} in τ) and G the unit's g-sensitivity;
 /// the accelerometers' is `b·dt` plus the size effect of the unit's offsets on the Earth's
@@ -350,6 +350,8 @@ fn imu_unit_reaches_the_output_and_the_truth() {
     scn.imu.accel.scale_factor_ppm = 0.0;
     scn.imu.accel.misalignment_arcsec = 0.0;
     scn.imu.accel.bias_rw_ug_per_rt_h = 0.0;
+    scn.imu.gyro.delta_angle_lsb_rad = 0.0;
+    scn.imu.accel.delta_velocity_lsb_m_s = 0.0;
     let mut imu = ImuSource::new(&scn, 0);
     let mut clean = ImuSource::new(&scn, 0);
     clean.model.enabled = false;
