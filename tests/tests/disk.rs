@@ -227,10 +227,13 @@ fn disk_filling_up_mid_run_counts_the_drops_and_resumes_in_a_new_segment() {
         eprintln!("skipped: prlimit (util-linux) not installed");
         return;
     }
-    // File-size limit 2 MB: the full recording of this run is about 7 MB (65 kB per simulated
-    // second), so the limit is hit during the run. Each segment is a new file, so the recording
-    // resumes at once in the next one (on a full disk: once space returns).
-    const LIMIT: u64 = 2_000_000;
+    // File-size limit 1.3 MB, hit during the run: the alignment's first 100 s record ≈ 23 kB
+    // per simulated second (chunks of ≈ 25 s, 0.57 MB with their message index), every
+    // solution after it ≈ 80 kB/s. The limit is crossed by the chunk that ends ≈ 68 s in; the
+    // next segment is tried 1 s of wall time later (25 s simulated: before the solutions start
+    // at 100 s) and holds the rest of the 112 s (≈ 1.1 MB). Each segment is a new file, so the
+    // recording resumes at once in it (on a full disk: once space returns).
+    const LIMIT: u64 = 1_300_000;
     let o = run_fusion("fsize", &rec, Some(LIMIT));
     assert!(o.log.contains(&rec.display().to_string()), "{}", o.log);
     assert!(o.log.contains("File too large"), "{}", o.log);
@@ -446,9 +449,10 @@ fn assert_nothing_died(r: &SmallFsRun, summary: &serde_json::Value) {
 #[test]
 fn full_disk_during_a_run_resumes_the_recording_and_the_summary_tells_the_truth() {
     let _g = MACHINE.shared();
-    // 4 MiB free: full after ≈ 60 s of scenario (65 kB/s), freed 7 s after the start (≈ 125 s
-    // of scenario, after the 100 s alignment); the run is 200 s.
-    let r = run_on_small_fs("resume", 200.0, 4 * 1024 * 1024, Some(7.0));
+    // 3 MiB free: full ≈ 110 s into the scenario (the 100 s alignment ≈ 2.4 MB, every
+    // solution after it ≈ 80 kB/s), freed 7 s after the start (≈ 125 s of scenario at 25×
+    // after the 2 s start delay); the run is 200 s.
+    let r = run_on_small_fs("resume", 200.0, 3 * 1024 * 1024, Some(7.0));
     let s: serde_json::Value = serde_json::from_str(
         &std::fs::read_to_string(r.out.join("summary.json")).expect("summary.json"),
     )
