@@ -472,9 +472,70 @@ struct Item {
     receive_mono_ns: u64,
 }
 
+/// What the recorder thread is handed: one record (the live path) or a batch of them, in
+/// order ([`RecordBatch`]: one send and at most one wake-up of the writer per batch).
+// A record goes unboxed: the live path allocates nothing per record.
+#[allow(clippy::large_enum_variant)]
+enum Queued {
+    One(Item),
+    Batch(Vec<Item>),
+}
+
+/// Records per batch for an offline tool handing over every record of a file
+/// ([`Recorder::batched`]): the writer thread is woken 256 times less often, and a batch of
+/// the largest records (≈ 0.5 kB each) stays near 140 kB.
+pub const OFFLINE_BATCH: usize = 256;
+
+/// Records on their way to the recorder in batches ([`Recorder::batched`]).
+pub struct RecordBatch<'a> {
+    recorder: &'a Recorder,
+    items: Vec<Item>,
+    capacity: usize,
+}
+
+impl RecordBatch<'_> {
+    /// Queue a record; a full batch is handed over, waiting while the recorder's queue is
+    /// full (records of a batch the recorder cannot take are counted as dropped).
+    pub fn record(&mut self, record: Record, receive_mono_ns: u64) {
+        self.items.push(Item {
+            record,
+            receive_mono_ns,
+        });
+        if self.items.len() >= self.capacity {
+            self.flush();
+        }
+    }
+
+    /// Hand over the records queued so far.
+    pub fn flush(&mut self) {
+        if self.items.is_empty() {
+            return;
+        }
+        let items = std::mem::replace(&mut self.items, Vec::with_capacity(self.capacity));
+        let n = items.len() as u64;
+        let sent = self
+            .recorder
+            .tx
+            .as_ref()
+            .is_some_and(|tx| tx.send(Queued::Batch(items)).is_ok());
+        if !sent {
+            self.recorder
+                .counters
+                .dropped
+                .fetch_add(n, Ordering::Relaxed);
+        }
+    }
+}
+
+impl Drop for RecordBatch<'_> {
+    fn drop(&mut self) {
+        self.flush();
+    }
+}
+
 /// Handle of the recorder thread, owned by the filter thread.
 pub struct Recorder {
-    tx: Option<SyncSender<Item>>,
+    tx: Option<SyncSender<Queued>>,
     counters: Arc<Counters>,
     thread: Option<JoinHandle<Result<(), RecorderError>>>,
     path: PathBuf,
@@ -1253,7 +1314,7 @@ impl LogClock {
 
 fn run(
     sink: Option<Sink>,
-    rx: Receiver<Item>,
+    rx: Receiver<Queued>,
     counters: Arc<Counters>,
     mut resume: Resume,
 ) -> Result<(), RecorderError> {
@@ -1269,7 +1330,12 @@ fn run(
             sink = resume.attempt(&counters);
         }
         match rx.recv_timeout(flush_interval) {
-            Ok(item) => clock.admit(item, &mut sink, &counters, &mut resume),
+            Ok(Queued::One(item)) => clock.admit(item, &mut sink, &counters, &mut resume),
+            Ok(Queued::Batch(items)) => {
+                for item in items {
+                    clock.admit(item, &mut sink, &counters, &mut resume);
+                }
+            }
             Err(RecvTimeoutError::Timeout) => {}
             Err(RecvTimeoutError::Disconnected) => {
                 clock.finish(&mut sink, &counters, &mut resume);
@@ -1389,10 +1455,10 @@ impl Recorder {
             self.counters.dropped.fetch_add(1, Ordering::Relaxed);
             return false;
         };
-        match tx.try_send(Item {
+        match tx.try_send(Queued::One(Item {
             record,
             receive_mono_ns,
-        }) {
+        })) {
             Ok(()) => true,
             Err(TrySendError::Full(_)) | Err(TrySendError::Disconnected(_)) => {
                 self.counters.dropped.fetch_add(1, Ordering::Relaxed);
@@ -1405,16 +1471,30 @@ impl Recorder {
     /// worse than waiting). Returns false when the recorder is not running (counted as dropped).
     pub fn record_blocking(&self, record: Record, receive_mono_ns: u64) -> bool {
         let sent = self.tx.as_ref().is_some_and(|tx| {
-            tx.send(Item {
+            tx.send(Queued::One(Item {
                 record,
                 receive_mono_ns,
-            })
+            }))
             .is_ok()
         });
         if !sent {
             self.counters.dropped.fetch_add(1, Ordering::Relaxed);
         }
         sent
+    }
+
+    /// A batching front of [`Recorder::record_blocking`] for offline tools that hand over
+    /// every record of a file: `capacity` records per send, so that the writer thread is
+    /// woken once per batch instead of once per record (a wake-up is a system call on each
+    /// side). The records reach the writer in order; [`RecordBatch::flush`] (or dropping it)
+    /// hands over the rest.
+    pub fn batched(&self, capacity: usize) -> RecordBatch<'_> {
+        let capacity = capacity.max(1);
+        RecordBatch {
+            recorder: self,
+            items: Vec::with_capacity(capacity),
+            capacity,
+        }
     }
 
     /// Messages written so far.
@@ -1859,6 +1939,32 @@ mod tests {
         let m = MessageStream::new(&bytes).unwrap().next().unwrap().unwrap();
         assert_eq!(m.log_time, m.publish_time);
         assert!(m.log_time > 1_742_504_400_000_000_000, "{}", m.log_time);
+    }
+
+    /// Batched records reach the file in the order they were queued, across batch boundaries
+    /// and the partial batch handed over when the front is dropped, and are all counted.
+    #[test]
+    fn batched_records_keep_their_order_and_the_last_partial_batch() {
+        let path = tmp("batched");
+        let rec = Recorder::start(&path, &RecorderOptions::default()).unwrap();
+        let t0 = fusion::time::GpsTime::from_utc(2025, 3, 20, 21, 0, 0.0).ns;
+        {
+            let mut out = rec.batched(4);
+            for k in 0..10u64 {
+                let mut imu = ImuSample::default();
+                imu.header.time_ns = t0 + k as i64 * 5_000_000;
+                imu.header.seq = k;
+                out.record(Record::Imu(imu), 0);
+            }
+        }
+        let stats = rec.finish().unwrap();
+        assert_eq!((stats.written, stats.dropped), (10, 0));
+        let bytes = std::fs::read(&path).unwrap();
+        let seqs: Vec<u32> = MessageStream::new(&bytes)
+            .unwrap()
+            .map(|m| m.unwrap().sequence)
+            .collect();
+        assert_eq!(seqs, (0..10).collect::<Vec<u32>>());
     }
 
     #[test]

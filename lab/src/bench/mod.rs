@@ -39,7 +39,7 @@ pub mod cost;
 pub mod floor;
 
 use crate::experiments::plot::{Chart, Line, color, line_chart};
-use crate::recorder::{Recorder, RecorderOptions};
+use crate::recorder::{OFFLINE_BATCH, Recorder, RecorderOptions};
 use crate::recording::Recording;
 use anyhow::{Context, bail};
 use drivers_sim::offline::{OfflineSim, feed};
@@ -491,9 +491,11 @@ fn replay_throughput(
         },
     )?;
     let channels = [Channel::SENSORS.as_slice(), &[Channel::Truth]].concat();
+    let mut batch = rec.batched(OFFLINE_BATCH);
     for r in OfflineSim::with_channels(&scn, &channels).with_duration_s(sim_s) {
-        rec.record_blocking(r, 0);
+        batch.record(r, 0);
     }
+    drop(batch);
     let stats = rec.finish()?;
     if stats.dropped > 0 {
         bail!(

@@ -20,7 +20,8 @@ pub mod kfgins_yaml;
 pub mod text;
 
 use crate::recorder::{
-    CONFIG_KEY_FILTER_TOML, CONFIG_METADATA_NAME, Record, Recorder, RecorderError, RecorderOptions,
+    CONFIG_KEY_FILTER_TOML, CONFIG_METADATA_NAME, OFFLINE_BATCH, Record, Recorder, RecorderError,
+    RecorderOptions,
 };
 use crate::recording::{Recording, RecordingError};
 use fusion::navigator::NavigatorConfig;
@@ -259,12 +260,14 @@ pub fn write_recording(
     )?;
     // A log has no reception clock: 0 makes the recorder's publish time the log time.
     let pb = crate::progress::steps(true, records.len() as u64, "writing the recording");
+    let mut batch = recorder.batched(OFFLINE_BATCH);
     for (k, r) in records.into_iter().enumerate() {
-        recorder.record_blocking(r, 0);
+        batch.record(r, 0);
         if k % 4096 == 0 {
             pb.set_position(k as u64);
         }
     }
+    drop(batch);
     pb.finish_and_clear();
     Ok(recorder.finish()?.written)
 }

@@ -51,7 +51,7 @@ use crate::config;
 use crate::daemon::{engine_status, feed, stamp_solution};
 use crate::recorder::{
     CALIBRATION_KEY_ELAPSED_S, CALIBRATION_KEY_SNAPSHOT, CALIBRATION_METADATA_NAME,
-    CONFIG_KEY_FILTER_TOML, CONFIG_METADATA_NAME, Record, Recorder, RecorderOptions,
+    CONFIG_KEY_FILTER_TOML, CONFIG_METADATA_NAME, OFFLINE_BATCH, Record, Recorder, RecorderOptions,
     WARM_START_KEY_SNAPSHOT, WARM_START_METADATA_NAME, recorded_rates,
 };
 use crate::recording::{Recording, RecordingError, TimeBase};
@@ -396,6 +396,7 @@ pub fn replay_offline(opts: &OfflineOptions) -> Result<OfflineSummary, ReplayErr
     // Decompressing and decoding on their own thread, the filter here, encoding and
     // compressing the replay's recording on the recorder's: three stages in a pipeline.
     let mut entries = rec.read_ahead();
+    let mut out = recorder.batched(OFFLINE_BATCH);
     for entry in &mut entries {
         let e = match entry {
             Ok(e) => e,
@@ -438,10 +439,10 @@ pub fn replay_offline(opts: &OfflineOptions) -> Result<OfflineSummary, ReplayErr
                         mine.alive_mask |= 1 << i;
                     }
                 }
-                recorder.record_blocking(Record::Status(Box::new(mine)), e.receive_mono_ns);
+                out.record(Record::Status(Box::new(mine)), e.receive_mono_ns);
             }
             Record::Truth(_) => {
-                recorder.record_blocking(r, e.receive_mono_ns);
+                out.record(r, e.receive_mono_ns);
             }
             input => {
                 s.inputs_fed += 1;
@@ -452,34 +453,38 @@ pub fn replay_offline(opts: &OfflineOptions) -> Result<OfflineSummary, ReplayErr
                     }
                 }
                 let result = feed(&mut engine, input);
-                let imu = match input {
-                    Record::Imu(imu) => {
-                        s.imu_samples += 1;
-                        t_first.get_or_insert(imu.header.time_ns);
-                        t_last = imu.header.time_ns;
-                        Some(*imu)
-                    }
-                    _ => None,
-                };
-                recorder.record_blocking(r.clone(), e.receive_mono_ns);
-                match result {
+                let solution = match result {
                     Ok(Some(mut sol)) => {
                         s.solutions_replayed += 1;
-                        if let Some(imu) = imu {
-                            stamp_solution(&mut sol, &imu, s.solutions_replayed);
+                        if let Record::Imu(imu) = input {
+                            stamp_solution(&mut sol, imu, s.solutions_replayed);
                         }
                         sol.header.send_mono_ns = e.receive_mono_ns;
-                        recorder.record_blocking(Record::Nav(sol), e.receive_mono_ns);
-                        if compare {
-                            matcher.replayed(sol);
-                        }
+                        Some(sol)
                     }
-                    Ok(None) => {}
-                    Err(_) => s.inputs_rejected += 1,
+                    Ok(None) => None,
+                    Err(_) => {
+                        s.inputs_rejected += 1;
+                        None
+                    }
+                };
+                if let Record::Imu(imu) = input {
+                    s.imu_samples += 1;
+                    t_first.get_or_insert(imu.header.time_ns);
+                    t_last = imu.header.time_ns;
+                }
+                // The input, then its solution: the order of the live recording.
+                out.record(r, e.receive_mono_ns);
+                if let Some(sol) = solution {
+                    out.record(Record::Nav(sol), e.receive_mono_ns);
+                    if compare {
+                        matcher.replayed(sol);
+                    }
                 }
             }
         }
     }
+    drop(out);
     pb.finish_and_clear();
     s.recording_complete = entries.into_recording().is_some_and(|r| r.is_complete());
     s.wall_time_s = started.elapsed().as_secs_f64();
