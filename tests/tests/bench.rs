@@ -155,6 +155,20 @@ fn quick_bench_reports_every_figure() {
         f(&s, "/recorder/paced_10x_accepted") + f(&s, "/recorder/paced_10x_dropped"),
         f(&s, "/recorder/paced_10x_records")
     );
+    // The recording target is the replayed drive's own file, at the shipped rates.
+    let rec_bytes = std::fs::metadata(out.join("replay/every_aiding/recording.mcap"))
+        .expect("the replay's recording")
+        .len() as f64;
+    let per_600 = rec_bytes / 1e6 * 600.0 / f(&s, "/replay/simulated_s");
+    let measured = f(&s, "/replay/every_aiding/recording_mb_per_600s");
+    assert!(
+        (measured - per_600).abs() <= 1e-9 * per_600,
+        "{measured} vs {per_600}"
+    );
+    assert_eq!(
+        f(&s, "/targets/recording_mb_per_600s_at_200hz/measured"),
+        measured
+    );
     for t in [
         "latency_p50_us_at_1khz",
         "latency_p99_us_at_1khz",

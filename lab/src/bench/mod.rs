@@ -513,11 +513,19 @@ fn replay_throughput(
             tap: None,
             solution_rate_hz: None,
         })?;
+        // The replay records at the source's rates: the shipped ones, as the default run.
+        let bytes: u64 = s
+            .replayed_segments
+            .iter()
+            .filter_map(|p| std::fs::metadata(p).ok())
+            .map(|m| m.len())
+            .sum();
         Ok(json!({
             "imu_samples": s.imu_samples,
             "solutions": s.solutions_replayed,
             "wall_s": s.wall_time_s,
             "imu_samples_per_s": s.imu_samples_per_s,
+            "recording_mb_per_600s": bytes as f64 / 1e6 * 600.0 / sim_s,
         }))
     };
     let every_aiding = replay(&source, "every_aiding")?;
@@ -886,9 +894,9 @@ pub fn run(opts: &BenchOptions) -> anyhow::Result<Value> {
         "fusion_peak_rss_mib": { "target": 30.0, "measured": fusion_rss },
         "recorder_10x_dropped": { "target": 0, "measured": recorder["paced_10x_dropped"] },
         "recording_mb_per_600s_at_200hz": {
-            "what": "every solution recorded (the bench times each one); the shipped 10 Hz solution rate: see README",
+            "what": "the replayed drive's recording at the shipped rates (inputs and truth in full, solutions and views at 10 Hz), scaled to 600 s; the live runs record every solution (the bench times each one): live.*.recording",
             "target": 16.0,
-            "measured": live["imu_200hz"]["recording"]["mb_per_600s"],
+            "measured": replay["every_aiding"]["recording_mb_per_600s"],
         },
     });
     let summary = json!({
