@@ -207,19 +207,15 @@ impl TriadErrors {
     ) -> Vector3<f64> {
         let scaled = (Matrix3::from_diagonal(&(Vector3::repeat(1.0) + self.scale)) * self.mis) * x;
         let y = scaled + bias * dt + w * (self.white_per_rt_s * dt.sqrt());
-        let y = if self.lsb > 0.0 {
-            y.map(|v| (v / dt / self.lsb).round() * self.lsb * dt)
-        } else {
-            y
-        };
-        if self.increment_lsb > 0.0 {
-            let v = y + self.residual;
-            let counted = v.map(|c| count(c, self.increment_lsb));
-            self.residual = v - counted;
-            counted
-        } else {
-            y
-        }
+        Vector3::from_fn(|i, _| {
+            digitise(
+                y[i],
+                dt,
+                self.lsb,
+                self.increment_lsb,
+                &mut self.residual[i],
+            )
+        })
     }
 }
 
@@ -416,29 +412,25 @@ impl AxisErrors {
             residual: 0.0,
         }
     }
-
-    /// Digitise the analog increment `y` (rad or m/s) over `dt`: the rate ADC, then the
-    /// output counts with their carried remainder.
-    fn digitise(&mut self, y: f64, dt: f64) -> f64 {
-        let y = if self.lsb > 0.0 {
-            (y / dt / self.lsb).round() * self.lsb * dt
-        } else {
-            y
-        };
-        if self.increment_lsb > 0.0 {
-            let v = y + self.residual;
-            let counted = count(v, self.increment_lsb);
-            self.residual = v - counted;
-            counted
-        } else {
-            y
-        }
-    }
 }
 
-/// `v` (rad or m/s) as the nearest whole number of counts of `lsb`.
-fn count(v: f64, lsb: f64) -> f64 {
-    (v / lsb).round() * lsb
+/// Digitise one axis's analog increment `y` (rad or m/s) over `dt`: the rate ADC of step
+/// `lsb` (rad/s or m/s², 0 = none), then the output's whole counts of `increment_lsb` (rad
+/// or m/s, 0 = none), whose remainder `residual` carries into the next interval.
+fn digitise(y: f64, dt: f64, lsb: f64, increment_lsb: f64, residual: &mut f64) -> f64 {
+    let y = if lsb > 0.0 {
+        (y / dt / lsb).round() * lsb * dt
+    } else {
+        y
+    };
+    if increment_lsb > 0.0 {
+        let v = y + *residual;
+        let counted = (v / increment_lsb).round() * increment_lsb;
+        *residual = v - counted;
+        counted
+    } else {
+        y
+    }
 }
 
 /// 1-σ of one interval's output error from white noise `white_per_rt_s` and an ADC step
@@ -681,8 +673,8 @@ impl ChannelErrorModel {
             let ya = (1.0 + a.scale) * a.true_axis.dot(&inc.delta_velocity_b_m_s)
                 + ab * dt
                 + a.white_per_rt_s * sq * wa;
-            out.delta_angle_rad[i] = g.digitise(yg, dt);
-            out.delta_velocity_m_s[i] = a.digitise(ya, dt);
+            out.delta_angle_rad[i] = digitise(yg, dt, g.lsb, g.increment_lsb, &mut g.residual);
+            out.delta_velocity_m_s[i] = digitise(ya, dt, a.lsb, a.increment_lsb, &mut a.residual);
             g.bias_rw += g.bias_rw_per_rt_s * sq * rg;
             a.bias_rw += a.bias_rw_per_rt_s * sq * ra;
         }
