@@ -24,9 +24,11 @@
 //! ([`ErrorStateEkf::propagate_covariance`]), with `Φ = I + F̄T + ½(F̄T)²` (`F̄T = ∫F dt`; the
 //! neglected commutator terms are `O(|F|²T²)` of the varying part, < 10⁻⁶ for T = 50 ms) and
 //! trapezoidal noise `P⁺ = Φ (P + ½ Q_c T) Φᵀ + ½ Q_c T`. `Φ` differs from the identity only
-//! in the 9 navigation rows (and the clock bias–drift entry), so `Φ P Φᵀ` is formed as a
-//! 9×31·31×31 product for the rows and a 31×31·31×9 one for the columns (≈ 17 300
-//! multiply-adds, once per interval).
+//! in the 9 navigation rows `a` (and the clock bias–drift entry), so `Φ P Φᵀ` needs only
+//! `G = P aᵀ` (31×9) and the symmetric `a G` (9×9): `a` is built from its non-zero 3×3 blocks
+//! (17 of 30; about 140 of its 279 entries are non-zero), `G` from those entries alone
+//! (≈ 4 400 multiply-adds) and `a G` as a 9×31·31×9 product of which the upper triangle is kept
+//! (≈ 7 000 multiply-adds in all, once per interval and before each update).
 
 use super::update::p_times_h_transpose;
 use super::{Covariance, ErrorStateEkf, NX, StateVector, idx, symmetrize};
@@ -272,35 +274,50 @@ impl TransitionAccumulator {
     pub fn nav_rows(&self, ell: &Ellipsoid, r_e: &Vector3<f64>) -> SMatrix<f64, 9, NX> {
         let t = self.dt_s;
         let omega = skew(&ell.omega_ie_e());
-        let mut fi = NavRows::zeros();
-        // Rows 0..3 position, 3..6 velocity, 6..9 attitude (state indices equal row indices).
-        fi.fixed_view_mut::<3, 3>(idx::POS, idx::VEL)
-            .copy_from(&(Matrix3::identity() * t));
-        fi.fixed_view_mut::<3, 3>(idx::VEL, idx::POS)
-            .copy_from(&(gravity_gradient(ell, r_e) * t));
-        fi.fixed_view_mut::<3, 3>(idx::VEL, idx::VEL)
-            .copy_from(&(omega * (-2.0 * t)));
-        fi.fixed_view_mut::<3, 3>(idx::VEL, idx::ATT)
-            .copy_from(&(-skew(&self.sum_f_e)));
-        fi.fixed_view_mut::<3, 3>(idx::VEL, idx::BA)
-            .copy_from(&(-self.sum_c_e_b));
-        fi.fixed_view_mut::<3, 3>(idx::VEL, idx::SA)
-            .copy_from(&(-self.sum_c_diag_f));
-        fi.fixed_view_mut::<3, 3>(idx::ATT, idx::ATT)
-            .copy_from(&(omega * (-t)));
-        fi.fixed_view_mut::<3, 3>(idx::ATT, idx::BG)
-            .copy_from(&(-self.sum_c_e_b));
-        fi.fixed_view_mut::<3, 3>(idx::ATT, idx::SG)
-            .copy_from(&(-self.sum_c_diag_w));
-        fi.fixed_view_mut::<3, 3>(idx::ATT, idx::SGM)
-            .copy_from(&(-self.sum_c_w_mis));
+        // The non-zero 3×3 blocks of F̄T (module docs): its position rows are T·I in the
+        // velocity columns; velocity rows read position, velocity, attitude, accelerometer bias
+        // and scale factor; attitude rows read attitude and the gyro bias, scale factor and
+        // non-orthogonality.
+        let v_p = gravity_gradient(ell, r_e) * t;
+        let v_v = omega * (-2.0 * t);
+        let v_a = -skew(&self.sum_f_e);
+        let v_ba = -self.sum_c_e_b;
+        let v_sa = -self.sum_c_diag_f;
+        let a_a = omega * (-t);
+        let a_bg = -self.sum_c_e_b;
+        let a_sg = -self.sum_c_diag_w;
+        let a_sgm = -self.sum_c_w_mis;
         // F has non-zero rows only in 0..9 (plus the clock row, whose column 27 meets no
-        // non-zero row of F), so (F̄T)² restricted to rows 0..9 is F̄T[:, 0..9] · F̄T[0..9, :].
-        let sq = fi.fixed_columns::<9>(0) * fi;
-        let mut a = fi + sq * 0.5;
-        for i in 0..9 {
-            a[(i, i)] += 1.0;
-        }
+        // non-zero row of F), so (F̄T)² restricted to rows 0..9 is F̄T[:, 0..9] · F̄T[0..9, :]:
+        // block by block, Φ = I + F̄T + ½(F̄T)² is
+        //   position rows: I + ½T·v_p | T·I + ½T·v_v | ½T·v_a | ½T·v_ba | ½T·v_sa
+        //   velocity rows: v_p + ½v_v·v_p | I + v_v + ½(v_v² + T·v_p) | v_a + ½(v_v·v_a +
+        //     v_a·a_a) | v_ba + ½v_v·v_ba | v_sa + ½v_v·v_sa | ½v_a·a_bg | ½v_a·a_sg | ½v_a·a_sgm
+        //   attitude rows: I + a_a + ½a_a² | a_bg + ½a_a·a_bg | (the same for a_sg, a_sgm)
+        let i3 = Matrix3::identity();
+        let h = 0.5 * t;
+        let mut a = NavRows::zeros();
+        let mut put = |r: usize, c: usize, m: Matrix3<f64>| {
+            a.fixed_view_mut::<3, 3>(r, c).copy_from(&m);
+        };
+        let (p, v, q) = (idx::POS, idx::VEL, idx::ATT);
+        put(p, p, i3 + v_p * h);
+        put(p, v, i3 * t + v_v * h);
+        put(p, q, v_a * h);
+        put(p, idx::BA, v_ba * h);
+        put(p, idx::SA, v_sa * h);
+        put(v, p, v_p + v_v * v_p * 0.5);
+        put(v, v, i3 + v_v + (v_v * v_v + v_p * t) * 0.5);
+        put(v, q, v_a + (v_v * v_a + v_a * a_a) * 0.5);
+        put(v, idx::BA, v_ba + v_v * v_ba * 0.5);
+        put(v, idx::SA, v_sa + v_v * v_sa * 0.5);
+        put(v, idx::BG, v_a * a_bg * 0.5);
+        put(v, idx::SG, v_a * a_sg * 0.5);
+        put(v, idx::SGM, v_a * a_sgm * 0.5);
+        put(q, q, i3 + a_a + a_a * a_a * 0.5);
+        put(q, idx::BG, a_bg + a_a * a_bg * 0.5);
+        put(q, idx::SG, a_sg + a_a * a_sg * 0.5);
+        put(q, idx::SGM, a_sgm + a_a * a_sgm * 0.5);
         a
     }
 }
@@ -394,10 +411,15 @@ impl ErrorStateEkf {
         // G = P aᵀ (31×9, P symmetric so G = (aP)ᵀ):
         //   P⁺[0..9, 0..9] = a G,  P⁺[9.., 0..9] = G[9.., ·] (and its mirror),  the rest = P.
         let g = p_times_h_transpose(pn, &a);
+        // a G = a P aᵀ is symmetric: its upper triangle, mirrored. Formed column by column as
+        // a sum of the columns of `a` (contiguous, independent lanes) weighted by G's entries,
+        // skipping the columns of `a` that are zero (states the navigation rows do not read).
         let top = a * g;
         for c in 0..9 {
-            for r in 0..9 {
-                pn[(r, c)] = 0.5 * (top[(r, c)] + top[(c, r)]);
+            for r in 0..=c {
+                let v = top[(r, c)];
+                pn[(r, c)] = v;
+                pn[(c, r)] = v;
             }
             for r in 9..NX {
                 pn[(r, c)] = g[(r, c)];

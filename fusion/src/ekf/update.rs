@@ -163,13 +163,22 @@ pub fn update_in_place<const M: usize>(
     if !(all_finite(&dx) && all_finite(&k) && all_finite(&e) && bound < 1e300) {
         return rejected(f64::INFINITY);
     }
+    // Only the upper triangle is computed (each column's leading part, contiguous in memory)
+    // and mirrored: the lower entries would be the same numbers (see above), for half the work.
+    let (k_s, e_s) = (k.as_slice(), e.as_slice());
+    let p_s = p.as_mut_slice();
     for j in 0..NX {
-        let mut col = p.column_mut(j);
+        let col = &mut p_s[j * NX..j * NX + j + 1];
         for a in 0..M {
             let (e_ja, k_ja) = (e[(j, a)], k[(j, a)]);
-            col.zip_zip_apply(&k.column(a), &e.column(a), |x, k_ia, e_ia| {
+            let k_a = &k_s[a * NX..a * NX + j + 1];
+            let e_a = &e_s[a * NX..a * NX + j + 1];
+            for ((x, k_ia), e_ia) in col.iter_mut().zip(k_a).zip(e_a) {
                 *x -= k_ia * e_ja + e_ia * k_ja;
-            });
+            }
+        }
+        for i in 0..j {
+            p_s[i * NX + j] = p_s[j * NX + i];
         }
     }
     (dx, residual(nis, false))
