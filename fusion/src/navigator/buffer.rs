@@ -167,10 +167,6 @@ impl<T: Clone> Ring<T> {
 /// beyond the latency itself). A checkpoint is one copy of the navigation core (≈ 10 kB).
 pub(super) const CHECKPOINT_PERIOD: Duration = Duration::from_ns(20_000_000);
 
-/// Checkpoints kept: the 2 s longest buffer window plus two periods and margin, at the period
-/// above (128 × 20 ms = 2.56 s).
-pub(super) const CHECKPOINT_CAP: usize = 128;
-
 /// Largest delayed-fusion IMU log, steps (≈ 5 MB; 2 kHz with the 2 s window needs 4 082).
 pub(super) const IMU_LOG_MAX_CAP: usize = 65_536;
 

@@ -351,7 +351,7 @@ impl Navigator {
             baro_q: TimeQueue::new(),
             imu_log: Ring::new(config.imu_log_capacity(), ImuLogEntry::default()),
             checkpoints: Ring::new(
-                CHECKPOINT_CAP,
+                config.checkpoint_capacity(),
                 Checkpoint {
                     t: GpsTime::EPOCH,
                     core,

@@ -711,6 +711,23 @@ impl NavigatorConfig {
         }
     }
 
+    /// Checkpoints the delayed-fusion ring keeps: at one per period ([`CHECKPOINT_PERIOD`];
+    /// an IMU slower than the period spaces them wider, covering more), enough to reach back
+    /// over `buffer_window_s` plus two periods, with two of margin. Sized from the window,
+    /// not for the longest one allowed: each checkpoint is a copy of the navigation core
+    /// (≈ 9 kB), and a ring larger than it needs to be spreads the writes over more memory
+    /// than the processor's cache keeps (54 for the 1 s window, ≈ 490 kB).
+    pub fn checkpoint_capacity(&self) -> usize {
+        let period_s = CHECKPOINT_PERIOD.seconds_f64();
+        // buffer_window_s is validated to (0, 2]; a non-finite value gives the 2 s ring.
+        let n = ((self.buffer_window_s + 2.0 * period_s) / period_s).ceil();
+        if n.is_finite() && n <= 2.04 / period_s {
+            n as usize + 2
+        } else {
+            (2.04 / period_s).ceil() as usize + 2
+        }
+    }
+
     /// Mechanization settings derived from this configuration.
     pub fn mechanization(&self) -> MechanizationConfig {
         MechanizationConfig {

@@ -529,9 +529,22 @@ fn invalid_inputs_are_rejected_without_touching_the_state() {
 
 #[test]
 fn late_gnss_sample_gives_the_in_time_update() {
+    late_gnss_sample_matches_in_time(300_000_000);
+}
+
+/// The same with the fix late by almost the whole buffer window (0.98 s behind the filter's
+/// epoch when it arrives, window 1 s): the checkpoint ring, sized from the window, still holds
+/// a checkpoint before it.
+#[test]
+fn gnss_sample_late_by_almost_the_window_gives_the_in_time_update() {
+    assert_eq!(quick_config().buffer_window_s, 1.0);
+    late_gnss_sample_matches_in_time(990_000_000);
+}
+
+fn late_gnss_sample_matches_in_time(delay_ns: i64) {
     // Two navigators see the same static-site stream (IMU 100 Hz, baro 10 Hz, GNSS 1 Hz).
     // A gets each GNSS fix before the IMU sample of its time (in time); B gets the fix of
-    // t = 75 s only 0.3 s later, after 30 more IMU samples and 3 baro updates. B must
+    // t = 75 s only `delay_ns` later (0.3 s: after 30 more IMU samples and 3 baro updates). B must
     // rewind to its checkpoint before 75 s, re-fuse the baro samples and replay the IMU:
     // the same floating-point operations in the same order, so the results agree to
     // rounding — asserted at 1e-9 m / 1e-12 m/s / 1e-12 rad and 1e-9 relative for the
@@ -556,7 +569,7 @@ fn late_gnss_sample_gives_the_in_time_update() {
             let g = sim.gnss();
             a.push_gnss(&g).unwrap();
             if t == late_at {
-                held = Some((t + 300_000_000, g));
+                held = Some((t + delay_ns, g));
             } else {
                 b.push_gnss(&g).unwrap();
             }
@@ -840,6 +853,7 @@ fn an_imu_rate_the_log_cannot_hold_is_a_configuration_error() {
         ..NavigatorConfig::default()
     };
     assert_eq!(cfg.imu_log_capacity(), 4082);
+    assert_eq!(cfg.checkpoint_capacity(), 104);
     cfg.validate().unwrap();
     cfg.max_imu_rate_hz = 40_000.0; // 88 000 steps
     let e = cfg.validate().unwrap_err();
