@@ -150,6 +150,21 @@ pub fn geodetic_to_ecef(ell: &Ellipsoid, g: &Geodetic) -> Vector3<f64> {
 /// `atan2` the textbook form takes, so the passes need square roots only; the latitude's
 /// and longitude's `atan2` are taken once at the end (it runs for every solution).
 pub fn ecef_to_geodetic(ell: &Ellipsoid, r_e: &Vector3<f64>) -> Geodetic {
+    bowring(ell, r_e).0
+}
+
+/// [`ecef_to_geodetic`] and the NED frame there, [`c_e_n`] at the latitude and longitude
+/// found, built from the sines and cosines the iteration ends with rather than from the
+/// angles: no trigonometric call (it runs for every solution). Equal to
+/// `c_e_n(lat_rad, lon_rad)` to rounding.
+pub fn ecef_to_geodetic_and_c_e_n(ell: &Ellipsoid, r_e: &Vector3<f64>) -> (Geodetic, Matrix3<f64>) {
+    let (geo, [sl, cl, so, co]) = bowring(ell, r_e);
+    (geo, c_e_n_from(sl, cl, so, co))
+}
+
+/// Bowring's passes ([`ecef_to_geodetic`]): the geodetic coordinates with the sine and cosine
+/// of the latitude and of the longitude.
+fn bowring(ell: &Ellipsoid, r_e: &Vector3<f64>) -> (Geodetic, [f64; 4]) {
     let a = ell.a_m;
     let b = ell.b_m();
     let e2 = ell.e2();
@@ -174,12 +189,14 @@ pub fn ecef_to_geodetic(ell: &Ellipsoid, r_e: &Vector3<f64>) -> Geodetic {
         (sb, cb) = unit(one_minus_f * sl, cl);
     }
     let (sl, cl) = unit(n_lat, d_lat);
+    let (so, co) = unit(r_e.y, r_e.x);
     let height_m = p * cl + z * sl - a * (1.0 - e2 * sl * sl).sqrt();
-    Geodetic {
+    let geo = Geodetic {
         lat_rad: n_lat.atan2(d_lat),
         lon_rad: r_e.y.atan2(r_e.x),
         height_m,
-    }
+    };
+    (geo, [sl, cl, so, co])
 }
 
 /// DCM from NED to ECEF at (lat, lon): `r_e = c_e_n · r_n`.
@@ -188,6 +205,11 @@ pub fn ecef_to_geodetic(ell: &Ellipsoid, r_e: &Vector3<f64>) -> Geodetic {
 pub fn c_e_n(lat_rad: f64, lon_rad: f64) -> Matrix3<f64> {
     let (sl, cl) = lat_rad.sin_cos();
     let (so, co) = lon_rad.sin_cos();
+    c_e_n_from(sl, cl, so, co)
+}
+
+/// [`c_e_n`] from the sine and cosine of the latitude (`sl`, `cl`) and longitude (`so`, `co`).
+fn c_e_n_from(sl: f64, cl: f64, so: f64, co: f64) -> Matrix3<f64> {
     Matrix3::new(
         -sl * co,
         -so,
@@ -423,6 +445,12 @@ mod tests {
                     let dlon = (g2.lon_rad - lon + PI).rem_euclid(2.0 * PI) - PI;
                     prop_assert!(dlon.abs() * (r_e + h) * lat.cos() < ROUND_TRIP_TOL_M);
                 }
+                // The frame from the iteration's sines and cosines is the frame at the angles
+                // it returns, to rounding (a few ulp of a unit vector's components).
+                let (g3, c) = ecef_to_geodetic_and_c_e_n(&ell, &r);
+                prop_assert_eq!(g3, g2);
+                let d = (c - c_e_n(g2.lat_rad, g2.lon_rad)).abs().max();
+                prop_assert!(d < 1e-15, "c_e_n differs by {}", d);
             }
         }
     }

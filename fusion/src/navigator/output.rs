@@ -53,9 +53,11 @@ impl Navigator {
     }
 
     pub(super) fn solution(&mut self, s: &ImuSample) -> NavSolution {
-        let geo = earth::ecef_to_geodetic(&self.ell, &self.core.nav.r_e);
-        let q_e_n = q_e_n(geo.lat_rad, geo.lon_rad);
-        let c_n_e = q_e_n.to_rotation_matrix().into_inner().transpose();
+        let (geo, c_e_n) = earth::ecef_to_geodetic_and_c_e_n(&self.ell, &self.core.nav.r_e);
+        let q_e_n = UnitQuaternion::from_rotation_matrix(
+            &nalgebra::Rotation3::from_matrix_unchecked(c_e_n),
+        );
+        let c_n_e = c_e_n.transpose();
         let q_n_b = q_e_n.inverse() * self.core.nav.q_e_b;
         let v_ned = c_n_e * self.core.nav.v_e;
         let rpy = rpy_from_q_n_b(&q_n_b);
