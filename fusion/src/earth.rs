@@ -85,6 +85,13 @@ pub const PZ90: Ellipsoid = Ellipsoid {
 /// further than ~50 km from the Earth's centre (checked by the round-trip property test).
 pub const ECEF_TO_GEODETIC_ITERATIONS: usize = 3;
 
+/// Distance from the Earth's centre beyond which [`ecef_to_geodetic`] stops after two passes,
+/// m: from 3000 km below the surface out past the geostationary orbit the third pass changes
+/// the latitude by at most an ulp (≤ 3.3·10⁻¹⁶ rad; the test
+/// `two_passes_suffice_beyond_the_threshold` compares them), and it costs a third of the
+/// conversion that every solution makes.
+pub const ECEF_TO_GEODETIC_TWO_PASS_RADIUS_M: f64 = 3.3e6;
+
 impl Ellipsoid {
     /// First eccentricity squared, dimensionless.
     pub fn e2(&self) -> f64 {
@@ -142,7 +149,7 @@ pub fn geodetic_to_ecef(ell: &Ellipsoid, g: &Geodetic) -> Vector3<f64> {
 /// ECEF → geodetic (exact to < 0.1 mm everywhere, poles included).
 ///
 /// Bowring's iteration on the parametric latitude β with a fixed number of passes
-/// ([`ECEF_TO_GEODETIC_ITERATIONS`]); no division by the axis distance, so the poles and the
+/// ([`ECEF_TO_GEODETIC_ITERATIONS`]; two beyond [`ECEF_TO_GEODETIC_TWO_PASS_RADIUS_M`]); no division by the axis distance, so the poles and the
 /// equatorial plane need no special case. Valid for heights from well inside the Earth
 /// (≈ −6000 km) to beyond the geostationary orbit. Longitude is 0 on the polar axis.
 ///
@@ -165,6 +172,16 @@ pub fn ecef_to_geodetic_and_c_e_n(ell: &Ellipsoid, r_e: &Vector3<f64>) -> (Geode
 /// Bowring's passes ([`ecef_to_geodetic`]): the geodetic coordinates with the sine and cosine
 /// of the latitude and of the longitude.
 fn bowring(ell: &Ellipsoid, r_e: &Vector3<f64>) -> (Geodetic, [f64; 4]) {
+    let passes = if r_e.norm_squared() > ECEF_TO_GEODETIC_TWO_PASS_RADIUS_M.powi(2) {
+        2
+    } else {
+        ECEF_TO_GEODETIC_ITERATIONS
+    };
+    bowring_passes(ell, r_e, passes)
+}
+
+/// [`bowring`] with a given number of passes.
+fn bowring_passes(ell: &Ellipsoid, r_e: &Vector3<f64>, passes: usize) -> (Geodetic, [f64; 4]) {
     let a = ell.a_m;
     let b = ell.b_m();
     let e2 = ell.e2();
@@ -182,7 +199,7 @@ fn bowring(ell: &Ellipsoid, r_e: &Vector3<f64>) -> (Geodetic, [f64; 4]) {
     // Initial parametric latitude: tan β = z a / (p b).
     let (mut sb, mut cb) = unit(z, one_minus_f * p);
     let (mut n_lat, mut d_lat) = (0.0, 1.0);
-    for _ in 0..ECEF_TO_GEODETIC_ITERATIONS {
+    for _ in 0..passes {
         n_lat = z + ep2 * b * sb * sb * sb;
         d_lat = p - e2 * a * cb * cb * cb;
         let (sl, cl) = unit(n_lat, d_lat);
@@ -430,6 +447,27 @@ mod tests {
 
     proptest! {
         #![proptest_config(ProptestConfig::with_cases(4000))]
+        /// Beyond the two-pass radius (3000 km below the surface and out, here to 40 000 km
+        /// up) the third pass moves the latitude by at most an ulp and the height by a few ulp.
+        #[test]
+        fn two_passes_suffice_beyond_the_threshold(
+            lat in lat_strategy(),
+            lon in -PI..PI,
+            h in prop_oneof![-3.0e6..-2.9e6, -3.0e6..4.0e7_f64, -10_000.0..10_000.0],
+        ) {
+            for ell in [WGS84, PZ90] {
+                let r = geodetic_to_ecef(&ell, &Geodetic { lat_rad: lat, lon_rad: lon, height_m: h });
+                prop_assume!(r.norm() > ECEF_TO_GEODETIC_TWO_PASS_RADIUS_M);
+                let (two, _) = bowring_passes(&ell, &r, 2);
+                let (three, _) = bowring_passes(&ell, &r, ECEF_TO_GEODETIC_ITERATIONS);
+                prop_assert!((two.lat_rad - three.lat_rad).abs() <= 4.5e-16, "{}", two.lat_rad - three.lat_rad);
+                // A few ulp of the distance from the centre.
+                let dh = (two.height_m - three.height_m).abs();
+                prop_assert!(dh <= 1e-15 * r.norm(), "{}", dh);
+                prop_assert_eq!(bowring(&ell, &r).0, two);
+            }
+        }
+
         #[test]
         fn geodetic_round_trip(lat in lat_strategy(), lon in -PI..PI, h in height_strategy()) {
             for ell in [WGS84, PZ90] {

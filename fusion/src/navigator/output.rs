@@ -62,14 +62,10 @@ impl Navigator {
         let v_ned = c_n_e * self.core.nav.v_e;
         let rpy = rpy_from_q_n_b(&q_n_b);
         let p = &self.core.ekf.p;
+        // Only the diagonal of C B Cᵀ: row i of C B dotted with row i of C.
         let sig = |k: usize| -> [f64; 3] {
-            let b: Matrix3<f64> = p.fixed_view::<3, 3>(k, k).into_owned();
-            let d = (c_n_e * b * c_n_e.transpose()).diagonal();
-            [
-                d.x.max(0.0).sqrt(),
-                d.y.max(0.0).sqrt(),
-                d.z.max(0.0).sqrt(),
-            ]
+            let cb = c_n_e * p.fixed_view::<3, 3>(k, k);
+            [0, 1, 2].map(|i| cb.row(i).dot(&c_n_e.row(i)).max(0.0).sqrt())
         };
         // The position error block is in ECEF: rotated into NED whole, so the horizontal
         // error ellipse keeps its orientation (`pos_sigma_ned_m` is its diagonal's root).
@@ -77,6 +73,7 @@ impl Navigator {
             let b: Matrix3<f64> = p.fixed_view::<3, 3>(idx::POS, idx::POS).into_owned();
             c_n_e * b * c_n_e.transpose()
         };
+        let pos_sigma = [0, 1, 2].map(|i| pos_cov_ned[(i, i)].max(0.0).sqrt());
         self.solutions += 1;
         let mut sol = NavSolution {
             header: Header {
@@ -95,7 +92,7 @@ impl Navigator {
             vel_ned_m_s: v_ned.into(),
             q_ned_body: quat_to_wire(&q_n_b),
             roll_pitch_heading_rad: rpy.into(),
-            pos_sigma_ned_m: sig(idx::POS),
+            pos_sigma_ned_m: pos_sigma,
             vel_sigma_ned_m_s: sig(idx::VEL),
             att_sigma_ned_rad: sig(idx::ATT),
             gyro_bias_rad_s: self.core.ekf.gyro_bias_rad_s.into(),
