@@ -329,7 +329,7 @@ impl<E: NavEngine> State<'_, E> {
         ev.header.send_mono_ns = msgs::monotonic_ns();
         let rec = Record::SensorAlive(ev);
         let _ = feed(&mut self.engine, &rec);
-        self.recorder.record(rec, ev.header.send_mono_ns);
+        self.recorder.record_live(rec, ev.header.send_mono_ns);
     }
 
     fn mark_received(&mut self, sensor: SensorId) {
@@ -367,13 +367,14 @@ impl<E: NavEngine> State<'_, E> {
 
     /// A message received: a sensor's goes into the engine; an IMU sample's solution is
     /// published; then the input and the solution go to the recorder, in that order. The
-    /// recorder's hand-off (a queue push that may wake its thread) comes after the
-    /// publication, off the latency path from IMU sample to solution.
+    /// recorder's hand-off (a batch of [`crate::recorder::LIVE_BATCH`] records pushed to its
+    /// queue, which may wake its thread) comes after the publication, off the latency path
+    /// from IMU sample to solution.
     fn on_message(&mut self, rec: Record) {
         let now = msgs::monotonic_ns();
         let Some(sensor) = rec.channel().and_then(Channel::sensor) else {
             // Truth goes to the recorder only: the filter never sees it.
-            self.recorder.record(rec, now);
+            self.recorder.record_live(rec, now);
             return;
         };
         let imu = match &rec {
@@ -418,10 +419,10 @@ impl<E: NavEngine> State<'_, E> {
                 None
             }
         };
-        self.recorder.record(rec, now);
+        self.recorder.record_live(rec, now);
         if let Some(sol) = solution {
             self.recorder
-                .record(Record::Nav(sol), sol.header.send_mono_ns);
+                .record_live(Record::Nav(sol), sol.header.send_mono_ns);
             // The solution is out: the late samples held out of it are fused now, before the
             // next IMU sample comes (and before a checkpoint is taken of the state).
             self.engine.catch_up();
@@ -531,7 +532,7 @@ impl<E: NavEngine> State<'_, E> {
         let st = self.status();
         match self.status_pub.send(st) {
             Ok(stamped) => {
-                self.recorder.record(
+                self.recorder.record_live(
                     Record::Status(Box::new(stamped)),
                     stamped.header.send_mono_ns,
                 );
@@ -692,6 +693,7 @@ pub fn run<E: NavEngine>(
             st.publish_status();
             status_at = (status_at + status_period).max(now);
         }
+        st.recorder.hand_over_live_if_due(now);
         service.tick(st.engine.mode(), st.solutions, st.recorder.dropped());
     }
     service.stopping();

@@ -486,6 +486,29 @@ enum Queued {
 /// the largest records (≈ 0.5 kB each) stays near 140 kB.
 pub const OFFLINE_BATCH: usize = 256;
 
+/// Records per hand-over on the live path ([`Recorder::record_live`]): at 1 kHz (an IMU sample
+/// and its solution each millisecond) the writer thread is woken about 30 times a second
+/// instead of 2 000, so that it competes less for the cores the filter and the drivers need.
+pub const LIVE_BATCH: usize = 64;
+
+/// Longest a record waits in the live batch before it is handed over, wall time (checked at
+/// each of the daemon's wake-ups, [`Recorder::hand_over_live_if_due`]): the recording on disk
+/// lags by up to this much more than the writer's own flush interval.
+pub const LIVE_HOLD: Duration = Duration::from_millis(50);
+
+/// The live path's batch and its vectors ([`Recorder::record_live`]). The writer thread hands
+/// each drained vector back (`spare`), so that in steady state no record costs an allocation;
+/// at most `max_vectors` exist, which bounds the records in flight as the queue's capacity
+/// bounds single records (a writer that falls that far behind makes records count as dropped).
+struct LiveBatch {
+    items: Vec<Item>,
+    /// When the oldest record of `items` was queued.
+    since: Option<Instant>,
+    spare: Receiver<Vec<Item>>,
+    vectors: usize,
+    max_vectors: usize,
+}
+
 /// Records on their way to the recorder in batches ([`Recorder::batched`]).
 pub struct RecordBatch<'a> {
     recorder: &'a Recorder,
@@ -536,6 +559,7 @@ impl Drop for RecordBatch<'_> {
 /// Handle of the recorder thread, owned by the filter thread.
 pub struct Recorder {
     tx: Option<SyncSender<Queued>>,
+    live: LiveBatch,
     counters: Arc<Counters>,
     thread: Option<JoinHandle<Result<(), RecorderError>>>,
     path: PathBuf,
@@ -1315,6 +1339,7 @@ impl LogClock {
 fn run(
     sink: Option<Sink>,
     rx: Receiver<Queued>,
+    spare: SyncSender<Vec<Item>>,
     counters: Arc<Counters>,
     mut resume: Resume,
 ) -> Result<(), RecorderError> {
@@ -1331,10 +1356,13 @@ fn run(
         }
         match rx.recv_timeout(flush_interval) {
             Ok(Queued::One(item)) => clock.admit(item, &mut sink, &counters, &mut resume),
-            Ok(Queued::Batch(items)) => {
-                for item in items {
+            Ok(Queued::Batch(mut items)) => {
+                for item in items.drain(..) {
                     clock.admit(item, &mut sink, &counters, &mut resume);
                 }
+                // Back to the live path for its next batch (an offline batch's vector is
+                // simply dropped when nobody takes it).
+                let _ = spare.try_send(items);
             }
             Err(RecvTimeoutError::Timeout) => {}
             Err(RecvTimeoutError::Disconnected) => {
@@ -1367,6 +1395,41 @@ fn run(
         syncer.join();
     }
     Ok(())
+}
+
+impl LiveBatch {
+    /// An empty batch for a queue of `queue_capacity` records, and the sender the writer
+    /// thread hands drained vectors back with.
+    fn new(queue_capacity: usize) -> (Self, SyncSender<Vec<Item>>) {
+        let max_vectors = (queue_capacity / LIVE_BATCH).max(2);
+        let (tx, rx) = sync_channel(max_vectors);
+        let live = Self {
+            items: Vec::new(),
+            since: None,
+            spare: rx,
+            vectors: 0,
+            max_vectors,
+        };
+        (live, tx)
+    }
+
+    /// Whether `items` can take a record: it has room, or a vector handed back (or a new one,
+    /// while fewer than `max_vectors` exist) is put in place.
+    fn ready(&mut self) -> bool {
+        if self.items.capacity() > self.items.len() {
+            return true;
+        }
+        if let Ok(v) = self.spare.try_recv() {
+            self.items = v;
+            return true;
+        }
+        if self.vectors < self.max_vectors {
+            self.vectors += 1;
+            self.items = Vec::with_capacity(LIVE_BATCH);
+            return true;
+        }
+        false
+    }
 }
 
 impl Recorder {
@@ -1409,6 +1472,7 @@ impl Recorder {
                 }
                 Self {
                     tx: None,
+                    live: LiveBatch::new(opts.queue_capacity).0,
                     counters,
                     thread: None,
                     path: path.to_path_buf(),
@@ -1426,6 +1490,7 @@ impl Recorder {
         failure: Option<String>,
     ) -> Result<Self, RecorderError> {
         let (tx, rx) = sync_channel(opts.queue_capacity);
+        let (live, spare_tx) = LiveBatch::new(opts.queue_capacity);
         let c = counters.clone();
         let resume = Resume {
             path: path.to_path_buf(),
@@ -1438,10 +1503,11 @@ impl Recorder {
         };
         let thread = std::thread::Builder::new()
             .name("recorder".into())
-            .spawn(move || run(sink, rx, c, resume))
+            .spawn(move || run(sink, rx, spare_tx, c, resume))
             .map_err(|e| RecorderError::Thread(e.to_string()))?;
         Ok(Self {
             tx: Some(tx),
+            live,
             counters,
             thread: Some(thread),
             path: path.to_path_buf(),
@@ -1463,6 +1529,65 @@ impl Recorder {
             Err(TrySendError::Full(_)) | Err(TrySendError::Disconnected(_)) => {
                 self.counters.dropped.fetch_add(1, Ordering::Relaxed);
                 false
+            }
+        }
+    }
+
+    /// Queue a record on the live path: it joins the current batch, which is handed to the
+    /// writer thread when it holds [`LIVE_BATCH`] records, when its oldest has waited
+    /// [`LIVE_HOLD`] ([`Recorder::hand_over_live_if_due`]) or at [`Recorder::hand_over_live`]
+    /// and the end. Never blocks and, once the writer has handed a few vectors back, never
+    /// allocates. Records keep their order as long as every record goes this way (the daemon's
+    /// all do). Returns false when the record is dropped (counted): no recorder, or the writer
+    /// so far behind that every batch vector is in its queue.
+    pub fn record_live(&mut self, record: Record, receive_mono_ns: u64) -> bool {
+        if self.tx.is_none() || !self.live.ready() {
+            self.counters.dropped.fetch_add(1, Ordering::Relaxed);
+            return false;
+        }
+        if self.live.items.is_empty() {
+            self.live.since = Some(Instant::now());
+        }
+        self.live.items.push(Item {
+            record,
+            receive_mono_ns,
+        });
+        if self.live.items.len() >= LIVE_BATCH {
+            self.hand_over_live();
+        }
+        true
+    }
+
+    /// Hand the live batch over if its oldest record has waited [`LIVE_HOLD`] by `now`.
+    pub fn hand_over_live_if_due(&mut self, now: Instant) {
+        if self
+            .live
+            .since
+            .is_some_and(|t| now.saturating_duration_since(t) >= LIVE_HOLD)
+        {
+            self.hand_over_live();
+        }
+    }
+
+    /// Hand the live batch over now (one send; a full queue drops it, counted).
+    pub fn hand_over_live(&mut self) {
+        self.live.since = None;
+        if self.live.items.is_empty() {
+            return;
+        }
+        let items = std::mem::take(&mut self.live.items);
+        let n = items.len() as u64;
+        let Some(tx) = &self.tx else {
+            self.counters.dropped.fetch_add(n, Ordering::Relaxed);
+            return;
+        };
+        if let Err(TrySendError::Full(q) | TrySendError::Disconnected(q)) =
+            tx.try_send(Queued::Batch(items))
+        {
+            self.counters.dropped.fetch_add(n, Ordering::Relaxed);
+            if let Queued::Batch(mut v) = q {
+                v.clear();
+                self.live.items = v;
             }
         }
     }
@@ -1545,6 +1670,7 @@ impl Recorder {
     }
 
     fn stop(&mut self) -> Result<RecorderStats, RecorderError> {
+        self.hand_over_live();
         self.tx = None;
         if let Some(t) = self.thread.take() {
             t.join()
@@ -1965,6 +2091,56 @@ mod tests {
             .map(|m| m.unwrap().sequence)
             .collect();
         assert_eq!(seqs, (0..10).collect::<Vec<u32>>());
+    }
+
+    /// The live path: records handed over 64 at a time keep their order, the partial batch
+    /// goes when its oldest record has waited [`LIVE_HOLD`] and at the end, and the writer hands
+    /// the vectors back, so that 3 000 records need only the first few.
+    #[test]
+    fn live_batches_keep_the_order_come_back_and_go_when_due() {
+        let path = tmp("live");
+        let mut rec = Recorder::start(&path, &RecorderOptions::default()).unwrap();
+        let t0 = fusion::time::GpsTime::from_utc(2025, 3, 20, 21, 0, 0.0).ns;
+        let imu = |k: u64| {
+            let mut imu = ImuSample::default();
+            imu.header.time_ns = t0 + k as i64 * 5_000_000;
+            imu.header.seq = k;
+            Record::Imu(imu)
+        };
+        for k in 0..3000u64 {
+            assert!(rec.record_live(imu(k), 0));
+            if k % 64 == 63 {
+                // A full batch was handed over: give the writer time to hand it back.
+                let t = Instant::now();
+                while rec.written() < k + 1 && t.elapsed() < Duration::from_secs(5) {
+                    std::thread::sleep(Duration::from_millis(1));
+                }
+            }
+        }
+        assert!(rec.live.vectors <= 3, "{} vectors", rec.live.vectors);
+        // 3 000 = 46 full batches and 56 records waiting: not handed over before they are due.
+        let written = rec.written();
+        assert_eq!(written, 46 * 64);
+        rec.hand_over_live_if_due(Instant::now());
+        assert!(rec.live.since.is_some(), "handed over before it was due");
+        rec.hand_over_live_if_due(Instant::now() + LIVE_HOLD);
+        assert!(rec.live.items.is_empty());
+        let t = Instant::now();
+        while rec.written() < 3000 && t.elapsed() < Duration::from_secs(5) {
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        assert_eq!(rec.written(), 3000);
+        for k in 3000..3010u64 {
+            assert!(rec.record_live(imu(k), 0));
+        }
+        let stats = rec.finish().unwrap();
+        assert_eq!((stats.written, stats.dropped), (3010, 0));
+        let bytes = std::fs::read(&path).unwrap();
+        let seqs: Vec<u32> = MessageStream::new(&bytes)
+            .unwrap()
+            .map(|m| m.unwrap().sequence)
+            .collect();
+        assert_eq!(seqs, (0..3010).collect::<Vec<u32>>());
     }
 
     #[test]
