@@ -497,7 +497,8 @@ pub const LIVE_BATCH: usize = 64;
 pub const LIVE_HOLD: Duration = Duration::from_millis(50);
 
 /// The live path's batch and its vectors ([`Recorder::record_live`]). The writer thread hands
-/// each drained vector back (`spare`), so that in steady state no record costs an allocation;
+/// each drained vector back (`spare`; an offline [`RecordBatch`] takes them too), so that in
+/// steady state no record costs an allocation;
 /// at most `max_vectors` exist, which bounds the records in flight as the queue's capacity
 /// bounds single records (a writer that falls that far behind makes records count as dropped).
 struct LiveBatch {
@@ -534,7 +535,16 @@ impl RecordBatch<'_> {
         if self.items.is_empty() {
             return;
         }
-        let items = std::mem::replace(&mut self.items, Vec::with_capacity(self.capacity));
+        // The next batch goes into a vector the writer has handed back when there is one (no
+        // allocation, and no vector left waiting in the hand-back queue).
+        let next = match self.recorder.live.spare.try_recv() {
+            Ok(mut v) => {
+                v.reserve(self.capacity);
+                v
+            }
+            Err(_) => Vec::with_capacity(self.capacity),
+        };
+        let items = std::mem::replace(&mut self.items, next);
         let n = items.len() as u64;
         let sent = self
             .recorder
@@ -1360,8 +1370,8 @@ fn run(
                 for item in items.drain(..) {
                     clock.admit(item, &mut sink, &counters, &mut resume);
                 }
-                // Back to the live path for its next batch (an offline batch's vector is
-                // simply dropped when nobody takes it).
+                // Back to whichever batch is filled next, live or offline (dropped when the
+                // hand-back queue is full).
                 let _ = spare.try_send(items);
             }
             Err(RecvTimeoutError::Timeout) => {}
