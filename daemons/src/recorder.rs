@@ -498,9 +498,9 @@ pub const LIVE_HOLD: Duration = Duration::from_millis(50);
 
 /// The live path's batch and its vectors ([`Recorder::record_live`]). The writer thread hands
 /// each drained vector back (`spare`; an offline [`RecordBatch`] takes them too), so that in
-/// steady state no record costs an allocation;
-/// at most `max_vectors` exist, which bounds the records in flight as the queue's capacity
-/// bounds single records (a writer that falls that far behind makes records count as dropped).
+/// steady state no record costs an allocation; at most `max_vectors` exist, which bounds the
+/// records in flight as the queue's capacity bounds single records (a writer that falls that
+/// far behind makes records count as dropped).
 struct LiveBatch {
     items: Vec<Item>,
     /// When the oldest record of `items` was queued.
@@ -2095,12 +2095,7 @@ mod tests {
         }
         let stats = rec.finish().unwrap();
         assert_eq!((stats.written, stats.dropped), (10, 0));
-        let bytes = std::fs::read(&path).unwrap();
-        let seqs: Vec<u32> = MessageStream::new(&bytes)
-            .unwrap()
-            .map(|m| m.unwrap().sequence)
-            .collect();
-        assert_eq!(seqs, (0..10).collect::<Vec<u32>>());
+        assert_eq!(sequences(&path), (0..10).collect::<Vec<u32>>());
     }
 
     /// The live path: records handed over 64 at a time keep their order, the partial batch
@@ -2145,12 +2140,16 @@ mod tests {
         }
         let stats = rec.finish().unwrap();
         assert_eq!((stats.written, stats.dropped), (3010, 0));
-        let bytes = std::fs::read(&path).unwrap();
-        let seqs: Vec<u32> = MessageStream::new(&bytes)
+        assert_eq!(sequences(&path), (0..3010).collect::<Vec<u32>>());
+    }
+
+    /// The messages' sequence numbers in file order.
+    fn sequences(path: &Path) -> Vec<u32> {
+        let bytes = std::fs::read(path).unwrap();
+        MessageStream::new(&bytes)
             .unwrap()
             .map(|m| m.unwrap().sequence)
-            .collect();
-        assert_eq!(seqs, (0..3010).collect::<Vec<u32>>());
+            .collect()
     }
 
     #[test]

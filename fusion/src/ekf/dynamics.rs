@@ -25,8 +25,8 @@
 //! neglected commutator terms are `O(|F|²T²)` of the varying part, < 10⁻⁶ for T = 50 ms) and
 //! trapezoidal noise `P⁺ = Φ (P + ½ Q_c T) Φᵀ + ½ Q_c T`. `Φ` differs from the identity only
 //! in the 9 navigation rows `a` (and the clock bias–drift entry), so `Φ P Φᵀ` needs only
-//! `G = P aᵀ` (31×9) and the symmetric `a G` (9×9): `a` is built from its non-zero 3×3 blocks
-//! (17 of 30; about 140 of its 279 entries are non-zero), `G` from those entries alone
+//! `G = P aᵀ` (31×9) and the symmetric `a G` (9×9): `a` is built from its 17 non-zero 3×3
+//! blocks (about 140 of its 279 entries are non-zero), `G` from those entries alone
 //! (≈ 4 400 multiply-adds) and `a G` as a 9×31·31×9 product of which the upper triangle is kept
 //! (≈ 7 000 multiply-adds in all, once per interval and before each update).
 
@@ -411,9 +411,7 @@ impl ErrorStateEkf {
         // G = P aᵀ (31×9, P symmetric so G = (aP)ᵀ):
         //   P⁺[0..9, 0..9] = a G,  P⁺[9.., 0..9] = G[9.., ·] (and its mirror),  the rest = P.
         let g = p_times_h_transpose(pn, &a);
-        // a G = a P aᵀ is symmetric: its upper triangle, mirrored. Formed column by column as
-        // a sum of the columns of `a` (contiguous, independent lanes) weighted by G's entries,
-        // skipping the columns of `a` that are zero (states the navigation rows do not read).
+        // a G = a P aᵀ is symmetric: its upper triangle, mirrored.
         let top = a * g;
         for c in 0..9 {
             for r in 0..=c {
