@@ -149,9 +149,10 @@ pub fn geodetic_to_ecef(ell: &Ellipsoid, g: &Geodetic) -> Vector3<f64> {
 /// ECEF → geodetic (exact to < 0.1 mm everywhere, poles included).
 ///
 /// Bowring's iteration on the parametric latitude β with a fixed number of passes
-/// ([`ECEF_TO_GEODETIC_ITERATIONS`]; two beyond [`ECEF_TO_GEODETIC_TWO_PASS_RADIUS_M`]); no division by the axis distance, so the poles and the
-/// equatorial plane need no special case. Valid for heights from well inside the Earth
-/// (≈ −6000 km) to beyond the geostationary orbit. Longitude is 0 on the polar axis.
+/// ([`ECEF_TO_GEODETIC_ITERATIONS`]; two beyond [`ECEF_TO_GEODETIC_TWO_PASS_RADIUS_M`]); no
+/// division by the axis distance, so the poles and the equatorial plane need no special case.
+/// Valid for heights from well inside the Earth (≈ −6000 km) to beyond the geostationary orbit.
+/// Longitude is 0 on the polar axis.
 ///
 /// The angles are carried as their (sine, cosine) pairs, each the normalised vector whose
 /// `atan2` the textbook form takes, so the passes need square roots only; the latitude's

@@ -719,13 +719,13 @@ impl NavigatorConfig {
     /// than the processor's cache keeps (54 for the 1 s window, ≈ 490 kB).
     pub fn checkpoint_capacity(&self) -> usize {
         let period_s = CHECKPOINT_PERIOD.seconds_f64();
-        // buffer_window_s is validated to (0, 2]; a non-finite value gives the 2 s ring.
-        let n = ((self.buffer_window_s + 2.0 * period_s) / period_s).ceil();
-        if n.is_finite() && n <= 2.04 / period_s {
-            n as usize + 2
+        // buffer_window_s is validated to (0, 2]; anything else gets the 2 s ring.
+        let window_s = if self.buffer_window_s.is_finite() {
+            self.buffer_window_s.clamp(0.0, 2.0)
         } else {
-            (2.04 / period_s).ceil() as usize + 2
-        }
+            2.0
+        };
+        ((window_s + 2.0 * period_s) / period_s).ceil() as usize + 2
     }
 
     /// Mechanization settings derived from this configuration.

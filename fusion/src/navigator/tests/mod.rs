@@ -538,6 +538,7 @@ fn late_gnss_sample_gives_the_in_time_update() {
 #[test]
 fn gnss_sample_late_by_almost_the_window_gives_the_in_time_update() {
     assert_eq!(quick_config().buffer_window_s, 1.0);
+    assert_eq!(quick_config().checkpoint_capacity(), 54);
     late_gnss_sample_matches_in_time(990_000_000);
 }
 
