@@ -255,13 +255,13 @@ pub fn session_config(o: &BridgeOptions) -> Result<zenoh::Config, BridgeError> {
 
 /// One local channel's subscriber, whatever its message type.
 trait Export {
-    fn listener(&self) -> &Listener<ipc::Service>;
+    fn listener(&self) -> &Listener<msgs::ipc::IpcService>;
     /// Take every pending message, as a record, until none is left or receiving fails.
     fn drain(&self, out: &mut dyn FnMut(Record)) -> Result<(), msgs::ipc::ReceiveError>;
 }
 
 impl<T: Message + Into<Record>> Export for Sub<T> {
-    fn listener(&self) -> &Listener<ipc::Service> {
+    fn listener(&self) -> &Listener<msgs::ipc::IpcService> {
         Sub::listener(self)
     }
     fn drain(&self, out: &mut dyn FnMut(Record)) -> Result<(), msgs::ipc::ReceiveError> {

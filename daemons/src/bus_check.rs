@@ -102,7 +102,7 @@ pub fn live_nodes_on(prefix: &str) -> Result<Vec<LiveNode>, BusListError> {
     let me = std::process::id() as i32;
     let head = format!("{prefix}/");
     let mut found: Vec<LiveNode> = Vec::new();
-    ipc::Service::list(Config::global_config(), |details| {
+    msgs::ipc::IpcService::list(Config::global_config(), |details| {
         let name = details.static_details.name().as_str();
         let ours = name
             .strip_prefix(&head)
@@ -114,7 +114,7 @@ pub fn live_nodes_on(prefix: &str) -> Result<Vec<LiveNode>, BusListError> {
             let NodeState::Alive(view) = node else {
                 continue;
             };
-            let Ok(pid) = view.id().pid::<ipc::Service>() else {
+            let Ok(pid) = view.id().pid::<msgs::ipc::IpcService>() else {
                 continue;
             };
             let pid = pid.value();

@@ -541,7 +541,7 @@ fn status_thread(prefix: String, stop: Arc<AtomicBool>) -> std::thread::JoinHand
             let sub = bus.subscriber::<Status>().map_err(|e| e.to_string())?;
             let ws = WaitSetBuilder::new()
                 .signal_handling_mode(SignalHandlingMode::Disabled)
-                .create::<ipc::Service>()
+                .create::<msgs::ipc::IpcService>()
                 .map_err(|e| format!("{e:?}"))?;
             let _g = ws
                 .attach_notification(sub.listener())

@@ -5,15 +5,19 @@
 //!
 //! Finding, per mechanism, each measured on its own in
 //! `each_step_of_the_loop_costs_what_it_costs` and together in `daemon_loop_allocations`:
-//! - publishing a message (`msgs::ipc::Pub::send_raw`): 1 allocation inside iceoryx2 0.10
-//!   (`Publisher::loan_uninit` allocates an `Rc` of shared state per sample). It was 3: its two
-//!   `map_err(ice(format!(..)))` built the error-context string on every send; they now format
-//!   only on failure. The daemon publishes one solution per IMU step (decimation 1).
+//! - publishing a message (`msgs::ipc::Pub::send_raw`): none. Inside iceoryx2 0.10 every loan
+//!   (`Publisher::loan_uninit`, which `send_copy` goes through too) creates a reference-counted
+//!   shared state through the service type's thread-safety policy; with iceoryx2's `ipc`
+//!   service that is an `Rc::new`, one heap allocation per message. Sextant's service type
+//!   (`msgs::ipc_service`) takes those blocks from a per-thread pool. Before that, 1 per
+//!   message (and 3 before the error contexts were formatted only on failure). The daemon
+//!   publishes one solution per IMU step (decimation 1).
 //! - each wake-up: none. The loop waits on the IMU listener itself (`Sub::wait_for_wake_up`, a
 //!   receive with a timeout on its socket). It used to wait on a WaitSet over every channel,
 //!   whose waits allocate twice each inside iceoryx2 0.10 (`WaitSet::wait_and_process_once*`
 //!   collects the triggered file descriptors into a `vec![]` and builds a second `Vec` in
-//!   `handle_all_attachments`): 3.0–3.4 allocations per IMU step then, 1.05 now.
+//!   `handle_all_attachments`): 3.0–3.4 allocations per IMU step then, 1.05 with the wait on
+//!   the listener, 0.05 with the pooled shared state (the GNSS samples' and statuses' boxes).
 //! - `Record::Gnss(Box::new(..))` and `Record::Status(Box::new(..))`: 1 per GNSS sample / status.
 //! - receiving a sample, building the other records, the recorder hand-off (`try_send` into the
 //!   bounded channel): none.
@@ -191,9 +195,10 @@ impl NavEngine for Probe {
     }
 }
 
-/// Allocations per published message (`Pub::send_raw`): iceoryx2's per-loan `Rc` only (its
-/// error contexts are formatted on failure only; they were 2 eager `format!`s).
-const PER_SEND: u64 = 1;
+/// Allocations per published message (`Pub::send_raw`): none (iceoryx2's per-loan shared
+/// state comes from `msgs::ipc_service`'s pool; its error contexts are formatted on failure
+/// only).
+const PER_SEND: u64 = 0;
 /// Allocations per wake-up of the loop's wait (`Sub::wait_for_wake_up`).
 const PER_WAKEUP: u64 = 0;
 

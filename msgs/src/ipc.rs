@@ -21,6 +21,9 @@ use iceoryx2::service::service_name::ServiceNameError;
 use iceoryx2::waitset::{WaitSetAttachmentError, WaitSetCreateError, WaitSetRunError};
 use std::time::Duration;
 
+/// The iceoryx2 service type of every Sextant port (`crate::ipc_service`).
+pub use crate::ipc_service::Service as IpcService;
+
 /// Failure to join the bus ([`Bus::new`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
 pub enum NodeError {
@@ -181,13 +184,13 @@ fn buffer_size(channel: Channel) -> usize {
 
 /// The publish-subscribe service of a channel and its paired event service.
 struct Services<T: Message> {
-    pubsub: publish_subscribe::PortFactory<ipc::Service, T, ()>,
-    event: event::PortFactory<ipc::Service>,
+    pubsub: publish_subscribe::PortFactory<IpcService, T, ()>,
+    event: event::PortFactory<IpcService>,
 }
 
 /// A node on the bus with the service-name prefix of this run.
 pub struct Bus {
-    node: Node<ipc::Service>,
+    node: Node<IpcService>,
     prefix: String,
 }
 
@@ -199,7 +202,7 @@ impl Bus {
         let node = NodeBuilder::new()
             .name(&node_name)
             .signal_handling_mode(SignalHandlingMode::Disabled)
-            .create::<ipc::Service>()
+            .create::<IpcService>()
             .map_err(NodeError::Create)?;
         Ok(Self {
             node,
@@ -323,16 +326,16 @@ pub(crate) fn receive_of<T: Message>(s: &Sub<T>) -> Result<Option<T>, ReceiveErr
 
 /// A WaitSet with iceoryx2's signal handling disabled (every Sextant process handles
 /// SIGINT/SIGTERM itself), to attach [`Sub::listener`]s, deadlines and intervals to.
-pub fn waitset() -> Result<WaitSet<ipc::Service>, WaitSetError> {
+pub fn waitset() -> Result<WaitSet<IpcService>, WaitSetError> {
     Ok(WaitSetBuilder::new()
         .signal_handling_mode(SignalHandlingMode::Disabled)
-        .create::<ipc::Service>()?)
+        .create::<IpcService>()?)
 }
 
 /// Publisher of one channel, with its notifier; stamps sequence number and send time.
 pub struct Pub<T: Message> {
-    publisher: Publisher<ipc::Service, T, ()>,
-    notifier: Notifier<ipc::Service>,
+    publisher: Publisher<IpcService, T, ()>,
+    notifier: Notifier<IpcService>,
     seq: u64,
 }
 
@@ -363,13 +366,13 @@ impl<T: Message> Pub<T> {
 
 /// Subscriber of one channel, with the listener to attach to a WaitSet.
 pub struct Sub<T: Message> {
-    subscriber: Subscriber<ipc::Service, T, ()>,
-    listener: Listener<ipc::Service>,
+    subscriber: Subscriber<IpcService, T, ()>,
+    listener: Listener<IpcService>,
 }
 
 impl<T: Message> Sub<T> {
     /// The event listener, to attach to a WaitSet.
-    pub fn listener(&self) -> &Listener<ipc::Service> {
+    pub fn listener(&self) -> &Listener<IpcService> {
         &self.listener
     }
 
@@ -418,8 +421,8 @@ impl<T: Message> Sub<T> {
 /// run starts clean. Returns the number of dead nodes cleaned.
 pub fn cleanup_dead_nodes() -> Result<usize, NodeListError> {
     let mut cleaned = 0;
-    Node::<ipc::Service>::list(Config::global_config(), |state| {
-        if let NodeState::<ipc::Service>::Dead(view) = state
+    Node::<IpcService>::list(Config::global_config(), |state| {
+        if let NodeState::<IpcService>::Dead(view) = state
             && view.try_remove_stale_resources().is_ok()
         {
             cleaned += 1;
@@ -433,8 +436,8 @@ pub fn cleanup_dead_nodes() -> Result<usize, NodeListError> {
 /// Number of nodes currently alive (all prefixes).
 pub fn alive_node_count() -> Result<usize, NodeListError> {
     let mut n = 0;
-    Node::<ipc::Service>::list(Config::global_config(), |state| {
-        if let NodeState::<ipc::Service>::Alive(_) = state {
+    Node::<IpcService>::list(Config::global_config(), |state| {
+        if let NodeState::<IpcService>::Alive(_) = state {
             n += 1;
         }
         CallbackProgression::Continue

@@ -13,6 +13,7 @@
 //! `c_n_b` maps body coordinates into NED.
 
 pub mod ipc;
+pub mod ipc_service;
 pub mod protobuf;
 pub mod record;
 /// The service manager's notification protocol (readiness, watchdog pings), spoken by every
