@@ -63,8 +63,10 @@ fn a_plain_iceoryx2_publisher_reaches_a_sextant_subscriber_and_back() {
         .subscriber_builder()
         .create()
         .expect("plain subscriber");
-    let mut s = ImuSample::default();
-    s.dt_s = 0.01;
+    let s = ImuSample {
+        dt_s: 0.01,
+        ..Default::default()
+    };
     for _ in 0..100 {
         sextant_pub.send(s).expect("sextant send");
     }
