@@ -202,17 +202,23 @@ fn stop(child: &mut Child, timeout: Duration) {
     let _ = child.wait();
 }
 
-/// Latencies of every solution in a recording, µs: (total, transport, processing). Transport =
-/// the IMU record's reception time on CLOCK_MONOTONIC (from its MCAP publish time) − the IMU
-/// sample's send time: iceoryx2 delivery and the daemon's wake-up. Processing = the solution's
-/// send time − that receive time: the filter step and the recorder hand-off.
+/// Latencies of every solution in a recording, µs. Transport = the IMU record's reception
+/// time on CLOCK_MONOTONIC (from its MCAP publish time) − the IMU sample's send time: iceoryx2
+/// delivery and the daemon's wake-up. Processing = the solution's send time − that receive
+/// time: the filter step and the recorder hand-off. Each solution is also sorted by whether
+/// another simulated driver (aiding or truth) sent a sample near its IMU sample's send
+/// ([`BESIDE_OTHER_DRIVERS`]): those drivers compute their sample from the world model when
+/// they send it and share the machine's cores with the IMU driver and the daemon.
 /// Also the span of simulated time the solutions cover, s (first to last solution's time of
 /// validity; 0 without solutions).
 fn latencies_and_span(recording: &Path) -> anyhow::Result<(LatencySeries, f64)> {
     // The project's reader: bounded on corrupt input, errors name the byte offset.
     let rec = Recording::open(recording)?;
     let mut received: std::collections::HashMap<u64, u64> = std::collections::HashMap::new();
-    let (mut total, mut transport, mut processing) = (Vec::new(), Vec::new(), Vec::new());
+    let mut series = LatencySeries::default();
+    // (IMU send time, total latency) of each solution, and the other drivers' send times.
+    let mut solutions: Vec<(u64, f64)> = Vec::new();
+    let mut other_sends: Vec<u64> = Vec::new();
     let (mut first_ns, mut last_ns) = (i64::MAX, i64::MIN);
     for e in rec {
         let e = e?;
@@ -225,16 +231,41 @@ fn latencies_and_span(recording: &Path) -> anyhow::Result<(LatencySeries, f64)> 
             {
                 first_ns = first_ns.min(nav.header.time_ns);
                 last_ns = last_ns.max(nav.header.time_ns);
-                total.push((nav.header.send_mono_ns - nav.imu_send_mono_ns) as f64 * 1e-3);
+                let total = (nav.header.send_mono_ns - nav.imu_send_mono_ns) as f64 * 1e-3;
+                series.total.push(total);
+                solutions.push((nav.imu_send_mono_ns, total));
                 if let Some(&rx) = received.get(&nav.imu_send_mono_ns)
                     && rx >= nav.imu_send_mono_ns
                     && nav.header.send_mono_ns >= rx
                 {
-                    transport.push((rx - nav.imu_send_mono_ns) as f64 * 1e-3);
-                    processing.push((nav.header.send_mono_ns - rx) as f64 * 1e-3);
+                    series
+                        .transport
+                        .push((rx - nav.imu_send_mono_ns) as f64 * 1e-3);
+                    series
+                        .processing
+                        .push((nav.header.send_mono_ns - rx) as f64 * 1e-3);
                 }
             }
+            Some(Record::StarTracker(m)) => other_sends.push(m.header.send_mono_ns),
+            Some(Record::Gnss(m)) => other_sends.push(m.header.send_mono_ns),
+            Some(Record::Odometer(m)) => other_sends.push(m.header.send_mono_ns),
+            Some(Record::Baro(m)) => other_sends.push(m.header.send_mono_ns),
+            Some(Record::Truth(m)) => other_sends.push(m.header.send_mono_ns),
             _ => {}
+        }
+    }
+    other_sends.sort_unstable();
+    let (before, after) = BESIDE_OTHER_DRIVERS;
+    for (imu_send, total) in solutions {
+        let from = imu_send.saturating_sub(before.as_nanos() as u64);
+        let k = other_sends.partition_point(|&t| t < from);
+        let beside = other_sends
+            .get(k)
+            .is_some_and(|&t| t <= imu_send + after.as_nanos() as u64);
+        if beside {
+            series.beside_other_drivers.push(total);
+        } else {
+            series.apart_from_other_drivers.push(total);
         }
     }
     let span_s = if last_ns > first_ns {
@@ -242,11 +273,29 @@ fn latencies_and_span(recording: &Path) -> anyhow::Result<(LatencySeries, f64)> 
     } else {
         0.0
     };
-    Ok(((total, transport, processing), span_s))
+    Ok((series, span_s))
 }
 
-/// Latencies in µs: total, transport, processing.
-type LatencySeries = (Vec<f64>, Vec<f64>, Vec<f64>);
+/// A solution is "beside" the other simulated drivers when one of them sent a sample from this
+/// long before its IMU sample's send to this long after (the drivers' work per sample, from
+/// their CPU time: up to ≈ 2 ms for a GNSS epoch, ≈ 0.1–0.5 ms for the others).
+const BESIDE_OTHER_DRIVERS: (Duration, Duration) =
+    (Duration::from_millis(3), Duration::from_millis(1));
+
+/// Latencies of a live run's solutions, µs.
+#[derive(Debug, Default)]
+struct LatencySeries {
+    /// IMU sample sent → solution sent.
+    total: Vec<f64>,
+    /// IMU sample sent → received by the daemon.
+    transport: Vec<f64>,
+    /// Received by the daemon → solution sent.
+    processing: Vec<f64>,
+    /// Total, of the solutions no other simulated driver sent a sample near.
+    apart_from_other_drivers: Vec<f64>,
+    /// Total, of the others.
+    beside_other_drivers: Vec<f64>,
+}
 
 /// One live run at `imu_hz`: returns (latencies µs, per-process figures).
 fn live_run(
@@ -353,7 +402,7 @@ fn live_run(
             );
         }
     }
-    let ((mut lat, mut transport, mut processing), span_s) = latencies_and_span(&recording)?;
+    let (mut series, span_s) = latencies_and_span(&recording)?;
     // How long it navigated: the alignment ends when its window is complete and a GNSS fix
     // is `buffer_window_s` old, not at a fixed time.
     procs.insert("navigating_s".into(), json!(span_s));
@@ -368,17 +417,37 @@ fn live_run(
             "mb_per_600s": bytes as f64 / 1e6 * 600.0 / duration_s,
         }),
     );
-    transport.sort_by(f64::total_cmp);
-    processing.sort_by(f64::total_cmp);
+    for v in [
+        &mut series.transport,
+        &mut series.processing,
+        &mut series.apart_from_other_drivers,
+        &mut series.beside_other_drivers,
+    ] {
+        v.sort_by(f64::total_cmp);
+    }
+    let part = |v: &[f64]| {
+        json!({
+            "solutions": v.len(),
+            "latency_p50_us": percentile(v, 50.0),
+            "latency_p99_us": percentile(v, 99.0),
+        })
+    };
     procs.insert(
         "latency_split".into(),
         json!({
-            "transport_p50_us": percentile(&transport, 50.0),
-            "transport_p99_us": percentile(&transport, 99.0),
-            "processing_p50_us": percentile(&processing, 50.0),
-            "processing_p99_us": percentile(&processing, 99.0),
+            "transport_p50_us": percentile(&series.transport, 50.0),
+            "transport_p99_us": percentile(&series.transport, 99.0),
+            "processing_p50_us": percentile(&series.processing, 50.0),
+            "processing_p99_us": percentile(&series.processing, 99.0),
+            "apart_from_other_drivers": part(&series.apart_from_other_drivers),
+            "beside_other_drivers": part(&series.beside_other_drivers),
+            "beside_window_ms": [
+                BESIDE_OTHER_DRIVERS.0.as_secs_f64() * 1e3,
+                BESIDE_OTHER_DRIVERS.1.as_secs_f64() * 1e3,
+            ],
         }),
     );
+    let mut lat = series.total;
     if lat.is_empty() {
         bail!(
             "no solution in {} (see {})",
@@ -967,6 +1036,27 @@ pub fn table(s: &Value) -> String {
             v["p99_9_ratio"].as_f64().unwrap_or(f64::NAN),
         );
     }
+    t += "Sextant's latency apart from / beside the other simulated drivers' sends (another \
+          driver sent a sample from 3 ms before to 1 ms after the IMU sample; they share the \
+          cores):\n";
+    for key in ["imu_200hz", "imu_1000hz"] {
+        let r = &s["live"][key];
+        let (a, b) = (
+            &r["latency_split"]["apart_from_other_drivers"],
+            &r["latency_split"]["beside_other_drivers"],
+        );
+        t += &format!(
+            "  {} Hz: apart p50 {} us, p99 {} us ({} solutions); beside p50 {} us, p99 {} us \
+             ({} solutions)\n",
+            r["imu_rate_hz"],
+            f(&a["latency_p50_us"]),
+            f(&a["latency_p99_us"]),
+            a["solutions"],
+            f(&b["latency_p50_us"]),
+            f(&b["latency_p99_us"]),
+            b["solutions"],
+        );
+    }
     let b = &s["bridge"];
     t += &format!(
         "Zenoh bridge (bus -> sextant-bridge -> TCP loopback -> sextant-bridge -> bus, {} Hz): p50 {} us, p99 {} us, p99.9 {} us, max {} us, {} of {} lost\n",
@@ -1026,7 +1116,8 @@ mod tests {
 
     /// Latencies come back from the recording through the project's reader: transport =
     /// receive (MCAP publish time) − IMU send, processing = solution send − receive; the
-    /// solutions' span from their times of validity; a cut
+    /// solutions beside another driver's send told from the others; the solutions' span from
+    /// their times of validity; a cut
     /// recording is an error naming its byte offset, not a hang or a silent partial read.
     #[test]
     fn latencies_from_a_recording_and_a_cut_one() {
@@ -1055,9 +1146,25 @@ mod tests {
             nav.imu_send_mono_ns = send;
             nav.header.send_mono_ns = send + 55_000;
             rec.record_blocking(Record::Nav(nav), nav.header.send_mono_ns);
+            // A baro sample sent 2 ms before every 20th IMU sample (beside it; 3 ms after the
+            // IMU sample before, outside that one's window), and ten IMU samples later an
+            // odometer sample 1.5 ms after one (apart from it, and from the next, 3.5 ms later).
+            if k % 20 == 5 {
+                let mut b = msgs::BaroSample::default();
+                b.header.send_mono_ns = send - 2_000_000;
+                rec.record_blocking(Record::Baro(b), send);
+            }
+            if k % 20 == 15 {
+                let mut o = msgs::OdometerSample::default();
+                o.header.send_mono_ns = send + 1_500_000;
+                rec.record_blocking(Record::Odometer(o), send + 1_500_000);
+            }
         }
         rec.finish().expect("finish");
-        let ((total, transport, processing), span_s) = latencies_and_span(&path).expect("read");
+        let (series, span_s) = latencies_and_span(&path).expect("read");
+        assert_eq!(series.beside_other_drivers.len(), 10);
+        assert_eq!(series.apart_from_other_drivers.len(), 190);
+        let (total, transport, processing) = (series.total, series.transport, series.processing);
         assert_eq!(total.len(), 200);
         // 200 solutions 5 ms apart: 199 intervals.
         assert!((span_s - 0.995).abs() < 1e-12, "{span_s}");
