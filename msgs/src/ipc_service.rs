@@ -322,10 +322,6 @@ mod tests {
         }
     }
 
-    impl Abandonable for Tracked {
-        unsafe fn abandon_in_place(_this: NonNull<Self>) {}
-    }
-
     // `Tracked` holds an `Rc`, which is not `Send`; the policy's bound asks for `Send`
     // values, so the tests wrap the counter in a type that claims it (single thread only).
     #[derive(Debug)]

@@ -207,8 +207,8 @@ fn stop(child: &mut Child, timeout: Duration) {
 /// delivery and the daemon's wake-up. Processing = the solution's send time − that receive
 /// time: the filter step and the recorder hand-off. Each solution is also sorted by whether
 /// another simulated driver (aiding or truth) sent a sample near its IMU sample's send
-/// ([`BESIDE_OTHER_DRIVERS`]): those drivers compute their sample from the world model when
-/// they send it and share the machine's cores with the IMU driver and the daemon.
+/// ([`BESIDE_OTHER_DRIVERS`]): those drivers compute their sample from the world model in the
+/// 2 ms before they send it and share the machine's cores with the IMU driver and the daemon.
 /// Also the span of simulated time the solutions cover, s (first to last solution's time of
 /// validity; 0 without solutions).
 fn latencies_and_span(recording: &Path) -> anyhow::Result<(LatencySeries, f64)> {
