@@ -292,6 +292,7 @@ where
     // values are still computed, because every source is a sequential process (random streams,
     // truth integration) that must stay identical to an uninterrupted run.
     let started_mono = msgs::monotonic_ns();
+    let compute_lead = compute_lead_ns(period, args.speed);
     let mut k = source.first_index();
     while k * period <= duration_ns {
         if stop_requested() {
@@ -304,7 +305,7 @@ where
         // Idle after a send, as a device driver blocked on its next read is: the sample is
         // computed shortly before its send time, not right after the previous send, when the
         // subscribers it woke are starting on the same cores.
-        let compute_at = target.saturating_sub(compute_lead_ns(period, args.speed));
+        let compute_at = target.saturating_sub(compute_lead);
         if compute_at > msgs::monotonic_ns() && !sleep_pinging(compute_at, &mut service) {
             summary.interrupted = true;
             break;
