@@ -75,7 +75,8 @@ pub use measurements::{
     nhc_linearisation_covariance, odometer_nhc, odometer_speed, star_attitude, zero_velocity,
 };
 pub use update::{
-    Measurement, Residual, UpdateOutcome, augment_covariance, symmetrize, update, update_in_place,
+    Measurement, Residual, UpdateOutcome, augment_covariance, h_p_ht, symmetrize, update,
+    update_in_place,
 };
 
 use crate::strapdown::NavState;

@@ -63,6 +63,10 @@ impl<T: Copy + Default, const CAP: usize> TimeQueue<T, CAP> {
         }
         None
     }
+    /// Whether the oldest entry's time is ≤ `t` (an entry [`Self::pop_due`] would return).
+    pub(super) fn next_due(&self, t: GpsTime) -> bool {
+        self.len > 0 && self.buf[self.head].0 <= t
+    }
     /// Remove and return the oldest entry if its time is ≤ `t`.
     pub(super) fn pop_due(&mut self, t: GpsTime) -> Option<(GpsTime, T, bool)> {
         if self.len > 0 && self.buf[self.head].0 <= t {
@@ -164,8 +168,17 @@ impl<T: Clone> Ring<T> {
 /// checkpoint before its time of validity and replays the IMU steps since: a sensor that is
 /// always late by its latency (the odometer's 10 ms at 20 Hz, a receiver's 50 ms) rewinds at
 /// every sample, so the period bounds the work repeated each time (half a period on average
-/// beyond the latency itself). A checkpoint is one copy of the navigation core (≈ 10 kB).
+/// beyond the latency itself), unless its epoch has a checkpoint before its updates
+/// ([`EPOCH_CHECKPOINT_SPACING`]). A checkpoint is one copy of the navigation core (≈ 10 kB).
 pub(super) const CHECKPOINT_PERIOD: Duration = Duration::from_ns(20_000_000);
+
+/// At an epoch where aiding is due or the covariance has just been propagated, the state
+/// before its updates is checkpointed too when the last checkpoint is at least this old (half
+/// the period): the ring then holds at most two checkpoints per period
+/// ([`NavigatorConfig::checkpoint_capacity`]). With the car's sensors the odometer's samples
+/// (10 ms late) have their epoch's covariance propagation checkpointed: its rewinds neither
+/// repeat that propagation nor replay the steps before the epoch.
+pub(super) const EPOCH_CHECKPOINT_SPACING: Duration = Duration::from_ns(10_000_000);
 
 /// Largest delayed-fusion IMU log, steps (≈ 5 MB; 2 kHz with the 2 s window needs 4 082).
 pub(super) const IMU_LOG_MAX_CAP: usize = 65_536;

@@ -83,11 +83,20 @@ impl Core {
     }
 }
 
-/// A delayed-fusion checkpoint: the [`Core`] at the end of the IMU epoch `t`.
+/// A delayed-fusion checkpoint: the [`Core`] at the IMU epoch `t`, either at the end of the
+/// epoch or, at an epoch with aiding due, before its updates (the covariance already brought
+/// to `t`), which a sample of that very epoch can rewind to.
 #[derive(Debug, Clone, Copy)]
 pub(super) struct Checkpoint {
     /// IMU epoch.
     pub(super) t: GpsTime,
-    /// The navigation core at that epoch.
+    /// A late sample with a time of validity after this one can rewind here: `t` for the end
+    /// of the epoch; the IMU epoch before `t` before its updates (a sample of validity in
+    /// between is fused at `t`).
+    pub(super) serves_after: GpsTime,
+    /// Taken before the epoch's updates: a rewind here fuses the aiding of epoch `t` again
+    /// before it replays the logged steps after it.
+    pub(super) before_updates: bool,
+    /// The navigation core at that point.
     pub(super) core: Core,
 }

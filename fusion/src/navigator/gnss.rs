@@ -132,7 +132,7 @@ impl Navigator {
                 self.core
                     .ekf
                     .propagate_covariance(&self.ell, &self.core.nav.r_e);
-                let hph = m.h * self.core.ekf.p * m.h.transpose();
+                let hph = ekf::h_p_ht(&self.core.ekf.p, &m.h);
                 m.r = ekf::correlated::inflate_covariance3(&hph, &m.r, rho);
             }
             let v = self.run_update(Counter::Sensor(id), &m, tally);
@@ -191,7 +191,7 @@ impl Navigator {
                     self.core
                         .ekf
                         .propagate_covariance(&self.ell, &self.core.nav.r_e);
-                    let hph = (m.h * self.core.ekf.p * m.h.transpose())[(0, 0)];
+                    let hph = ekf::h_p_ht(&self.core.ekf.p, &m.h)[(0, 0)];
                     m.r[(0, 0)] *= ekf::correlated::scalar_inflation(hph, m.r[(0, 0)], rho);
                 }
                 let v = self.run_update(Counter::Sensor(id), &m, tally);

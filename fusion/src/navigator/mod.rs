@@ -52,13 +52,16 @@
 //! [`NavigatorConfig::buffer_window_s`]) is fused by **re-propagation from buffered IMU
 //! data**: every 20 ms of IMU time the replayable filter state (inertial state, error-state
 //! filter with its covariance and pending transition, strapdown history, ZUPT/baro
-//! schedulers) is checkpointed; the validated IMU increments and every fused aiding sample
-//! are kept for the window. A late sample is held out of the next IMU step (its solution is
+//! schedulers) is checkpointed, and also before the updates of an epoch where aiding is due
+//! or the covariance has just been propagated (at least 10 ms after the last checkpoint): a
+//! sample of that epoch arriving later rewinds no further than its own epoch; the validated
+//! IMU increments and every fused aiding sample are kept for the window. A late sample is held out of the next IMU step (its solution is
 //! formed without it, so that the work below is not between that sample's arrival and its
 //! solution); once that solution is formed, the navigator — at the start of the next input,
 //! or earlier when told ([`Navigator::catch_up`], which the daemon calls once it has
-//! published) — restores the latest checkpoint before the late sample's time, re-queues the
-//! aiding fused since then and replays the logged IMU steps, fusing everything — the late
+//! published) — restores the latest checkpoint before the late sample's time (or before the
+//! updates of its own epoch), re-queues the aiding fused since then and replays the logged IMU
+//! steps, fusing everything — the late
 //! sample included — at the epoch, with the state *and covariance* that an in-time arrival
 //! would have met. So a late sample reaches the solutions one IMU interval after the one it
 //! arrived with; when the rewind runs changes nothing (test
@@ -354,6 +357,8 @@ impl Navigator {
                 config.checkpoint_capacity(),
                 Checkpoint {
                     t: GpsTime::EPOCH,
+                    serves_after: GpsTime::EPOCH,
+                    before_updates: false,
                     core,
                 },
             ),

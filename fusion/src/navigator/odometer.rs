@@ -98,7 +98,7 @@ impl Navigator {
             .ekf
             .propagate_covariance(&self.ell, &self.core.nav.r_e);
         let mut m = ekf::odometer_speed(&self.core.nav, &wheel, k, end_speed, a.odometer_sigma_m_s);
-        let hph = (m.h * self.core.ekf.p * m.h.transpose())[(0, 0)];
+        let hph = ekf::h_p_ht(&self.core.ekf.p, &m.h)[(0, 0)];
         m.r[(0, 0)] += Self::violation_variance(hph, sig.white_m_s.x, sig.maneuver_m_s.x, rho);
         if self.run_update(Counter::Sensor(id), &m, tally).accepted() {
             self.mark_fused(id, ts, tally);
@@ -121,7 +121,7 @@ impl Navigator {
                 }
             }
             let h: nalgebra::SMatrix<f64, 2, { ekf::NX }> = m3.h.fixed_rows::<2>(1).into_owned();
-            let hph = h * p * h.transpose();
+            let hph = ekf::h_p_ht(p, &h);
             let floor = a.nhc_sigma_m_s * a.nhc_sigma_m_s;
             let r = nalgebra::Matrix2::from_diagonal(&nalgebra::Vector2::from_fn(|i, _| {
                 floor

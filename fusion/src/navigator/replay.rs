@@ -33,20 +33,47 @@ impl Navigator {
         self.core
             .ekf
             .accumulate(&self.core.nav, &(dv_c / dt), &(dth_c / dt), dt);
-        if self.core.ekf.pending_s() >= self.config.covariance_interval_s - 1e-9 {
+        let propagated = self.core.ekf.pending_s() >= self.config.covariance_interval_s - 1e-9;
+        if propagated {
             self.core
                 .ekf
                 .propagate_covariance(&self.ell, &self.core.nav.r_e);
         }
         self.time = t;
         self.update_static_detector(t, &inc);
+        // The state before this epoch's updates is the one a sample of this epoch arriving
+        // later meets, whatever else arrives late: checkpointed where the covariance was just
+        // brought to the epoch or where aiding is due, it spares that sample's rewind the
+        // steps before the epoch (and, after a propagation, the propagation): a sensor late by
+        // its latency rewinds for each of its samples.
+        if (propagated || self.aiding_due(t))
+            && self.checkpoints.len > 0
+            && t - self.checkpoints.get(self.checkpoints.len - 1).t >= EPOCH_CHECKPOINT_SPACING
+        {
+            self.take_checkpoint(t, e.prev_t.unwrap_or(t), true);
+        }
+        self.finish_step(t);
+    }
+
+    /// The end of IMU epoch `t` once its mechanization is done (and its state before the
+    /// updates checkpointed where aiding is due): fusion of the aiding due, ZUPT, the periodic
+    /// checkpoint.
+    fn finish_step(&mut self, t: GpsTime) {
         self.fuse_due(t);
         self.maybe_zupt(t);
         let due = self.checkpoints.len == 0
             || t - self.checkpoints.get(self.checkpoints.len - 1).t >= CHECKPOINT_PERIOD;
         if due {
-            self.take_checkpoint(t);
+            self.take_checkpoint(t, t, false);
         }
+    }
+
+    /// Whether an aiding sample is queued for fusion at epoch `t` (time of validity ≤ `t`).
+    fn aiding_due(&self, t: GpsTime) -> bool {
+        self.gnss_q.next_due(t)
+            || self.star_q.next_due(t)
+            || self.odo_q.next_due(t)
+            || self.baro_q.next_due(t)
     }
 
     /// How a sample of time of validity `ts` arrives: too late (older than the window), late
@@ -102,7 +129,15 @@ impl Navigator {
         }
     }
 
-    pub(super) fn take_checkpoint(&mut self, t: GpsTime) {
+    /// Checkpoint the core at epoch `t` ([`Checkpoint`]: the samples it can serve are those
+    /// of validity after `serves_after`; `before_updates` when taken before the epoch's
+    /// updates).
+    pub(super) fn take_checkpoint(
+        &mut self,
+        t: GpsTime,
+        serves_after: GpsTime,
+        before_updates: bool,
+    ) {
         // The checkpoints are cleared only when navigation starts (and a replay keeps at least
         // one), so the first one marks the start.
         if self.checkpoints.len == 0 {
@@ -110,6 +145,8 @@ impl Navigator {
         }
         let slot = self.checkpoints.push_slot();
         slot.t = t;
+        slot.serves_after = serves_after;
+        slot.before_updates = before_updates;
         slot.core = self.core;
     }
 
@@ -124,15 +161,20 @@ impl Navigator {
     /// checkpoint (an IMU faster than `max_imu_rate_hz`), the replay is impossible: counted,
     /// and the late samples are dropped ([`Self::drop_unreplayable`]).
     pub(super) fn replay_from(&mut self, ts: GpsTime) {
+        // `serves_after` never decreases along the ring (a checkpoint before the updates of
+        // epoch t serves from the epoch before t, which no earlier checkpoint is after).
         let mut k = self.checkpoints.len;
-        while k > 0 && self.checkpoints.get(k - 1).t >= ts {
+        while k > 0 && self.checkpoints.get(k - 1).serves_after >= ts {
             k -= 1;
         }
         if k == 0 {
             return;
         }
-        // Its time only: the core (≈ 10 kB) is copied once, straight into place, below.
-        let c_t = self.checkpoints.get(k - 1).t;
+        // Its times only: the core (≈ 10 kB) is copied once, straight into place, below.
+        let (c_t, c_after, c_before_updates) = {
+            let c = self.checkpoints.get(k - 1);
+            (c.t, c.serves_after, c.before_updates)
+        };
         // The IMU log must hold every step after the checkpoint epoch: its first entry is at
         // or before it, or is the very step after it (the log starts with navigation, right
         // after the checkpoint taken at the start).
@@ -148,17 +190,22 @@ impl Navigator {
         self.core = self.checkpoints.get(k - 1).core;
         self.time = c_t;
         self.diagnostics.rewinds += 1;
-        while let Some((t, v, _)) = self.gnss_done.pop_newer(c_t) {
+        // Everything fused after the checkpoint goes back: before the updates of epoch c_t,
+        // that epoch's own samples too.
+        while let Some((t, v, _)) = self.gnss_done.pop_newer(c_after) {
             self.gnss_q.insert_flagged(t, v, true);
         }
-        while let Some((t, v, _)) = self.star_done.pop_newer(c_t) {
+        while let Some((t, v, _)) = self.star_done.pop_newer(c_after) {
             self.star_q.insert_flagged(t, v, true);
         }
-        while let Some((t, v, _)) = self.odo_done.pop_newer(c_t) {
+        while let Some((t, v, _)) = self.odo_done.pop_newer(c_after) {
             self.odo_q.insert_flagged(t, v, true);
         }
-        while let Some((t, v, _)) = self.baro_done.pop_newer(c_t) {
+        while let Some((t, v, _)) = self.baro_done.pop_newer(c_after) {
             self.baro_q.insert_flagged(t, v, true);
+        }
+        if c_before_updates {
+            self.finish_step(c_t);
         }
         // The log is in time order (IMU times only increase): the steps after the checkpoint
         // are its tail, found from the end — a few steps, where the log holds seconds.

@@ -95,7 +95,7 @@ impl Navigator {
             self.core
                 .ekf
                 .propagate_covariance(&self.ell, &self.core.nav.r_e);
-            let hph = m.h * self.core.ekf.p * m.h.transpose();
+            let hph = ekf::h_p_ht(&self.core.ekf.p, &m.h);
             let r_lf = Matrix3::identity() * (sigma_lf_rad * sigma_lf_rad);
             m.r += ekf::correlated::inflate_covariance3(&hph, &r_lf, rho);
         }

@@ -711,21 +711,24 @@ impl NavigatorConfig {
         }
     }
 
-    /// Checkpoints the delayed-fusion ring keeps: at one per period ([`CHECKPOINT_PERIOD`];
-    /// an IMU slower than the period spaces them wider, covering more), enough to reach back
-    /// over `buffer_window_s` plus two periods, with two of margin. Sized from the window,
-    /// not for the longest one allowed: each checkpoint is a copy of the navigation core
-    /// (≈ 9 kB), and a ring larger than it needs to be spreads the writes over more memory
-    /// than the processor's cache keeps (54 for the 1 s window, ≈ 490 kB).
+    /// Checkpoints the delayed-fusion ring keeps: at most two per period (one per
+    /// [`CHECKPOINT_PERIOD`], and before the updates of an epoch with aiding due when the last
+    /// is at least [`EPOCH_CHECKPOINT_SPACING`] old; an IMU slower than that spaces them
+    /// wider, covering more), enough to reach back over `buffer_window_s` plus two periods,
+    /// with two of margin. Sized from the window, not for the longest one allowed: each
+    /// checkpoint is a copy of the navigation core (≈ 9.7 kB), and a ring larger than it needs
+    /// to be spreads the writes over more memory than the processor's cache keeps (106 for the
+    /// 1 s window, ≈ 1 MB).
     pub fn checkpoint_capacity(&self) -> usize {
         let period_s = CHECKPOINT_PERIOD.seconds_f64();
+        let spacing_s = EPOCH_CHECKPOINT_SPACING.seconds_f64();
         // buffer_window_s is validated to (0, 2]; anything else gets the 2 s ring.
         let window_s = if self.buffer_window_s.is_finite() {
             self.buffer_window_s.clamp(0.0, 2.0)
         } else {
             2.0
         };
-        ((window_s + 2.0 * period_s) / period_s).ceil() as usize + 2
+        ((window_s + 2.0 * period_s) / spacing_s).ceil() as usize + 2
     }
 
     /// Mechanization settings derived from this configuration.

@@ -538,7 +538,7 @@ fn late_gnss_sample_gives_the_in_time_update() {
 #[test]
 fn gnss_sample_late_by_almost_the_window_gives_the_in_time_update() {
     assert_eq!(quick_config().buffer_window_s, 1.0);
-    assert_eq!(quick_config().checkpoint_capacity(), 54);
+    assert_eq!(quick_config().checkpoint_capacity(), 106);
     late_gnss_sample_matches_in_time(990_000_000);
 }
 
@@ -625,6 +625,67 @@ fn late_gnss_sample_matches_in_time(delay_ns: i64) {
         c.push_imu(&imu).unwrap();
     }
     assert!((c.nav_state().r_e - na.r_e).norm() > 1e-4);
+}
+
+/// A sample that arrives a few IMU steps after its epoch, where other aiding was due in time,
+/// rewinds to the checkpoint taken before that epoch's updates: it replays only the steps after
+/// its epoch, and the result is the in-time one bit for bit (the same operations in the same
+/// order: the epoch's samples are fused again in their order after the checkpoint). Every
+/// GNSS fix here (1 Hz, on a baro epoch) arrives two IMU samples (20 ms) late.
+#[test]
+fn a_sample_late_by_a_few_steps_rewinds_to_its_own_epoch() {
+    let cfg = quick_config();
+    let mut a = Navigator::new(cfg.clone()).unwrap();
+    let mut b = Navigator::new(cfg).unwrap();
+    let mut sim = StaticSim::new(23, 100.0);
+    let mut held: Option<(i64, GnssSample)> = None;
+    let mut late = 0u64;
+    for k in 1..=(90 * 100 + 50) {
+        let imu = sim.next_imu();
+        let t = imu.header.time_ns;
+        if k % 10 == 0 {
+            let baro = baro_at(t, k as u64, 181.0);
+            a.push_baro(&baro).unwrap();
+            b.push_baro(&baro).unwrap();
+        }
+        if k % 100 == 0 {
+            let g = sim.gnss();
+            a.push_gnss(&g).unwrap();
+            if b.is_navigating() {
+                held = Some((t + 20_000_000, g));
+            } else {
+                b.push_gnss(&g).unwrap();
+            }
+        }
+        if let Some((when, g)) = held
+            && t >= when
+        {
+            assert!(
+                g.header.time_ns < b.time().ns,
+                "the fix must really be late"
+            );
+            b.push_gnss(&g).unwrap();
+            held = None;
+            late += 1;
+        }
+        a.push_imu(&imu).unwrap();
+        b.push_imu(&imu).unwrap();
+    }
+    assert!(held.is_none());
+    assert!(late >= 25, "{late} late fixes");
+    let d = b.diagnostics();
+    assert_eq!(d.rewinds, late);
+    // The fix is held out of the step it arrived with; its rewind replays that step and the
+    // one before: two per fix, none before the epoch.
+    assert_eq!(d.replayed_imu_steps, 2 * late);
+    assert_eq!(a.nav_state().r_e, b.nav_state().r_e);
+    assert_eq!(a.nav_state().v_e, b.nav_state().v_e);
+    assert_eq!(a.covariance(), b.covariance());
+    for s in [SensorId::Gnss, SensorId::Baro] {
+        let (ha, hb) = (a.health()[s as usize], b.health()[s as usize]);
+        assert_eq!(ha.fused, hb.fused, "{s:?}");
+        assert_eq!(ha.nis_count, hb.nis_count, "{s:?}");
+    }
 }
 
 /// `catch_up` only moves the rewind of held late samples earlier: two navigators fed the
@@ -854,7 +915,7 @@ fn an_imu_rate_the_log_cannot_hold_is_a_configuration_error() {
         ..NavigatorConfig::default()
     };
     assert_eq!(cfg.imu_log_capacity(), 4082);
-    assert_eq!(cfg.checkpoint_capacity(), 104);
+    assert_eq!(cfg.checkpoint_capacity(), 206);
     cfg.validate().unwrap();
     cfg.max_imu_rate_hz = 40_000.0; // 88 000 steps
     let e = cfg.validate().unwrap_err();
