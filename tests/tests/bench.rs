@@ -145,6 +145,20 @@ fn quick_bench_reports_every_figure() {
             f(&s, &format!("/replay/{leg}/imu_samples_per_s")) > 1000.0,
             "{leg}"
         );
+        // The figure is the median of the five timed replays, each kept.
+        let mut runs: Vec<f64> = s["replay"][leg]["imu_samples_per_s_runs"]
+            .as_array()
+            .expect("the replays' rates")
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
+        assert_eq!(runs.len(), 5, "{leg}");
+        runs.sort_by(f64::total_cmp);
+        assert_eq!(
+            f(&s, &format!("/replay/{leg}/imu_samples_per_s")),
+            runs[2],
+            "{leg}"
+        );
     }
     assert!(out.join("kfgins").join("kf-gins.yaml").is_file());
     assert!(stdout.contains("KF-GINS kf-gins.yaml"), "{stdout}");
