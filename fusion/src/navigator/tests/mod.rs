@@ -542,23 +542,23 @@ fn gnss_sample_late_by_almost_the_window_gives_the_in_time_update() {
     late_gnss_sample_matches_in_time(990_000_000);
 }
 
-fn late_gnss_sample_matches_in_time(delay_ns: i64) {
-    // Two navigators see the same static-site stream (IMU 100 Hz, baro 10 Hz, GNSS 1 Hz).
-    // A gets each GNSS fix before the IMU sample of its time (in time); B gets the fix of
-    // t = 75 s only `delay_ns` later (0.3 s: after 30 more IMU samples and 3 baro updates). B must
-    // rewind to its checkpoint before 75 s, re-fuse the baro samples and replay the IMU:
-    // the same floating-point operations in the same order, so the results agree to
-    // rounding — asserted at 1e-9 m / 1e-12 m/s / 1e-12 rad and 1e-9 relative for the
-    // covariance (the ops are identical; the bound only allows for a different
-    // summation order should the compiler choose one).
+/// Two navigators fed the same static-site stream for `steps` IMU samples (IMU 100 Hz, baro
+/// 10 Hz, GNSS 1 Hz): `a` gets every fix before the IMU sample of its time (in time); `b` gets
+/// the fix of time `t` that `delay(t, b)` names that many ns later (asserted late: after the
+/// IMU has passed its epoch), the others as `a`. Returns both and the late fixes delivered
+/// (every one is, before the stream ends).
+fn with_late_fixes(
+    seed: u64,
+    steps: usize,
+    delay: impl Fn(i64, &Navigator) -> Option<i64>,
+) -> (Navigator, Navigator, u32) {
     let cfg = quick_config();
     let mut a = Navigator::new(cfg.clone()).unwrap();
     let mut b = Navigator::new(cfg).unwrap();
-    let mut sim = StaticSim::new(31, 100.0);
+    let mut sim = StaticSim::new(seed, 100.0);
     let mut held: Option<(i64, GnssSample)> = None;
-    let late_at = T0 + 75_000_000_000;
     let mut delayed = 0;
-    for k in 1..=(80 * 100) {
+    for k in 1..=steps {
         let imu = sim.next_imu();
         let t = imu.header.time_ns;
         if k % 10 == 0 {
@@ -569,10 +569,9 @@ fn late_gnss_sample_matches_in_time(delay_ns: i64) {
         if k % 100 == 0 {
             let g = sim.gnss();
             a.push_gnss(&g).unwrap();
-            if t == late_at {
-                held = Some((t + delay_ns, g));
-            } else {
-                b.push_gnss(&g).unwrap();
+            match delay(t, &b) {
+                Some(d) => held = Some((t + d, g)),
+                None => b.push_gnss(&g).unwrap(),
             }
         }
         if let Some((when, g)) = held
@@ -589,6 +588,21 @@ fn late_gnss_sample_matches_in_time(delay_ns: i64) {
         a.push_imu(&imu).unwrap();
         b.push_imu(&imu).unwrap();
     }
+    assert!(held.is_none(), "a late fix still held at the end");
+    (a, b, delayed)
+}
+
+fn late_gnss_sample_matches_in_time(delay_ns: i64) {
+    // Two navigators see the same static-site stream (IMU 100 Hz, baro 10 Hz, GNSS 1 Hz).
+    // A gets each GNSS fix before the IMU sample of its time (in time); B gets the fix of
+    // t = 75 s only `delay_ns` later (0.3 s: after 30 more IMU samples and 3 baro updates). B must
+    // rewind to its checkpoint before 75 s, re-fuse the baro samples and replay the IMU:
+    // the same floating-point operations in the same order, so the results agree to
+    // rounding — asserted at 1e-9 m / 1e-12 m/s / 1e-12 rad and 1e-9 relative for the
+    // covariance (the ops are identical; the bound only allows for a different
+    // summation order should the compiler choose one).
+    let late_at = T0 + 75_000_000_000;
+    let (a, b, delayed) = with_late_fixes(31, 80 * 100, |t, _| (t == late_at).then_some(delay_ns));
     assert_eq!(delayed, 1);
     let (na, nb) = (a.nav_state(), b.nav_state());
     assert!(
@@ -634,44 +648,10 @@ fn late_gnss_sample_matches_in_time(delay_ns: i64) {
 /// GNSS fix here (1 Hz, on a baro epoch) arrives two IMU samples (20 ms) late.
 #[test]
 fn a_sample_late_by_a_few_steps_rewinds_to_its_own_epoch() {
-    let cfg = quick_config();
-    let mut a = Navigator::new(cfg.clone()).unwrap();
-    let mut b = Navigator::new(cfg).unwrap();
-    let mut sim = StaticSim::new(23, 100.0);
-    let mut held: Option<(i64, GnssSample)> = None;
-    let mut late = 0u64;
-    for k in 1..=(90 * 100 + 50) {
-        let imu = sim.next_imu();
-        let t = imu.header.time_ns;
-        if k % 10 == 0 {
-            let baro = baro_at(t, k as u64, 181.0);
-            a.push_baro(&baro).unwrap();
-            b.push_baro(&baro).unwrap();
-        }
-        if k % 100 == 0 {
-            let g = sim.gnss();
-            a.push_gnss(&g).unwrap();
-            if b.is_navigating() {
-                held = Some((t + 20_000_000, g));
-            } else {
-                b.push_gnss(&g).unwrap();
-            }
-        }
-        if let Some((when, g)) = held
-            && t >= when
-        {
-            assert!(
-                g.header.time_ns < b.time().ns,
-                "the fix must really be late"
-            );
-            b.push_gnss(&g).unwrap();
-            held = None;
-            late += 1;
-        }
-        a.push_imu(&imu).unwrap();
-        b.push_imu(&imu).unwrap();
-    }
-    assert!(held.is_none());
+    let (a, b, late) = with_late_fixes(23, 90 * 100 + 50, |_, b| {
+        b.is_navigating().then_some(20_000_000)
+    });
+    let late = u64::from(late);
     assert!(late >= 25, "{late} late fixes");
     let d = b.diagnostics();
     assert_eq!(d.rewinds, late);
