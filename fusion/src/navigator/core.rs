@@ -84,19 +84,24 @@ impl Core {
 }
 
 /// A delayed-fusion checkpoint: the [`Core`] at the IMU epoch `t`, either at the end of the
-/// epoch or, at an epoch with aiding due, before its updates (the covariance already brought
-/// to `t`), which a sample of that very epoch can rewind to.
+/// epoch or, at an epoch where aiding is due or the covariance was just propagated, before its
+/// updates, which a sample of that very epoch can rewind to.
 #[derive(Debug, Clone, Copy)]
 pub(super) struct Checkpoint {
     /// IMU epoch.
     pub(super) t: GpsTime,
     /// A late sample with a time of validity after this one can rewind here: `t` for the end
-    /// of the epoch; the IMU epoch before `t` before its updates (a sample of validity in
-    /// between is fused at `t`).
+    /// of the epoch; before its updates, an earlier time no sample fused at `t` is at or before
+    /// (the IMU epoch before `t`: a sample of validity in between is fused at `t`).
     pub(super) serves_after: GpsTime,
-    /// Taken before the epoch's updates: a rewind here fuses the aiding of epoch `t` again
-    /// before it replays the logged steps after it.
-    pub(super) before_updates: bool,
     /// The navigation core at that point.
     pub(super) core: Core,
+}
+
+impl Checkpoint {
+    /// Taken before the updates of epoch `t` (it serves samples of `t` itself): a rewind here
+    /// fuses the aiding of epoch `t` again before it replays the logged steps after it.
+    pub(super) fn before_updates(&self) -> bool {
+        self.serves_after < self.t
+    }
 }

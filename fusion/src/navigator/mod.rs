@@ -358,7 +358,6 @@ impl Navigator {
                 Checkpoint {
                     t: GpsTime::EPOCH,
                     serves_after: GpsTime::EPOCH,
-                    before_updates: false,
                     core,
                 },
             ),

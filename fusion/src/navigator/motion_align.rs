@@ -289,7 +289,7 @@ impl Navigator {
         self.imu_log.clear();
         self.checkpoints.clear();
         self.rewind_to = None;
-        self.take_checkpoint(t, t, false);
+        self.take_checkpoint(t, t);
         self.gnss_q.clear();
         self.gnss_inbox.clear();
         self.star_inbox.clear();

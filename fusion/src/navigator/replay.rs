@@ -47,24 +47,30 @@ impl Navigator {
         // steps before the epoch (and, after a propagation, the propagation): a sensor late by
         // its latency rewinds for each of its samples.
         if (propagated || self.aiding_due(t))
-            && self.checkpoints.len > 0
-            && t - self.checkpoints.get(self.checkpoints.len - 1).t >= EPOCH_CHECKPOINT_SPACING
+            && let Some(last_t) = self
+                .checkpoints
+                .len
+                .checked_sub(1)
+                .map(|i| self.checkpoints.get(i).t)
+            && t - last_t >= EPOCH_CHECKPOINT_SPACING
         {
-            self.take_checkpoint(t, e.prev_t.unwrap_or(t), true);
+            // Every sample fused at t is after the IMU epoch before it, and after the last
+            // checkpoint (its epoch or an earlier one) when that epoch is unknown.
+            self.take_checkpoint(t, e.prev_t.unwrap_or(last_t));
         }
         self.finish_step(t);
     }
 
     /// The end of IMU epoch `t` once its mechanization is done (and its state before the
-    /// updates checkpointed where aiding is due): fusion of the aiding due, ZUPT, the periodic
-    /// checkpoint.
+    /// updates checkpointed where aiding is due or the covariance was just propagated): fusion
+    /// of the aiding due, ZUPT, the periodic checkpoint.
     fn finish_step(&mut self, t: GpsTime) {
         self.fuse_due(t);
         self.maybe_zupt(t);
         let due = self.checkpoints.len == 0
             || t - self.checkpoints.get(self.checkpoints.len - 1).t >= CHECKPOINT_PERIOD;
         if due {
-            self.take_checkpoint(t, t, false);
+            self.take_checkpoint(t, t);
         }
     }
 
@@ -130,14 +136,9 @@ impl Navigator {
     }
 
     /// Checkpoint the core at epoch `t` ([`Checkpoint`]: the samples it can serve are those
-    /// of validity after `serves_after`; `before_updates` when taken before the epoch's
+    /// of validity after `serves_after`, `t` at the end of the epoch, earlier before its
     /// updates).
-    pub(super) fn take_checkpoint(
-        &mut self,
-        t: GpsTime,
-        serves_after: GpsTime,
-        before_updates: bool,
-    ) {
+    pub(super) fn take_checkpoint(&mut self, t: GpsTime, serves_after: GpsTime) {
         // The checkpoints are cleared only when navigation starts (and a replay keeps at least
         // one), so the first one marks the start.
         if self.checkpoints.len == 0 {
@@ -146,7 +147,6 @@ impl Navigator {
         let slot = self.checkpoints.push_slot();
         slot.t = t;
         slot.serves_after = serves_after;
-        slot.before_updates = before_updates;
         slot.core = self.core;
     }
 
@@ -173,7 +173,7 @@ impl Navigator {
         // Its times only: the core (≈ 10 kB) is copied once, straight into place, below.
         let (c_t, c_after, c_before_updates) = {
             let c = self.checkpoints.get(k - 1);
-            (c.t, c.serves_after, c.before_updates)
+            (c.t, c.serves_after, c.before_updates())
         };
         // The IMU log must hold every step after the checkpoint epoch: its first entry is at
         // or before it, or is the very step after it (the log starts with navigation, right

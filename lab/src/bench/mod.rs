@@ -28,8 +28,9 @@
 //! 7. **Replay** ([`replay_throughput`]): `replay --offline`'s replay stage (reading, the
 //!    filter, writing its recording; not the analysis), the median of five replays, on a
 //!    simulated drive recorded with every aiding sensor, and on its loosely coupled part (IMU
-//!    and GNSS fixes) exported to the KF-GINS formats and imported back — the files and `kf-gins.yaml` stay in `OUT/kfgins`,
-//!    so that KF-GINS can be run on the very same data and its samples per second compared.
+//!    and GNSS fixes) exported to the KF-GINS formats and imported back — the files and
+//!    `kf-gins.yaml` stay in `OUT/kfgins`, so that KF-GINS can be run on the very same data and
+//!    its samples per second compared.
 //!
 //! Writes `summary.json`, a latency histogram PNG (Sextant and the floor), the cost curves'
 //! PNG, and returns the summary for the table.
