@@ -2,12 +2,14 @@
 //!
 //! The motion is specified kinematically in geodetic/NED form (speed, heading, pitch, roll as
 //! analytic functions of time with raised-cosine transitions). Position (lat, lon, h) is
-//! integrated with RK4 on a fixed 1 ms grid from t = 0, using the analytic NED velocity and the
+//! integrated with RK4 on a fixed grid from t = 0 (1 ms, or finer where a sensor's period is
+//! not a whole number of milliseconds: [`Scenario::truth_grid_ns`]), using the analytic NED
+//! velocity and the
 //! WGS-84 radii of curvature; every quantity at a grid point is then computed analytically:
 //! NED acceleration, body rate relative to NED from the Euler-angle rates, Earth and transport
 //! rates, J2 gravity, specific force `f^n = a^n + (2ω_ie^n + ω_en^n)×v^n − g^n`, and the inertial
 //! body rate `ω_ib^b = C_b_n(ω_ie^n + ω_en^n) + ω_nb^b`. The grid index is an integer and the
-//! time of grid point k is `k·1e-3` s computed the same way everywhere, so all processes follow
+//! time of grid point k is `k·step` s computed the same way everywhere, so all processes follow
 //! bit-identical floating-point paths without talking to each other.
 
 use crate::scenario::{Scenario, Segment, TRUTH_GRID_NS, Trajectory};
@@ -17,9 +19,6 @@ use fusion::attitude::c_n_b_from_rpy;
 use fusion::earth::{self, Ellipsoid, Geodetic, GravityModel, WGS84};
 use nalgebra::{Matrix3, Vector3};
 use std::f64::consts::{PI, TAU};
-
-/// Grid step of the truth integration, s.
-pub const GRID_STEP_S: f64 = TRUTH_GRID_NS as f64 * 1e-9;
 
 /// Raised-cosine ramp: fraction completed `τ/T − sin(2πτ/T)/2π` and its rate (1/s), for
 /// `0 ≤ τ ≤ T` (clamped outside). The rate `(1 − cos(2πτ/T))/T` is zero at both ends, so the
@@ -490,7 +489,7 @@ impl TruthPoint {
     }
 }
 
-/// Integrals of the truth over one sample interval (trapezoid rule on the 1 ms grid).
+/// Integrals of the truth over one sample interval (trapezoid rule on the truth grid).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Increments {
     /// Interval, s.
@@ -510,9 +509,13 @@ pub struct Increments {
     pub rate_outer_b_rad2_s: Matrix3<f64>,
 }
 
-/// Steps the truth along the 1 ms grid.
+/// Steps the truth along its grid.
 #[derive(Debug, Clone)]
 pub struct TruthGenerator {
+    /// Grid step, ns.
+    grid_ns: i64,
+    /// Grid step, s (`grid_ns · 1e-9`).
+    grid_s: f64,
     profile: Profile,
     ell: Ellipsoid,
     world: MotionWorld,
@@ -570,10 +573,10 @@ impl ProfileAt {
 const INTENT_FD_STEP_S: f64 = 1e-4;
 
 impl TruthGenerator {
-    /// Start at grid point 0 of the scenario.
+    /// Start at grid point 0 of the scenario, on its grid ([`Scenario::truth_grid_ns`]).
     pub fn new(scn: &Scenario) -> Self {
         let world = MotionWorld::new(scn.spec.world.as_ref(), scn.spec.scenario.seed);
-        Self::from_profile_in_world(Profile::new(scn), scn.spec.site, world)
+        Self::on_grid(Profile::new(scn), scn.spec.site, world, scn.truth_grid_ns())
     }
 
     /// Start at grid point 0 of `profile` from the geodetic point `s`.
@@ -581,12 +584,24 @@ impl TruthGenerator {
         Self::from_profile_in_world(profile, s, MotionWorld::default())
     }
 
-    /// Start at grid point 0 of `profile` from the geodetic point `s` in the motion `world`.
+    /// Start at grid point 0 of `profile` from the geodetic point `s` in the motion `world`, on
+    /// the 1 ms grid.
     pub fn from_profile_in_world(
         profile: Profile,
         s: crate::scenario::Site,
         world: MotionWorld,
     ) -> Self {
+        Self::on_grid(profile, s, world, TRUTH_GRID_NS)
+    }
+
+    /// [`Self::from_profile_in_world`] on a grid of `grid_ns` ns (a divisor of 1 ms).
+    fn on_grid(
+        profile: Profile,
+        s: crate::scenario::Site,
+        world: MotionWorld,
+        grid_ns: i64,
+    ) -> Self {
+        let grid_s = grid_ns as f64 * 1e-9;
         let ell = WGS84;
         let lat = s.lat_deg.to_radians();
         let lon = s.lon_deg.to_radians();
@@ -600,13 +615,15 @@ impl TruthGenerator {
             vehicle: world
                 .vehicle
                 .as_ref()
-                .map(|v| v.follower(0.0, 0.0, Some(GRID_STEP_S))),
+                .map(|v| v.follower(0.0, 0.0, Some(grid_s))),
             vibration: world
                 .vibration
                 .as_ref()
-                .map(|v| v.follower(0.0, Some(GRID_STEP_S))),
+                .map(|v| v.follower(0.0, Some(grid_s))),
         };
         let mut g = Self {
+            grid_ns,
+            grid_s,
             profile,
             ell,
             world,
@@ -655,8 +672,13 @@ impl TruthGenerator {
         &self.point
     }
 
-    fn t_of(k: i64) -> f64 {
-        k as f64 * GRID_STEP_S
+    /// Grid step, ns.
+    pub fn grid_ns(&self) -> i64 {
+        self.grid_ns
+    }
+
+    fn t_of(&self, k: i64) -> f64 {
+        k as f64 * self.grid_s
     }
 
     /// Rates of (lat, lon, h, distance) for the profile `p` at a time, position and distance
@@ -720,7 +742,7 @@ impl TruthGenerator {
         s_m: f64,
     ) -> TruthPoint {
         let ell = &self.ell;
-        let t = Self::t_of(k);
+        let t = self.t_of(k);
         let mut kin = *kin;
         let mut geo = Geodetic {
             lat_rad: lat,
@@ -786,7 +808,7 @@ impl TruthGenerator {
         }
         let f_n = a + (2.0 * w_ie_n + w_en_n).cross(&v) - g_n;
         TruthPoint {
-            t_ns: k * TRUTH_GRID_NS,
+            t_ns: k * self.grid_ns,
             geodetic: geo,
             r_e_m: r_e,
             v_ned_m_s: v,
@@ -810,8 +832,8 @@ impl TruthGenerator {
     /// Advance one grid step (RK4 on lat, lon, h and distance), accumulating the interval
     /// integrals.
     pub fn step(&mut self) {
-        let t0 = Self::t_of(self.k);
-        let t1 = Self::t_of(self.k + 1);
+        let t0 = self.t_of(self.k);
+        let t1 = self.t_of(self.k + 1);
         let h = t1 - t0;
         let tm = t0 + 0.5 * h;
         let (lat, lon, hh, s) = (self.lat_rad, self.lon_rad, self.height_m, self.distance_m);
@@ -883,7 +905,7 @@ impl TruthGenerator {
     /// Advance to the grid point at `t_ns` (a multiple of the grid step, not before the current
     /// point) and return the integrals since the previous call (or since t = 0).
     pub fn advance_to(&mut self, t_ns: i64) -> Increments {
-        let target = t_ns.div_euclid(TRUTH_GRID_NS);
+        let target = t_ns.div_euclid(self.grid_ns);
         while self.k < target {
             self.step();
         }

@@ -216,6 +216,9 @@ fn quick_bench_reports_every_figure() {
             assert_eq!(f(pt, "/rejected_inputs"), 0.0, "{curve}: {pt}");
         }
     }
+    // The IMU-rate curve reaches 2 kHz (the simulator's 0.5 ms truth grid).
+    let rates = s["cost_curves"]["imu_rate"].as_array().expect("imu_rate");
+    assert_eq!(rates.last().map(|p| f(p, "/imu_rate_hz")), Some(2000.0));
     assert!(f(&s, "/cost_curves/satellites_simulated_max") >= 4.0);
     assert!(f(&s, "/cost_curves/triad_ns_per_imu_sample") > 0.0);
     let png = std::fs::metadata(out.join("cost_curves.png")).expect("cost curves");

@@ -5,8 +5,8 @@
 //!
 //! Every point runs the vehicle scenario with every aiding sensor (star tracker, GNSS, odometer,
 //! baro) and one thing changed:
-//! - **IMU rate**: `[imu] rate_hz` of the scenario, 100 Hz to 1 kHz (the simulator's truth grid
-//!   is 1 ms, so an IMU period is a whole number of milliseconds);
+//! - **IMU rate**: `[imu] rate_hz` of the scenario, 100 Hz to 2 kHz (400 Hz and 2 kHz on the
+//!   simulator's 0.5 ms truth grid, the others on its 1 ms grid);
 //! - **active states**: the switchable groups of `[states]` switched on one after the other;
 //!   the position, velocity, attitude, gyro and accelerometer bias (15), baro bias and odometer
 //!   scale (2) are always estimated, so the curve spans 17 to 31 states;
@@ -53,7 +53,7 @@ impl CurveSizes {
                 sim_s: 10.0,
                 measure_from_s: 3.0,
                 repetitions: 1,
-                rates_hz: vec![100.0, 1000.0],
+                rates_hz: vec![100.0, 2000.0],
                 state_steps: vec![0, STATE_STEPS.len() - 1],
                 satellites: vec![1, usize::MAX],
                 channels: vec![3, 8],
@@ -64,9 +64,7 @@ impl CurveSizes {
                 sim_s: 185.0,
                 measure_from_s: 125.0,
                 repetitions: 3,
-                // The simulator's truth grid is 1 ms: every IMU period is a whole number of
-                // milliseconds (400 Hz and 2 kHz cannot be simulated).
-                rates_hz: vec![100.0, 125.0, 200.0, 250.0, 500.0, 1000.0],
+                rates_hz: vec![100.0, 125.0, 200.0, 250.0, 400.0, 500.0, 1000.0, 2000.0],
                 state_steps: (0..STATE_STEPS.len()).collect(),
                 satellites: vec![0, 1, 2, 3, 4, 6, 8, 10, 12, 16, 24, 32, usize::MAX],
                 channels: vec![3, 4, 5, 6, 7, 8],
