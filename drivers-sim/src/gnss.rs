@@ -136,6 +136,10 @@ impl Constellation {
     }
 }
 
+/// Largest simulated constellation: satellites in orbit (PRN 1..=128). A sample carries at
+/// most [`MAX_SATELLITES`] of them: the receiver's channels ([`GnssSim::tracked_channels`]).
+pub const MAX_CONSTELLATION: usize = 128;
+
 /// Elevation of line-of-sight unit vector `u_e` (ECEF) seen from NED frame `c_e_n`, rad.
 pub fn elevation_rad(c_e_n: &nalgebra::Matrix3<f64>, u_e: &Vector3<f64>) -> f64 {
     let u_n = c_e_n.transpose() * u_e;
@@ -381,6 +385,42 @@ impl GnssSim {
         )
     }
 
+    /// The satellites the receiver tracks at reception time `t_rx_s` from the antenna `r_rx`
+    /// (ECEF, m) under the NED frame `c_e_n`, as bit `i` for satellite `i`: every one above the
+    /// elevation mask `mask_rad` while they fit the sample's [`MAX_SATELLITES`] channels, else
+    /// the highest of them (a multi-constellation sky holds more than a receiver reports; the
+    /// low ones are the first it drops, and their multipath and atmosphere are the worst).
+    /// A constellation no larger than the channels needs no pre-pass: all of it.
+    fn tracked_channels(
+        &self,
+        t_rx_s: f64,
+        r_rx: &Vector3<f64>,
+        c_e_n: &nalgebra::Matrix3<f64>,
+        mask_rad: f64,
+    ) -> u128 {
+        let n = self.constellation.len();
+        if n <= MAX_SATELLITES {
+            return u128::MAX;
+        }
+        let mut visible = [(0.0f64, 0usize); MAX_CONSTELLATION];
+        let mut k = 0;
+        for i in 0..n.min(MAX_CONSTELLATION) {
+            let (r_s, _, range) = self.constellation.at_reception(i, t_rx_s, r_rx);
+            let el = elevation_rad(c_e_n, &((r_s - r_rx) / range));
+            if el >= mask_rad {
+                visible[k] = (el, i);
+                k += 1;
+            }
+        }
+        let visible = &mut visible[..k];
+        // Highest first; equal elevations by PRN (a total order: no NaN above the mask).
+        visible.sort_unstable_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+        visible
+            .iter()
+            .take(MAX_SATELLITES)
+            .fold(0u128, |bits, &(_, i)| bits | (1 << i))
+    }
+
     fn draws(&mut self) -> [f64; 4] {
         [
             self.rng.sample(StandardNormal),
@@ -414,11 +454,12 @@ impl GnssSim {
         let mut hth = Matrix4::<f64>::zeros();
         let mut ht_pr = Vector4::<f64>::zeros();
         let mut ht_rr = Vector4::<f64>::zeros();
+        let channels = self.tracked_channels(t_rx_s, &r_rx, &truth.c_e_n, mask);
         let mut n = 0usize;
         for i in 0..self.constellation.len() {
             // Fixed draw order for every satellite, visible or not.
             let draws = self.draws();
-            if outage || n >= MAX_SATELLITES {
+            if outage || n >= MAX_SATELLITES || channels & (1 << i) == 0 {
                 continue;
             }
             let (r_s, v_s, range) = self.constellation.at_reception(i, t_rx_s, &r_rx);
@@ -519,10 +560,11 @@ impl GnssSim {
             phase_multipath_cycles: [[0.0; 2]; MAX_SATELLITES],
         };
         let mut obs = fusion::gnss_ls::Observations::default();
+        let channels = self.tracked_channels(t_rx_s, &r_rx, &truth.c_e_n, mask);
         let mut n = 0usize;
         for i in 0..self.constellation.len() {
             let draws = self.draws();
-            if outage || n >= MAX_SATELLITES {
+            if outage || n >= MAX_SATELLITES || channels & (1 << i) == 0 {
                 continue;
             }
             let (r_s, v_s, range) = self.constellation.at_reception(i, t_rx_s, &r_rx);

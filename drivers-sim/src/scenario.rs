@@ -1302,12 +1302,16 @@ impl Scenario {
         rate("gnss.rate_hz", spec.gnss.rate_hz)?;
         windows("gnss.outages", &spec.gnss.outages)?;
         let c = &spec.gnss.constellation;
-        if c.planes == 0 || c.per_plane == 0 || c.planes * c.per_plane > msgs::MAX_SATELLITES as u32
-        {
+        let max = crate::gnss::MAX_CONSTELLATION as u32;
+        if c.planes == 0 || c.per_plane == 0 || c.planes.saturating_mul(c.per_plane) > max {
             return Err(invalid(
                 f,
                 "gnss.constellation.planes",
-                format!("need 1..={} satellites in total", msgs::MAX_SATELLITES),
+                format!(
+                    "need 1..={max} satellites in total (a sample carries the {} highest in \
+                     view)",
+                    msgs::MAX_SATELLITES
+                ),
             ));
         }
         finite("gnss.constellation.inclination_deg", c.inclination_deg)?;

@@ -400,6 +400,55 @@ fn at_least_four_satellites_visible_all_day() {
     assert!(min_vis >= 4, "only {min_vis} satellites visible");
 }
 
+/// A sky with more satellites above the mask than a sample has channels (a Walker pattern of
+/// 128, four constellations' worth): each sample carries 32, the highest in view — none left
+/// out is higher than one carried — by the matched and by the world's receiver alike.
+#[test]
+fn a_crowded_sky_fills_the_channels_with_the_highest_satellites() {
+    for (name, scn) in [
+        ("matched static site", load("static_site")),
+        ("vehicle in its world", load_shipped("vehicle")),
+    ] {
+        let mut scn = scn;
+        scn.spec.gnss.constellation.planes = 16;
+        scn.spec.gnss.constellation.per_plane = 8;
+        let c = Constellation::new(scn.spec.gnss.constellation);
+        let epoch = scn.epoch_gps().ns;
+        let mut src = GnssSource::new(&scn, epoch);
+        let mask = 10f64.to_radians();
+        // Ten epochs outside the vehicle scenario's GNSS outage (300–360 s).
+        for k in [0, 50, 100, 150, 200, 250, 400, 450, 500, 550] {
+            let t_ns = k * 1_000_000_000;
+            let (sample, hidden) = src.sample_with_truth(t_ns);
+            let r_rx = hidden.antenna_r_e_m;
+            let (_, c_e_n) = earth::ecef_to_geodetic_and_c_e_n(&WGS84, &r_rx);
+            let t_rx = (epoch + t_ns) as f64 * 1e-9;
+            let el = |i: usize| {
+                let (r, _, range) = c.at_reception(i, t_rx, &r_rx);
+                crate::gnss::elevation_rad(&c_e_n, &((r - r_rx) / range))
+            };
+            let n = sample.n_satellites as usize;
+            let carried: Vec<usize> = sample.satellites[..n]
+                .iter()
+                .map(|s| s.prn as usize - 1)
+                .collect();
+            let in_view = (0..c.len()).filter(|&i| el(i) >= mask).count();
+            assert!(in_view > msgs::MAX_SATELLITES, "{name}: {in_view} in view");
+            assert_eq!(n, msgs::MAX_SATELLITES, "{name} at {k} s");
+            let lowest_carried = carried.iter().map(|&i| el(i)).fold(f64::MAX, f64::min);
+            let highest_left = (0..c.len())
+                .filter(|i| !carried.contains(i))
+                .map(el)
+                .fold(f64::MIN, f64::max);
+            assert!(lowest_carried >= mask, "{name}");
+            assert!(
+                highest_left <= lowest_carried,
+                "{name} at {k} s: {highest_left} rad left out, {lowest_carried} rad carried"
+            );
+        }
+    }
+}
+
 /// Star tracker at the level static site: optical axis (sensor z) points to the local up, and
 /// the measured attitude differs from the truth by ≈ the configured noise.
 #[test]

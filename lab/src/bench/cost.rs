@@ -12,8 +12,9 @@
 //!   scale (2) are always estimated, so the curve spans 17 to 31 states;
 //! - **tight satellites**: `gnss_mode = "tight"` with at most n satellites tracked (those of
 //!   highest C/N0, [`OfflineSim::limit_satellites`]) from 3 s on (after the alignment fix); 0 is
-//!   tight with no satellite (no GNSS update), the top of the curve is every satellite in view
-//!   of the largest constellation a GNSS sample carries (32 satellites, eight planes of four);
+//!   tight with no satellite (no GNSS update), the top of the curve is a full receiver: 32
+//!   satellites, the highest of a sky of 128 (one Walker pattern of four constellations'
+//!   worth; [`drivers_sim::gnss::MAX_CONSTELLATION`]);
 //! - **redundant IMU channels**: `[imu.channels]` pyramid of N single-axis channels (least
 //!   squares combination and parity-space FDI in the navigator), the triad as reference.
 //!
@@ -242,12 +243,12 @@ pub fn run(cfg_dir: &Path, base: &NavigatorConfig, quick: bool) -> anyhow::Resul
         p["groups"] = json!(STATE_STEPS[step]);
         states.push(p);
     }
-    // The satellites: the largest constellation a GNSS sample can carry (32, eight planes of
-    // four), so that as many are in view as the simulator can give.
-    let dense = scenario_variant(cfg_dir, "32sats", "gnss", |gnss| {
+    // The satellites: a sky of four constellations' worth (128 in one Walker pattern, about
+    // 45 above the mask), so that the receiver's 32 channels are all in use.
+    let dense = scenario_variant(cfg_dir, "128sats", "gnss", |gnss| {
         let mut c = toml::Table::new();
-        c.insert("planes".into(), toml::Value::Integer(8));
-        c.insert("per_plane".into(), toml::Value::Integer(4));
+        c.insert("planes".into(), toml::Value::Integer(16));
+        c.insert("per_plane".into(), toml::Value::Integer(8));
         c.insert("phasing".into(), toml::Value::Integer(1));
         c.insert("inclination_deg".into(), toml::Value::Float(55.0));
         c.insert("semi_major_axis_m".into(), toml::Value::Float(26_559_700.0));
