@@ -4,11 +4,10 @@
 //! analytic functions of time with raised-cosine transitions). Position (lat, lon, h) is
 //! integrated with RK4 on a fixed grid from t = 0 (1 ms, or finer where a sensor's period is
 //! not a whole number of milliseconds: [`Scenario::truth_grid_ns`]), using the analytic NED
-//! velocity and the
-//! WGS-84 radii of curvature; every quantity at a grid point is then computed analytically:
-//! NED acceleration, body rate relative to NED from the Euler-angle rates, Earth and transport
-//! rates, J2 gravity, specific force `f^n = a^n + (2ω_ie^n + ω_en^n)×v^n − g^n`, and the inertial
-//! body rate `ω_ib^b = C_b_n(ω_ie^n + ω_en^n) + ω_nb^b`. The grid index is an integer and the
+//! velocity and the WGS-84 radii of curvature; every quantity at a grid point is then computed
+//! analytically: NED acceleration, body rate relative to NED from the Euler-angle rates, Earth
+//! and transport rates, J2 gravity, specific force `f^n = a^n + (2ω_ie^n + ω_en^n)×v^n − g^n`,
+//! and the inertial body rate `ω_ib^b = C_b_n(ω_ie^n + ω_en^n) + ω_nb^b`. The grid index is an integer and the
 //! time of grid point k is `k·step` s computed the same way everywhere, so all processes follow
 //! bit-identical floating-point paths without talking to each other.
 
