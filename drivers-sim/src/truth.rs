@@ -513,8 +513,6 @@ pub struct Increments {
 pub struct TruthGenerator {
     /// Grid step, ns.
     grid_ns: i64,
-    /// Grid step, s (`grid_ns · 1e-9`).
-    grid_s: f64,
     profile: Profile,
     ell: Ellipsoid,
     world: MotionWorld,
@@ -622,7 +620,6 @@ impl TruthGenerator {
         };
         let mut g = Self {
             grid_ns,
-            grid_s,
             profile,
             ell,
             world,
@@ -677,7 +674,7 @@ impl TruthGenerator {
     }
 
     fn t_of(&self, k: i64) -> f64 {
-        k as f64 * self.grid_s
+        k as f64 * (self.grid_ns as f64 * 1e-9)
     }
 
     /// Rates of (lat, lon, h, distance) for the profile `p` at a time, position and distance
