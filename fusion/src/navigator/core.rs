@@ -49,6 +49,9 @@ pub(super) struct Core {
     /// Bias-corrected inertial angular rate of the last IMU step, body axes, rad/s (the
     /// velocity lever-arm term of the GNSS antenna).
     pub(super) w_ib_b_rad_s: Vector3<f64>,
+    /// Each aiding sensor's cadence (index `SensorId as usize`): where its next sample is
+    /// expected, for the propagation at its epoch ([`super::cadence`]).
+    pub(super) cadence: [Cadence; SensorId::COUNT],
 }
 
 impl Core {
@@ -78,6 +81,7 @@ impl Core {
             odo_epoch: None,
             clock_initialized: false,
             last_gnss_ranging: None,
+            cadence: Default::default(),
             w_ib_b_rad_s: Vector3::zeros(),
         }
     }

@@ -102,6 +102,8 @@
 //! - `warm_start`: the snapshot of the estimate for a warm restart, and the resumption from it.
 //! - `calibration_memory`: a previous run's sensor errors as the prior of the next start.
 //! - `core`: the replayable state as one `Clone` value; a checkpoint is `(time, Core)`.
+//! - `cadence`: where each aiding sensor's next sample is expected (the covariance is
+//!   propagated at that epoch, so that a late sample's rewind finds it there).
 //! - `buffer`, `obs`: the delayed-fusion queues and logs, and the observations they hold.
 //! - `replay`: the navigating IMU step, checkpoints and the replay of late samples.
 //! - `update`: one gated measurement update and the counters folded from it.
@@ -131,6 +133,7 @@ mod align;
 mod alignment_carry;
 mod baro;
 mod buffer;
+mod cadence;
 mod calibration_memory;
 mod channels;
 mod config;
@@ -155,6 +158,7 @@ mod zupt;
 use self::core::*;
 use alignment_carry::*;
 use buffer::*;
+use cadence::Cadence;
 use calibration_memory::CalibrationPrior;
 pub use calibration_memory::{
     CalibrationLoaded, CalibrationMemoryConfig, CalibrationRefusal, REMEMBERED,

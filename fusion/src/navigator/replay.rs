@@ -33,7 +33,12 @@ impl Navigator {
         self.core
             .ekf
             .accumulate(&self.core.nav, &(dv_c / dt), &(dth_c / dt), dt);
-        let propagated = self.core.ekf.pending_s() >= self.config.covariance_interval_s - 1e-9;
+        // At the fixed interval, and at the epoch where a sensor's next sample is expected: a
+        // forced propagation (an update) shifts the interval's grid off a late sensor's
+        // epochs, and its rewind would then propagate again ([`super::cadence`]).
+        let propagated = self.core.ekf.pending_s() >= self.config.covariance_interval_s - 1e-9
+            || e.prev_t
+                .is_some_and(|p| self.core.cadence.iter().any(|c| c.expected_within(p, t)));
         if propagated {
             self.core
                 .ekf
@@ -249,6 +254,15 @@ impl Navigator {
         }
     }
 
+    /// A sample of `sensor` valid at `ts` is being fused: where its next one is expected, for
+    /// a sensor with a time-tag latency, whose samples arrive after their epoch
+    /// ([`super::cadence`]; one stamped at its epoch arrives in time and needs no forecast).
+    fn note_cadence(&mut self, sensor: SensorId, ts: GpsTime) {
+        if self.config.latency.of(sensor) > Duration::ZERO {
+            self.core.cadence[sid(sensor)].observe(ts);
+        }
+    }
+
     /// Fuse every queued sample with time of validity ≤ `t` (the current epoch) and keep it
     /// for a possible replay.
     pub(super) fn fuse_due(&mut self, t: GpsTime) {
@@ -258,6 +272,7 @@ impl Navigator {
             if self.nav_start.is_some_and(|start| ts <= start) {
                 continue;
             }
+            self.note_cadence(SensorId::Gnss, ts);
             self.fuse_gnss(ts, &obs, Tally::first_time(counted));
             self.gnss_done.insert_flagged(ts, obs, true);
         }
@@ -265,6 +280,7 @@ impl Navigator {
             if self.nav_start.is_some_and(|start| ts <= start) {
                 continue;
             }
+            self.note_cadence(SensorId::StarTracker, ts);
             self.fuse_star(ts, &obs, Tally::first_time(counted));
             self.star_done.insert_flagged(ts, obs, true);
         }
@@ -272,6 +288,7 @@ impl Navigator {
             if self.nav_start.is_some_and(|start| ts <= start) {
                 continue;
             }
+            self.note_cadence(SensorId::Odometer, ts);
             self.fuse_odometer(ts, speed, Tally::first_time(counted));
             self.odo_done.insert_flagged(ts, speed, true);
         }
@@ -279,6 +296,7 @@ impl Navigator {
             if self.nav_start.is_some_and(|start| ts <= start) {
                 continue;
             }
+            self.note_cadence(SensorId::Baro, ts);
             self.fuse_baro(ts, h, Tally::first_time(counted));
             self.baro_done.insert_flagged(ts, h, true);
         }
