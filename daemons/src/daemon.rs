@@ -626,8 +626,16 @@ pub fn run<E: NavEngine>(
         opts.prefix,
         opts.out.display()
     );
-    // The real-time settings, on this (the filter) thread once the recorder's and checkpoint
-    // writer's threads have started with the normal policy.
+    // The scheduling of this (the filter) thread, once the recorder's and checkpoint writer's
+    // threads have started with the normal policy and slice.
+    // The short time slice first: a SCHED_FIFO priority below replaces it.
+    match crate::time_slice::apply_short_slice() {
+        Ok(()) => tracing::debug!(
+            "filter thread: {} µs time slice",
+            crate::time_slice::FILTER_SLICE_NS / 1000
+        ),
+        Err(e) => tracing::info!("filter thread: the default time slice kept ({e})"),
+    }
     let rt = &opts.system.fusion.realtime;
     if rt.any() {
         crate::realtime::apply(rt)?;

@@ -32,3 +32,4 @@ pub use msgs::sd_notify;
 pub mod signals;
 pub mod staleness;
 pub mod supervisor;
+pub mod time_slice;
