@@ -668,6 +668,73 @@ fn a_sample_late_by_a_few_steps_rewinds_to_its_own_epoch() {
     }
 }
 
+/// A sensor with a declared time-tag latency whose epochs fall between the covariance's 50 ms
+/// propagations (GNSS valid 30 ms past each second, stamped 20 ms later and delivered at its
+/// stamp, with the in-time baro at whole 100 ms): the covariance is also propagated at the
+/// epoch where its next sample is expected (`cadence`), so the checkpoint before that epoch's
+/// updates serves the sample's rewind, which replays only the two IMU steps after its epoch
+/// once the sensor's cadence is known (from its third sample on); without it the rewind would
+/// go back to the periodic checkpoint before the epoch and replay the epoch's step too. The
+/// result is the in-time arrival's (the same declared latency, each fix pushed before the IMU
+/// step of its epoch) bit for bit.
+#[test]
+fn a_late_sensor_between_propagations_rewinds_to_its_own_epoch() {
+    const LATENCY_NS: i64 = 20_000_000;
+    let mut cfg = quick_config();
+    cfg.latency.gnss_s = LATENCY_NS as f64 * 1e-9;
+    let mut a = Navigator::new(cfg.clone()).unwrap();
+    let mut b = Navigator::new(cfg).unwrap();
+    let mut sim = StaticSim::new(29, 100.0);
+    let mut held: Option<GnssSample> = None;
+    let mut replayed_per_rewind = Vec::new();
+    for k in 1..=(90 * 100 + 50) {
+        let imu = sim.next_imu();
+        let t = imu.header.time_ns;
+        if k % 10 == 0 {
+            let baro = baro_at(t, k as u64, 181.0);
+            a.push_baro(&baro).unwrap();
+            b.push_baro(&baro).unwrap();
+        }
+        if k % 100 == 3 {
+            // Valid at t, stamped at t + latency.
+            let mut g = sim.gnss();
+            g.header.time_ns += LATENCY_NS;
+            a.push_gnss(&g).unwrap();
+            held = Some(g);
+        }
+        if let Some(g) = held
+            && t >= g.header.time_ns
+        {
+            if b.is_navigating() {
+                assert!(g.header.time_ns - LATENCY_NS < b.time().ns, "really late");
+            }
+            b.push_gnss(&g).unwrap();
+            held = None;
+        }
+        a.push_imu(&imu).unwrap();
+        let before = b.diagnostics().replayed_imu_steps;
+        b.push_imu(&imu).unwrap();
+        b.catch_up();
+        let replayed = b.diagnostics().replayed_imu_steps - before;
+        if replayed > 0 {
+            replayed_per_rewind.push(replayed);
+        }
+    }
+    assert_eq!(replayed_per_rewind.len() as u64, b.diagnostics().rewinds);
+    assert!(replayed_per_rewind.len() >= 25, "{replayed_per_rewind:?}");
+    assert!(
+        replayed_per_rewind[2..].iter().all(|&n| n == 2),
+        "{replayed_per_rewind:?}"
+    );
+    assert_eq!(a.nav_state().r_e, b.nav_state().r_e);
+    assert_eq!(a.nav_state().v_e, b.nav_state().v_e);
+    assert_eq!(a.nav_state().q_e_b, b.nav_state().q_e_b);
+    assert_eq!(a.covariance(), b.covariance());
+    let g = SensorId::Gnss as usize;
+    assert_eq!(a.health()[g].fused, b.health()[g].fused);
+    assert_eq!(b.health()[g].dropped_late, 0);
+}
+
 /// `catch_up` only moves the rewind of held late samples earlier: two navigators fed the
 /// same stream with late samples (every baro sample and GNSS fix arrives after the IMU
 /// sample of its epoch, some fixes 0.2 s late), one calling `catch_up` after every IMU
