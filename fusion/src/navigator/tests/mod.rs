@@ -552,44 +552,74 @@ fn with_late_fixes(
     steps: usize,
     delay: impl Fn(i64, &Navigator) -> Option<i64>,
 ) -> (Navigator, Navigator, u32) {
-    let cfg = quick_config();
-    let mut a = Navigator::new(cfg.clone()).unwrap();
-    let mut b = Navigator::new(cfg).unwrap();
-    let mut sim = StaticSim::new(seed, 100.0);
-    let mut held: Option<(i64, GnssSample)> = None;
-    let mut delayed = 0;
-    for k in 1..=steps {
-        let imu = sim.next_imu();
-        let t = imu.header.time_ns;
-        if k % 10 == 0 {
-            let baro = baro_at(t, k as u64, 181.0);
-            a.push_baro(&baro).unwrap();
-            b.push_baro(&baro).unwrap();
-        }
-        if k % 100 == 0 {
-            let g = sim.gnss();
-            a.push_gnss(&g).unwrap();
-            match delay(t, &b) {
-                Some(d) => held = Some((t + d, g)),
-                None => b.push_gnss(&g).unwrap(),
+    let fixes = LateFixes {
+        cfg: quick_config(),
+        seed,
+        steps,
+        fix_step: 0,
+        stamp_after_ns: 0,
+    };
+    fixes.run(delay, |_| {})
+}
+
+/// The stream of [`with_late_fixes`] with its configuration, the fix's epoch at IMU step
+/// `fix_step` of each second (0–99) and its stamp `stamp_after_ns` after that epoch (a
+/// time-tag latency, declared or not in `cfg`).
+struct LateFixes {
+    cfg: NavigatorConfig,
+    seed: u64,
+    steps: usize,
+    fix_step: usize,
+    stamp_after_ns: i64,
+}
+
+impl LateFixes {
+    /// Feed both navigators; `after_b` sees `b` after each of its IMU samples.
+    fn run(
+        &self,
+        delay: impl Fn(i64, &Navigator) -> Option<i64>,
+        mut after_b: impl FnMut(&mut Navigator),
+    ) -> (Navigator, Navigator, u32) {
+        let mut a = Navigator::new(self.cfg.clone()).unwrap();
+        let mut b = Navigator::new(self.cfg.clone()).unwrap();
+        let mut sim = StaticSim::new(self.seed, 100.0);
+        let mut held: Option<(i64, GnssSample)> = None;
+        let mut delayed = 0;
+        for k in 1..=self.steps {
+            let imu = sim.next_imu();
+            let t = imu.header.time_ns;
+            if k % 10 == 0 {
+                let baro = baro_at(t, k as u64, 181.0);
+                a.push_baro(&baro).unwrap();
+                b.push_baro(&baro).unwrap();
             }
+            if k % 100 == self.fix_step {
+                let mut g = sim.gnss();
+                g.header.time_ns += self.stamp_after_ns;
+                a.push_gnss(&g).unwrap();
+                match delay(t, &b) {
+                    Some(d) => held = Some((t + d, g)),
+                    None => b.push_gnss(&g).unwrap(),
+                }
+            }
+            if let Some((when, g)) = held
+                && t >= when
+            {
+                assert!(
+                    g.header.time_ns - self.stamp_after_ns < b.time().ns,
+                    "the sample must really be late"
+                );
+                b.push_gnss(&g).unwrap();
+                held = None;
+                delayed += 1;
+            }
+            a.push_imu(&imu).unwrap();
+            b.push_imu(&imu).unwrap();
+            after_b(&mut b);
         }
-        if let Some((when, g)) = held
-            && t >= when
-        {
-            assert!(
-                g.header.time_ns < b.time().ns,
-                "the sample must really be late"
-            );
-            b.push_gnss(&g).unwrap();
-            held = None;
-            delayed += 1;
-        }
-        a.push_imu(&imu).unwrap();
-        b.push_imu(&imu).unwrap();
+        assert!(held.is_none(), "a late fix still held at the end");
+        (a, b, delayed)
     }
-    assert!(held.is_none(), "a late fix still held at the end");
-    (a, b, delayed)
 }
 
 fn late_gnss_sample_matches_in_time(delay_ns: i64) {
@@ -682,44 +712,28 @@ fn a_late_sensor_between_propagations_rewinds_to_its_own_epoch() {
     const LATENCY_NS: i64 = 20_000_000;
     let mut cfg = quick_config();
     cfg.latency.gnss_s = LATENCY_NS as f64 * 1e-9;
-    let mut a = Navigator::new(cfg.clone()).unwrap();
-    let mut b = Navigator::new(cfg).unwrap();
-    let mut sim = StaticSim::new(29, 100.0);
-    let mut held: Option<GnssSample> = None;
+    // Valid at 30 ms past the second, stamped and delivered 20 ms later.
+    let fixes = LateFixes {
+        cfg,
+        seed: 29,
+        steps: 90 * 100 + 50,
+        fix_step: 3,
+        stamp_after_ns: LATENCY_NS,
+    };
     let mut replayed_per_rewind = Vec::new();
-    for k in 1..=(90 * 100 + 50) {
-        let imu = sim.next_imu();
-        let t = imu.header.time_ns;
-        if k % 10 == 0 {
-            let baro = baro_at(t, k as u64, 181.0);
-            a.push_baro(&baro).unwrap();
-            b.push_baro(&baro).unwrap();
-        }
-        if k % 100 == 3 {
-            // Valid at t, stamped at t + latency.
-            let mut g = sim.gnss();
-            g.header.time_ns += LATENCY_NS;
-            a.push_gnss(&g).unwrap();
-            held = Some(g);
-        }
-        if let Some(g) = held
-            && t >= g.header.time_ns
-        {
-            if b.is_navigating() {
-                assert!(g.header.time_ns - LATENCY_NS < b.time().ns, "really late");
+    let mut replayed = 0;
+    let (a, b, late) = fixes.run(
+        |_, _| Some(LATENCY_NS),
+        |b| {
+            b.catch_up();
+            let now = b.diagnostics().replayed_imu_steps;
+            if now > replayed {
+                replayed_per_rewind.push(now - replayed);
             }
-            b.push_gnss(&g).unwrap();
-            held = None;
-        }
-        a.push_imu(&imu).unwrap();
-        let before = b.diagnostics().replayed_imu_steps;
-        b.push_imu(&imu).unwrap();
-        b.catch_up();
-        let replayed = b.diagnostics().replayed_imu_steps - before;
-        if replayed > 0 {
-            replayed_per_rewind.push(replayed);
-        }
-    }
+            replayed = now;
+        },
+    );
+    assert!(late >= 90);
     assert_eq!(replayed_per_rewind.len() as u64, b.diagnostics().rewinds);
     assert!(replayed_per_rewind.len() >= 25, "{replayed_per_rewind:?}");
     assert!(
