@@ -109,11 +109,13 @@ impl std::fmt::Display for CpuRange {
     }
 }
 
-fn errno_text(errno: i32) -> String {
+/// The system's text for an error number (for the messages of the scheduling errors).
+pub(crate) fn errno_text(errno: i32) -> String {
     std::io::Error::from_raw_os_error(errno).to_string()
 }
 
-fn last_errno() -> i32 {
+/// The calling thread's last system error number (0 if none).
+pub(crate) fn last_errno() -> i32 {
     std::io::Error::last_os_error().raw_os_error().unwrap_or(0)
 }
 

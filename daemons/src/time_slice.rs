@@ -19,17 +19,19 @@
 /// requests to 0.1–100 ms).
 pub const FILTER_SLICE_NS: u64 = 100_000;
 
+use crate::realtime::{errno_text, last_errno};
+
 /// Why the slice was not set.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
 pub enum TimeSliceError {
     /// `getpriority` failed (the thread's nice value, kept as it is).
-    #[error("read the filter thread's nice value: {}", std::io::Error::from_raw_os_error(*.errno))]
+    #[error("read the filter thread's nice value: {}", errno_text(*.errno))]
     Nice {
         /// The system's error number.
         errno: i32,
     },
     /// `sched_setattr` refused.
-    #[error("ask for a {} µs time slice: {}", FILTER_SLICE_NS / 1000, std::io::Error::from_raw_os_error(*.errno))]
+    #[error("ask for a {} µs time slice: {}", FILTER_SLICE_NS / 1000, errno_text(*.errno))]
     SetAttr {
         /// The system's error number.
         errno: i32,
@@ -83,10 +85,6 @@ pub fn apply_short_slice() -> Result<(), TimeSliceError> {
         });
     }
     Ok(())
-}
-
-fn last_errno() -> i32 {
-    std::io::Error::last_os_error().raw_os_error().unwrap_or(0)
 }
 
 #[cfg(test)]
