@@ -204,6 +204,17 @@ pub fn feed<E: NavEngine>(
     }
 }
 
+/// [`feed`] to a [`Navigator`] without forming the solution ([`Navigator::push_deferred`]):
+/// true when an IMU sample produced one, formed by [`Navigator::solution`] until the next
+/// input. The same state as [`feed`]; for offline replay, which forms only the solutions it
+/// keeps.
+pub fn feed_deferred(engine: &mut Navigator, record: &Record) -> Result<bool, Rejection> {
+    match Input::from_record(record) {
+        Some(input) => engine.push_deferred(input),
+        None => Ok(false),
+    }
+}
+
 /// Stamp a solution the engine produced the way the daemon publishes it: `seq` = solution
 /// count (from 1), `imu_send_mono_ns` = send time of the IMU sample that produced it.
 /// (`header.send_mono_ns` is the wall clock of publication and is not reproducible offline.)

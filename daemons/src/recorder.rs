@@ -1036,6 +1036,22 @@ impl Sink {
 
     /// Write the summary section and the end of the file and hand the file's bytes to the
     /// kernel; the writer (its chunk index and buffers) is freed. What is left is the `fsync`.
+    /// Its rate gates.
+    fn gates(&self) -> Gates {
+        Gates {
+            view: self.view_gate,
+            nav: self.nav_gate,
+            truth: self.truth_gate,
+        }
+    }
+
+    /// Continue from another segment's rate gates.
+    fn set_gates(&mut self, g: Gates) {
+        self.view_gate = g.view;
+        self.nav_gate = g.nav;
+        self.truth_gate = g.truth;
+    }
+
     fn write_end(mut self) -> Result<Unsynced, RecorderError> {
         self.writer.finish().map_err(|e| self.err(e))?;
         let path = self.path.clone();
@@ -1161,6 +1177,15 @@ impl Syncer {
     }
 }
 
+/// A segment's rate gates ([`RateGate`]), carried into the next segment: a recording in
+/// segments keeps the messages one file would (the first of each interval of time).
+#[derive(Debug, Clone, Copy)]
+struct Gates {
+    view: RateGate,
+    nav: RateGate,
+    truth: RateGate,
+}
+
 /// Where the writer thread opens its next segment after a failure.
 struct Resume {
     /// The recording's first segment.
@@ -1177,6 +1202,8 @@ struct Resume {
     /// Waits for the `fsync` of rotated-away segments off the writer thread (started with
     /// the writer).
     syncer: Option<Syncer>,
+    /// The gates of the last segment, for the next one.
+    gates: Option<Gates>,
 }
 
 impl Resume {
@@ -1188,6 +1215,7 @@ impl Resume {
             return sink;
         }
         let sk = sink?;
+        self.gates = Some(sk.gates());
         let (done, unflushed) = (sk.path.clone(), sk.unflushed);
         match sk.write_end() {
             Ok(file) => match &self.syncer {
@@ -1221,7 +1249,10 @@ impl Resume {
             self.next += 1;
         }
         let p = segment_path(&self.path, self.next);
-        let sink = Sink::create_segment(&p, &self.opts)?;
+        let mut sink = Sink::create_segment(&p, &self.opts)?;
+        if let Some(g) = self.gates {
+            sink.set_gates(g);
+        }
         self.next += 1;
         counters.add_segment(&p);
         Ok((sink, p))
@@ -1294,6 +1325,7 @@ fn deliver(
             count_failure(counters, 1 + sk.unflushed, &e);
             resume.dropped_at_failure = counters.dropped.load(Ordering::Relaxed);
             resume.last_attempt = Instant::now();
+            resume.gates = Some(sk.gates());
             *sink = None;
         }
     }
@@ -1388,6 +1420,7 @@ fn run(
                 count_failure(&counters, sk.unflushed, &e);
                 resume.dropped_at_failure = counters.dropped.load(Ordering::Relaxed);
                 resume.last_attempt = Instant::now();
+                resume.gates = Some(sk.gates());
                 sink = None;
             }
         }
@@ -1510,6 +1543,7 @@ impl Recorder {
             dropped_at_failure: 0,
             enabled: std::fs::metadata(path).map_or(true, |m| m.is_file()),
             syncer: None,
+            gates: None,
         };
         let thread = std::thread::Builder::new()
             .name("recorder".into())

@@ -3,13 +3,17 @@
 //! configuration (every aiding, the car's latencies: late samples rewind the filter), fed
 //! through the same input path as the daemon and `replay --offline`. Each iteration starts
 //! from the navigator as it is right after the alignment and runs 60 s of the drive; the
-//! throughput is printed in IMU samples per second ("elements").
+//! throughput is printed in IMU samples per second ("elements"). Two ways of taking the
+//! solutions: one formed for every IMU sample, as the fusion daemon publishes them
+//! (`every_aiding_60s_imu_samples`), and only those `replay --offline` keeps, at the shipped
+//! recorder's solution rate (`every_aiding_60s_recorded_solutions`: the offline filter core).
 
 use criterion::{BatchSize, Criterion, Throughput, criterion_group, criterion_main};
 use drivers_sim::offline::{OfflineSim, feed};
 use drivers_sim::scenario::Scenario;
-use fusion::navigator::Navigator;
+use fusion::navigator::{Input, Navigator};
 use msgs::{Channel, Record};
+use sextant_lab::recorder::{RateGate, log_time_of};
 use std::hint::black_box;
 use std::path::Path;
 
@@ -41,6 +45,27 @@ fn bench(c: &mut Criterion) {
             |nav| {
                 for m in drive {
                     let _ = black_box(feed(nav, m));
+                }
+            },
+            BatchSize::LargeInput,
+        )
+    });
+    // The recorder keeps one solution per interval of time of validity: the others are not
+    // formed (`Navigator::push_deferred`), as in `replay --offline`.
+    let solution_rate_hz = cfg.system.recorder.solution_rate_hz;
+    g.bench_function("every_aiding_60s_recorded_solutions", |b| {
+        b.iter_batched_ref(
+            || (aligned.clone(), RateGate::new(solution_rate_hz)),
+            |(nav, kept)| {
+                for m in drive {
+                    let Some(input) = Input::from_record(m) else {
+                        continue;
+                    };
+                    if let (Ok(true), Input::Imu(s)) = (nav.push_deferred(input), input)
+                        && kept.admit(log_time_of(s.header.time_ns).unwrap_or(0))
+                    {
+                        black_box(nav.solution());
+                    }
                 }
             },
             BatchSize::LargeInput,

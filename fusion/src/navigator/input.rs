@@ -9,6 +9,16 @@ impl Navigator {
     /// (None while initializing/aligning). Buffered aiding samples whose time of validity is
     /// reached are fused before the solution is formed. Allocates nothing.
     pub fn push_imu(&mut self, s: &ImuSample) -> Result<Option<NavSolution>, Rejection> {
+        Ok(if self.push_imu_deferred(s)? {
+            self.solution()
+        } else {
+            None
+        })
+    }
+
+    /// [`Self::push_imu`] without forming the solution ([`Self::push_deferred`]): true once
+    /// navigating, the solution then formed by [`Self::solution`] until the next input.
+    pub fn push_imu_deferred(&mut self, s: &ImuSample) -> Result<bool, Rejection> {
         self.catch_up();
         let id = sid(SensorId::Imu);
         self.health[id].received += 1;
@@ -64,12 +74,15 @@ impl Navigator {
             }
         }
         if self.phase != Phase::Navigating {
-            return Ok(None);
+            return Ok(false);
         }
         self.update_mode(t);
-        let sol = self.solution(s);
+        self.solutions += 1;
+        self.solution_ready = true;
+        self.solution_imu_send_mono_ns = s.header.send_mono_ns;
+        // Only moves the late samples to their queues: the state stays the solution's.
         self.ripen_late();
-        Ok(Some(sol))
+        Ok(true)
     }
 
     /// Queue a star-tracker sample for fusion at its time of validity.

@@ -52,7 +52,14 @@ impl Navigator {
         };
     }
 
-    pub(super) fn solution(&mut self, s: &ImuSample) -> NavSolution {
+    /// The solution of the IMU sample just pushed, formed now: None when that sample gave none
+    /// (not navigating) or when another input or a rewind ([`Self::catch_up`]) has come since.
+    /// Forming it changes nothing in the navigator; allocates nothing.
+    pub fn solution(&self) -> Option<NavSolution> {
+        self.solution_ready.then(|| self.form_solution())
+    }
+
+    fn form_solution(&self) -> NavSolution {
         let (geo, c_e_n) = earth::ecef_to_geodetic_and_c_e_n(&self.ell, &self.core.nav.r_e);
         let q_e_n = UnitQuaternion::from_rotation_matrix(
             &nalgebra::Rotation3::from_matrix_unchecked(c_e_n),
@@ -74,7 +81,6 @@ impl Navigator {
             c_n_e * b * c_n_e.transpose()
         };
         let pos_sigma = [0, 1, 2].map(|i| pos_cov_ned[(i, i)].max(0.0).sqrt());
-        self.solutions += 1;
         let mut sol = NavSolution {
             header: Header {
                 time_ns: self.time.ns,
@@ -97,7 +103,7 @@ impl Navigator {
             att_sigma_ned_rad: sig(idx::ATT),
             gyro_bias_rad_s: self.core.ekf.gyro_bias_rad_s.into(),
             accel_bias_m_s2: self.core.ekf.accel_bias_m_s2.into(),
-            imu_send_mono_ns: s.header.send_mono_ns,
+            imu_send_mono_ns: self.solution_imu_send_mono_ns,
             gyro_bias_sigma_rad_s: diag_sigma(p, idx::BG),
             accel_bias_sigma_m_s2: diag_sigma(p, idx::BA),
             gyro_scale_ppm: (self.core.ekf.gyro_scale * 1e6).into(),

@@ -133,6 +133,8 @@ impl Navigator {
     /// daemon) calls it then, which takes the replay of the IMU steps off the next sample's
     /// path from arrival to solution. Allocates nothing.
     pub fn catch_up(&mut self) {
+        // Every input starts here: the last IMU step's solution is no longer the state's.
+        self.solution_ready = false;
         if self.phase == Phase::Navigating
             && let Some(ts) = self.rewind_to.take()
         {

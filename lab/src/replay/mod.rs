@@ -48,11 +48,12 @@ mod matching;
 use matching::SolutionMatcher;
 
 use crate::config;
-use crate::daemon::{engine_status, feed, stamp_solution};
+use crate::daemon::{engine_status, feed_deferred, stamp_solution};
 use crate::recorder::{
     CALIBRATION_KEY_ELAPSED_S, CALIBRATION_KEY_SNAPSHOT, CALIBRATION_METADATA_NAME,
-    CONFIG_KEY_FILTER_TOML, CONFIG_METADATA_NAME, OFFLINE_BATCH, Record, Recorder, RecorderOptions,
-    WARM_START_KEY_SNAPSHOT, WARM_START_METADATA_NAME, recorded_rates,
+    CONFIG_KEY_FILTER_TOML, CONFIG_METADATA_NAME, OFFLINE_BATCH, RateGate, Record, Recorder,
+    RecorderOptions, WARM_START_KEY_SNAPSHOT, WARM_START_METADATA_NAME, log_time_of,
+    recorded_rates,
 };
 use crate::recording::{Recording, RecordingError, TimeBase};
 use fusion::navigator::{NavSnapshot, Navigator, NavigatorConfig};
@@ -360,6 +361,12 @@ pub fn replay_offline(opts: &OfflineOptions) -> Result<OfflineSummary, ReplayErr
     }
     let out = opts.out_dir.join("recording.mcap");
     let (solution_rate_hz, truth_rate_hz, view_rate_hz) = recorded_rates(rec.metadata());
+    let replay_solution_rate_hz = opts.solution_rate_hz.unwrap_or(solution_rate_hz);
+    let mut kept = KeptSolutions {
+        source: compare.then(|| RateGate::new(solution_rate_hz)),
+        nav: RateGate::new(replay_solution_rate_hz),
+        views: RateGate::new(view_rate_hz),
+    };
     // Which replayed solutions the source's recorder kept: the same gate on the same times.
     let recorder = Recorder::start(
         &out,
@@ -374,7 +381,7 @@ pub fn replay_offline(opts: &OfflineOptions) -> Result<OfflineSummary, ReplayErr
             },
             segment_duration: opts.segment_duration,
             tap: opts.tap.clone(),
-            solution_rate_hz: opts.solution_rate_hz.unwrap_or(solution_rate_hz),
+            solution_rate_hz: replay_solution_rate_hz,
             truth_rate_hz,
             view_rate_hz,
             ..Default::default()
@@ -393,6 +400,8 @@ pub fn replay_offline(opts: &OfflineOptions) -> Result<OfflineSummary, ReplayErr
     let mut alive = [false; MAX_SENSORS];
     let (mut t_first, mut t_last) = (None::<i64>, 0i64);
     let mut n = 0u64;
+    // Seq of the last replayed solution formed (`KeptSolutions`).
+    let mut formed_seq = 0u64;
     // Decompressing and decoding on their own thread, the filter here, encoding and
     // compressing the replay's recording on the recorder's: three stages in a pipeline.
     let mut entries = rec.read_ahead();
@@ -416,6 +425,18 @@ pub fn replay_offline(opts: &OfflineOptions) -> Result<OfflineSummary, ReplayErr
                 s.solutions_recorded += 1;
                 if !compare {
                     continue;
+                }
+                // A solution the gates did not keep (a recording in segments made before its
+                // recorder carried the gates across segments holds a second solution of an
+                // interval at a segment's start): formed now, the engine still at its epoch
+                // (a solution follows its IMU sample in the file, no input between).
+                if recorded.header.seq == s.solutions_replayed
+                    && formed_seq != s.solutions_replayed
+                    && let Some(mut sol) = engine.solution()
+                {
+                    sol.header.seq = s.solutions_replayed;
+                    formed_seq = s.solutions_replayed;
+                    matcher.replayed(sol);
                 }
                 matcher.recorded(recorded);
             }
@@ -452,17 +473,22 @@ pub fn replay_offline(opts: &OfflineOptions) -> Result<OfflineSummary, ReplayErr
                         *a = ev.alive;
                     }
                 }
-                let result = feed(&mut engine, input);
-                let solution = match result {
-                    Ok(Some(mut sol)) => {
+                let solution = match feed_deferred(&mut engine, input) {
+                    Ok(true) => {
                         s.solutions_replayed += 1;
-                        if let Record::Imu(imu) = input {
-                            stamp_solution(&mut sol, imu, s.solutions_replayed);
+                        match input {
+                            Record::Imu(imu) if kept.admit(imu.header.time_ns) => {
+                                formed_seq = s.solutions_replayed;
+                                engine.solution().map(|mut sol| {
+                                    stamp_solution(&mut sol, imu, s.solutions_replayed);
+                                    sol.header.send_mono_ns = e.receive_mono_ns;
+                                    sol
+                                })
+                            }
+                            _ => None,
                         }
-                        sol.header.send_mono_ns = e.receive_mono_ns;
-                        Some(sol)
                     }
-                    Ok(None) => None,
+                    Ok(false) => None,
                     Err(_) => {
                         s.inputs_rejected += 1;
                         None
@@ -513,6 +539,31 @@ pub fn replay_offline(opts: &OfflineOptions) -> Result<OfflineSummary, ReplayErr
     s.replay_recorder_errors = stats.errors;
     s.replayed_segments = segments.iter().map(|p| p.display().to_string()).collect();
     Ok(s)
+}
+
+/// Which replayed solutions something keeps: the replay's recording (its solutions and their
+/// views, each at its rate) and, when comparing, the source's recorded ones. The gates are the
+/// recorders' own on the same times of validity, so a solution none of them admits would be
+/// dropped by all: it is not formed ([`Navigator::push_deferred`]; the state is the same).
+struct KeptSolutions {
+    /// The source recorder's `nav` gate (comparing only).
+    source: Option<RateGate>,
+    /// The replay recorder's `nav` gate.
+    nav: RateGate,
+    /// The replay recorder's views gate (location fix, pose, transforms).
+    views: RateGate,
+}
+
+impl KeptSolutions {
+    /// Whether the solution of time of validity `time_ns` (GPS) is kept by any; every gate takes
+    /// its interval, as the recorder's does with every solution it is handed.
+    fn admit(&mut self, time_ns: i64) -> bool {
+        let t = log_time_of(time_ns).unwrap_or(0);
+        let source = self.source.as_mut().is_some_and(|g| g.admit(t));
+        let nav = self.nav.admit(t);
+        let views = self.views.admit(t);
+        source || nav || views
+    }
 }
 
 /// Table of an offline replay.

@@ -801,6 +801,79 @@ fn catching_up_early_changes_no_solution() {
     assert_eq!(a.health(), b.health());
 }
 
+/// A navigator fed without forming its solutions (`push_deferred`, as `replay --offline` feeds
+/// it) and one that forms every solution (`push_imu`, as the daemon does) go through the same
+/// states: a solution formed now and then from the first is bit for bit the second's of that
+/// epoch, late samples and their rewinds included. The solution is that of the IMU sample just
+/// pushed, so none is formed while aligning, after another input or after a rewind.
+#[test]
+fn solutions_formed_only_when_asked_are_those_of_every_epoch() {
+    let cfg = quick_config();
+    let mut a = Navigator::new(cfg.clone()).unwrap();
+    let mut b = Navigator::new(cfg).unwrap();
+    let mut sim = StaticSim::new(23, 100.0);
+    let mut held: Vec<(i64, GnssSample)> = Vec::new();
+    let (mut formed, mut epochs) = (0, 0);
+    for k in 1..=(90 * 100) {
+        let imu = sim.next_imu();
+        let t = imu.header.time_ns;
+        let sa = a.push_imu(&imu).unwrap();
+        let navigating = b.push_deferred(Input::Imu(&imu)).unwrap();
+        assert_eq!(navigating, sa.is_some(), "epoch {k}");
+        if !navigating {
+            assert_eq!(b.solution(), None, "epoch {k}: no solution while aligning");
+        } else {
+            epochs += 1;
+            if k % 7 == 0 {
+                // Asked twice: forming it changes nothing.
+                assert_eq!(b.solution(), sa, "epoch {k}");
+                assert_eq!(b.solution(), sa, "epoch {k}");
+                formed += 1;
+            }
+        }
+        if k % 10 == 0 {
+            let baro = baro_at(t, k as u64, 181.0);
+            a.push_baro(&baro).unwrap();
+            assert!(!b.push_deferred(Input::Baro(&baro)).unwrap());
+            assert_eq!(b.solution(), None, "epoch {k}: another input came");
+        }
+        if k % 100 == 0 {
+            let g = sim.gnss();
+            if k % 300 == 0 {
+                held.push((t + 200_000_000, g));
+            } else {
+                a.push_gnss(&g).unwrap();
+                b.push_gnss(&g).unwrap();
+            }
+        }
+        while let Some(&(when, g)) = held.first() {
+            if t < when {
+                break;
+            }
+            a.push_gnss(&g).unwrap();
+            b.push_gnss(&g).unwrap();
+            held.remove(0);
+        }
+        if k % 13 == 0 && navigating {
+            b.catch_up();
+            assert_eq!(b.solution(), None, "epoch {k}: after a rewind's turn");
+        }
+    }
+    assert!(
+        epochs > 2500 && formed > 350,
+        "{epochs} epochs, {formed} formed"
+    );
+    assert!(b.diagnostics().rewinds > 25, "{:?}", b.diagnostics());
+    assert_eq!(a.health(), b.health());
+    assert_eq!(a.diagnostics(), b.diagnostics());
+    let last = sim.next_imu();
+    assert_eq!(
+        a.push_imu(&last).unwrap(),
+        b.push_imu(&last).unwrap(),
+        "the state after the drive"
+    );
+}
+
 /// A receiver that stamps its fix 50 ms after the epoch it measured, declared in
 /// `[latency] gnss_s`: each fix is fused at its time of validity, so the navigator that gets
 /// the late-stamped fixes (after the IMU has passed their epoch, as from a real receiver) ends
