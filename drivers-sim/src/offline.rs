@@ -406,8 +406,20 @@ pub fn feed(nav: &mut Navigator, msg: &Record) -> Result<Option<NavSolution>, Of
     })
 }
 
+/// [`feed`] without forming the solution ([`Navigator::push_deferred`]): true when an IMU
+/// sample produced one, which [`Navigator::solution`] forms until the next input.
+pub fn feed_deferred(nav: &mut Navigator, msg: &Record) -> Result<bool, OfflineError> {
+    let r = Input::from_record(msg).map_or(Ok(false), |input| nav.push_deferred(input));
+    r.map_err(|source| OfflineError::Rejected {
+        topic: msg.topic(),
+        time_ns: msg.time_ns(),
+        source,
+    })
+}
+
 /// Feed `messages` (time-ordered, e.g. an [`OfflineSim`]) to `nav`; at each truth message on
-/// an IMU epoch while navigating, call `each` with the comparison. `epoch_ns` is the
+/// an IMU epoch while navigating, call `each` with the comparison (read from the navigator's
+/// state: no solution message is formed). `epoch_ns` is the
 /// scenario epoch (GPS ns) from which [`RunPoint::t_s`] counts.
 pub fn run_navigator<I, F>(
     messages: I,
@@ -432,7 +444,7 @@ where
                 }
             }
             m => {
-                feed(nav, m)?;
+                feed_deferred(nav, m)?;
             }
         }
     }
