@@ -761,11 +761,10 @@ fn catching_up_early_changes_no_solution() {
     let mut a = Navigator::new(cfg.clone()).unwrap();
     let mut b = Navigator::new(cfg).unwrap();
     let mut sim = StaticSim::new(17, 100.0);
-    let mut held: Vec<(i64, GnssSample)> = Vec::new();
+    let mut aiding = StaticAiding::default();
     let (mut compared, mut rewinds_b) = (0, 0);
     for k in 1..=(90 * 100) {
         let imu = sim.next_imu();
-        let t = imu.header.time_ns;
         let sa = a.push_imu(&imu).unwrap();
         let sb = b.push_imu(&imu).unwrap();
         let before = b.diagnostics().rewinds;
@@ -773,32 +772,52 @@ fn catching_up_early_changes_no_solution() {
         rewinds_b += b.diagnostics().rewinds - before;
         assert_eq!(sa, sb, "epoch {k}");
         compared += u32::from(sa.is_some());
-        if k % 10 == 0 {
-            let baro = baro_at(t, k as u64, 181.0);
-            a.push_baro(&baro).unwrap();
-            b.push_baro(&baro).unwrap();
-        }
-        if k % 100 == 0 {
-            let g = sim.gnss();
-            if k % 300 == 0 {
-                held.push((t + 200_000_000, g));
-            } else {
-                a.push_gnss(&g).unwrap();
-                b.push_gnss(&g).unwrap();
-            }
-        }
-        while let Some(&(when, g)) = held.first() {
-            if t < when {
-                break;
-            }
-            a.push_gnss(&g).unwrap();
-            b.push_gnss(&g).unwrap();
-            held.remove(0);
-        }
+        aiding.after_imu(k, imu.header.time_ns, &mut sim, |input| {
+            a.push(input).unwrap();
+            b.push(input).unwrap();
+        });
     }
     assert!(compared > 2500, "{compared} epochs compared");
     assert!(rewinds_b > 250, "catch_up rewound {rewinds_b} times");
     assert_eq!(a.health(), b.health());
+}
+
+/// The aiding of the static stream that two navigators are fed side by side: a baro sample
+/// after every tenth IMU sample, a GNSS fix after every hundredth, every third fix 0.2 s late.
+#[derive(Default)]
+struct StaticAiding {
+    /// Late fixes and when they are delivered (IMU time, ns).
+    held: Vec<(i64, GnssSample)>,
+}
+
+impl StaticAiding {
+    /// After the `k`-th IMU sample (time `t`, ns): hand `feed` the aiding due.
+    fn after_imu(
+        &mut self,
+        k: usize,
+        t: i64,
+        sim: &mut StaticSim,
+        mut feed: impl FnMut(Input<'_>),
+    ) {
+        if k.is_multiple_of(10) {
+            feed(Input::Baro(&baro_at(t, k as u64, 181.0)));
+        }
+        if k.is_multiple_of(100) {
+            let g = sim.gnss();
+            if k.is_multiple_of(300) {
+                self.held.push((t + 200_000_000, g));
+            } else {
+                feed(Input::Gnss(&g));
+            }
+        }
+        while let Some(&(when, g)) = self.held.first() {
+            if t < when {
+                break;
+            }
+            feed(Input::Gnss(&g));
+            self.held.remove(0);
+        }
+    }
 }
 
 /// A navigator fed without forming its solutions (`push_deferred`, as `replay --offline` feeds
@@ -812,9 +831,9 @@ fn solutions_formed_only_when_asked_are_those_of_every_epoch() {
     let mut a = Navigator::new(cfg.clone()).unwrap();
     let mut b = Navigator::new(cfg).unwrap();
     let mut sim = StaticSim::new(23, 100.0);
-    let mut held: Vec<(i64, GnssSample)> = Vec::new();
+    let mut aiding = StaticAiding::default();
     let (mut formed, mut epochs) = (0, 0);
-    for k in 1..=(90 * 100) {
+    for k in 1..=(90 * 100usize) {
         let imu = sim.next_imu();
         let t = imu.header.time_ns;
         let sa = a.push_imu(&imu).unwrap();
@@ -824,37 +843,19 @@ fn solutions_formed_only_when_asked_are_those_of_every_epoch() {
             assert_eq!(b.solution(), None, "epoch {k}: no solution while aligning");
         } else {
             epochs += 1;
-            if k % 7 == 0 {
+            if k.is_multiple_of(7) {
                 // Asked twice: forming it changes nothing.
                 assert_eq!(b.solution(), sa, "epoch {k}");
                 assert_eq!(b.solution(), sa, "epoch {k}");
                 formed += 1;
             }
         }
-        if k % 10 == 0 {
-            let baro = baro_at(t, k as u64, 181.0);
-            a.push_baro(&baro).unwrap();
-            assert!(!b.push_deferred(Input::Baro(&baro)).unwrap());
+        aiding.after_imu(k, t, &mut sim, |input| {
+            a.push(input).unwrap();
+            assert!(!b.push_deferred(input).unwrap());
             assert_eq!(b.solution(), None, "epoch {k}: another input came");
-        }
-        if k % 100 == 0 {
-            let g = sim.gnss();
-            if k % 300 == 0 {
-                held.push((t + 200_000_000, g));
-            } else {
-                a.push_gnss(&g).unwrap();
-                b.push_gnss(&g).unwrap();
-            }
-        }
-        while let Some(&(when, g)) = held.first() {
-            if t < when {
-                break;
-            }
-            a.push_gnss(&g).unwrap();
-            b.push_gnss(&g).unwrap();
-            held.remove(0);
-        }
-        if k % 13 == 0 && navigating {
+        });
+        if k.is_multiple_of(13) && navigating {
             b.catch_up();
             assert_eq!(b.solution(), None, "epoch {k}: after a rewind's turn");
         }
