@@ -466,6 +466,7 @@ fn every_path_the_documentation_names_exists() {
         "README.md",
         "docs/ARCHITECTURE.md",
         "docs/DATA.md",
+        "docs/SPEED.md",
         "CHANGELOG.md",
     ] {
         let text = std::fs::read_to_string(root.join(doc)).unwrap();
