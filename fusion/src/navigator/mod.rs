@@ -42,6 +42,13 @@
 //! GNSS: astro-inertial error ≤ 600 m with σ at that floor, free inertial 1.4 km and
 //! growing).
 //!
+//! # Solutions
+//! Every navigating IMU step has a solution (`msgs::NavSolution`: geodetic position, NED
+//! velocity and attitude, σ, estimates), formed only when asked ([`Navigator::solution`], until
+//! the next input): [`Navigator::push`] forms it for every IMU sample, as the daemon publishes
+//! them; [`Navigator::push_deferred`] leaves it to the caller (offline replay forms only the
+//! solutions its recordings keep). Forming one changes nothing in the navigator.
+//!
 //! # Delayed fusion (at the time of validity, exactly)
 //! Aiding samples are queued in fixed-capacity, time-ordered ring buffers (no allocation) and
 //! fused when the IMU time reaches their time of validity: at the first IMU epoch ≥ that time
