@@ -2,7 +2,9 @@
 //! pacing on CLOCK_MONOTONIC and publishing on the iceoryx2 bus.
 //!
 //! Sample k at sim time `t_k = k·period` (ns since the scenario epoch) is computed first, then
-//! sent at CLOCK_MONOTONIC `start_mono_ns + t_k/speed` (absolute `clock_nanosleep`, woken at
+//! sent at CLOCK_MONOTONIC `start_mono_ns + (t_k + d)/speed`, `d` the driver's publication delay
+//! after the stamp (none for the IMU, [`MESSAGE_HANDLING_NS`] for the message sensors and the
+//! truth) (absolute `clock_nanosleep`, woken at
 //! least every 100 ms to notice a stop request). The process exits after the last sample with
 //! `t_k ≤ duration`, or as soon as SIGINT/SIGTERM arrives; either way the iceoryx2 ports and
 //! node are dropped cleanly. A sample found overdue by more than [`max_lag_ns`] when its turn
@@ -182,6 +184,19 @@ fn cli_invalid(key: &str, reason: String) -> SimError {
     }
 }
 
+/// How long after a message's stamp the simulated driver of a message sensor (star tracker,
+/// GNSS receiver, odometer, barometer; and the truth) publishes it, ns of simulated time: a
+/// driver stamps a serial or CAN message when it arrives, then reads, decodes and publishes it.
+/// The simulator's stamps lie on its truth grid, which is also the IMU's: published at their
+/// stamps, every sensor's messages would reach the fusion at the very microsecond of an IMU
+/// sample, with every driver due woken at once (a computer whose sensors run on their own
+/// clocks never sees that), and the fusion's latency would measure the test rig's pile-up. 0.3
+/// ms is off the instants of every IMU rate up to 2 kHz, and so is the computation before it
+/// ([`compute_lead_ns`]: at most 2 ms earlier). The samples are no later for the filter: their
+/// times of validity are their stamps' (less the sensor's latency), a sample published after
+/// the IMU sample of its epoch is fused at that epoch by the delayed fusion's rewind.
+pub const MESSAGE_HANDLING_NS: i64 = 300_000;
+
 /// The six simulated sensor processes, one binary each (`sextant-sim-imu`, …).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum SimDriver {
@@ -210,6 +225,16 @@ impl SimDriver {
         Self::Truth,
     ];
 
+    /// Simulated time from a sample's stamp to its publication, ns: none for the IMU (its
+    /// publication starts the latency the fusion is measured by), [`MESSAGE_HANDLING_NS`] for
+    /// the others.
+    pub fn publish_delay_ns(self) -> i64 {
+        match self {
+            Self::Imu => 0,
+            _ => MESSAGE_HANDLING_NS,
+        }
+    }
+
     /// The process's name (its binary's and its iceoryx2 node's).
     pub fn process_name(self) -> &'static str {
         match self {
@@ -232,20 +257,20 @@ pub fn main_of(driver: SimDriver) -> Result<RunSummary, SimError> {
     };
     init_logging();
     let args = DriverArgs::parse();
-    let name = driver.process_name();
     match driver {
-        SimDriver::Imu => run(&args, name, ImuSource::new),
-        SimDriver::StarTracker => run(&args, name, StarTrackerSource::new),
-        SimDriver::Gnss => run(&args, name, GnssSource::new),
-        SimDriver::Odometer => run(&args, name, OdometerSource::new),
-        SimDriver::Baro => run(&args, name, BaroSource::new),
-        SimDriver::Truth => run(&args, name, TruthSource::new),
+        SimDriver::Imu => run(&args, driver, ImuSource::new),
+        SimDriver::StarTracker => run(&args, driver, StarTrackerSource::new),
+        SimDriver::Gnss => run(&args, driver, GnssSource::new),
+        SimDriver::Odometer => run(&args, driver, OdometerSource::new),
+        SimDriver::Baro => run(&args, driver, BaroSource::new),
+        SimDriver::Truth => run(&args, driver, TruthSource::new),
     }
 }
 
 /// Run one driver: load the scenario, build the source with `make(scenario, epoch_gps_ns)`,
-/// publish every sample on time as node `node_name`.
-pub fn run<S, F>(args: &DriverArgs, node_name: &str, make: F) -> Result<RunSummary, SimError>
+/// publish every sample on time (its stamp plus the driver's
+/// [`SimDriver::publish_delay_ns`]) as the driver's node.
+pub fn run<S, F>(args: &DriverArgs, driver: SimDriver, make: F) -> Result<RunSummary, SimError>
 where
     S: SampleSource,
     F: FnOnce(&Scenario, i64) -> S,
@@ -256,6 +281,8 @@ where
             format!("must be > 0, got {}", args.speed),
         ));
     }
+    let node_name = driver.process_name();
+    let publish_delay_ns = driver.publish_delay_ns();
     let scn = Scenario::load(&args.scenario)?;
     let duration_ns = match args.duration {
         Some(d) if d.is_finite() && d > 0.0 => (d * 1e9).round() as i64,
@@ -300,7 +327,7 @@ where
             break;
         }
         let t_ns = k * period;
-        let offset = t_ns as f64 / args.speed;
+        let offset = (t_ns + publish_delay_ns) as f64 / args.speed;
         let target = start_mono.saturating_add(if offset.is_finite() { offset as u64 } else { 0 });
         // Idle after a send, as a device driver blocked on its next read is: the sample is
         // computed shortly before its send time, not right after the previous send, when the
