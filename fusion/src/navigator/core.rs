@@ -109,3 +109,16 @@ impl Checkpoint {
         self.serves_after < self.t
     }
 }
+
+/// The part of an IMU step left until its solution is formed
+/// ([`super::Navigator::catch_up`]): none of it changes the solution of its epoch.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct DeferredStep {
+    /// IMU epoch of the step.
+    pub(super) t: GpsTime,
+    /// The IMU epoch before it (the checkpoint before its updates serves samples after it).
+    pub(super) prev_t: Option<GpsTime>,
+    /// Nothing was fused at the epoch and its covariance propagation is due: the propagation
+    /// and the checkpoint before the (absent) updates are left too.
+    pub(super) propagate: bool,
+}

@@ -49,6 +49,14 @@
 //! them; [`Navigator::push_deferred`] leaves it to the caller (offline replay forms only the
 //! solutions its recordings keep). Forming one changes nothing in the navigator.
 //!
+//! A solution needs the state at its epoch, not what the step does for later epochs: the
+//! periodic checkpoint, and at an epoch where nothing is fused the covariance propagation and
+//! the checkpoint before the (absent) updates, are done once the solution is formed — by
+//! [`Navigator::catch_up`], which the daemon calls after publishing, or at the start of the
+//! next input — with the same state, so the filter evolves bit for bit as if the step had
+//! done them. The solution of such an epoch therefore reports σ (and the receiver clock
+//! estimate) as of the propagation before it, as every solution between two propagations does.
+//!
 //! # Delayed fusion (at the time of validity, exactly)
 //! Aiding samples are queued in fixed-capacity, time-ordered ring buffers (no allocation) and
 //! fused when the IMU time reaches their time of validity: at the first IMU epoch ≥ that time
@@ -59,7 +67,8 @@
 //! [`NavigatorConfig::buffer_window_s`]) is fused by **re-propagation from buffered IMU
 //! data**: every 20 ms of IMU time the replayable filter state (inertial state, error-state
 //! filter with its covariance and pending transition, strapdown history, ZUPT/baro
-//! schedulers) is checkpointed, and also before the updates of an epoch where aiding is due
+//! schedulers) is checkpointed (once the step's solution is formed, "Solutions" above), and
+//! also before the updates of an epoch where aiding is due
 //! or the covariance has just been propagated (at least 10 ms after the last checkpoint): a
 //! sample of that epoch arriving later rewinds no further than its own epoch; the validated
 //! IMU increments and every fused aiding sample are kept for the window. A late sample is held out of the next IMU step (its solution is
@@ -276,6 +285,9 @@ pub struct Navigator {
     baro_q: TimeQueue<f64, BARO_CAP>,
     imu_log: Ring<ImuLogEntry>,
     checkpoints: Ring<Checkpoint>,
+    /// What is left of the last IMU step until its solution is formed (propagation,
+    /// checkpoints: [`Navigator::catch_up`]).
+    deferred_step: Option<DeferredStep>,
     gnss_done: Box<TimeQueue<GnssObs, GNSS_CAP>>,
     star_done: TimeQueue<StarObs, STAR_CAP>,
     odo_done: TimeQueue<f64, ODO_CAP>,
@@ -378,6 +390,7 @@ impl Navigator {
                     core,
                 },
             ),
+            deferred_step: None,
             gnss_done: Box::new(TimeQueue::new()),
             star_done: TimeQueue::new(),
             odo_done: TimeQueue::new(),

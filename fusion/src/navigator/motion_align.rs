@@ -288,6 +288,7 @@ impl Navigator {
         self.gsf = GsfAlignment::default();
         self.imu_log.clear();
         self.checkpoints.clear();
+        self.deferred_step = None;
         self.rewind_to = None;
         self.take_checkpoint(t, t);
         self.gnss_q.clear();

@@ -6,10 +6,15 @@ use super::*;
 
 impl Navigator {
     /// One navigating IMU step (live or replayed): mechanization, transition accumulation,
-    /// covariance propagation at its interval, fusion of the aiding due, ZUPT, checkpoint.
+    /// covariance propagation at its interval, fusion of the aiding due, ZUPT, checkpoints.
     /// The same live and replayed: a queued sample carries its own tally
     /// ([`Tally::first_time`]), the ZUPT counts by its epoch ([`Self::maybe_zupt`]).
+    ///
+    /// What the step's solution does not need is left to [`Self::finish_deferred_step`], after
+    /// the solution is formed (module docs, "Solutions"): the periodic checkpoint always, and
+    /// at an epoch where nothing is fused the covariance propagation and its checkpoint too.
     pub(super) fn imu_step(&mut self, e: &ImuLogEntry) {
+        self.finish_deferred_step();
         let t = e.t;
         // The increment covers dt_s; after missing samples, stretch it over the gap.
         let gap_s = e.prev_t.map_or(e.dt_s, |p| (t - p).seconds_f64());
@@ -36,46 +41,90 @@ impl Navigator {
         // At the fixed interval, and at the epoch where a sensor's next sample is expected: a
         // forced propagation (an update) shifts the interval's grid off a late sensor's
         // epochs, and its rewind would then propagate again ([`super::cadence`]).
-        let propagated = self.core.ekf.pending_s() >= self.config.covariance_interval_s - 1e-9
+        let propagate = self.core.ekf.pending_s() >= self.config.covariance_interval_s - 1e-9
             || e.prev_t
                 .is_some_and(|p| self.core.cadence.iter().any(|c| c.expected_within(p, t)));
-        if propagated {
+        self.time = t;
+        // The static detector reads the inertial state only, the propagation writes the
+        // covariance and transition only: their order does not matter.
+        self.update_static_detector(t, &inc);
+        let aiding_due = self.aiding_due(t);
+        if !aiding_due && !self.zupt_due(t) {
+            // Nothing is fused at this epoch: the solution is the mechanized state, and the
+            // propagation and checkpoints wait until it is formed (fusion and ZUPT would be
+            // no-ops).
+            self.deferred_step = Some(DeferredStep {
+                t,
+                prev_t: e.prev_t,
+                propagate,
+            });
+            return;
+        }
+        if propagate {
             self.core
                 .ekf
                 .propagate_covariance(&self.ell, &self.core.nav.r_e);
         }
-        self.time = t;
-        self.update_static_detector(t, &inc);
-        // The state before this epoch's updates is the one a sample of this epoch arriving
-        // later meets, whatever else arrives late: checkpointed where the covariance was just
-        // brought to the epoch or where aiding is due, it spares that sample's rewind the
-        // steps before the epoch (and, after a propagation, the propagation): a sensor late by
-        // its latency rewinds for each of its samples.
-        if (propagated || self.aiding_due(t))
-            && let Some(last_t) = self
-                .checkpoints
-                .len
-                .checked_sub(1)
-                .map(|i| self.checkpoints.get(i).t)
+        if propagate || aiding_due {
+            self.epoch_checkpoint(t, e.prev_t);
+        }
+        self.finish_step(t);
+        self.deferred_step = Some(DeferredStep {
+            t,
+            prev_t: e.prev_t,
+            propagate: false,
+        });
+    }
+
+    /// The checkpoint of epoch `t`'s state before its updates, where the covariance was just
+    /// brought to the epoch or aiding is due (and the last checkpoint is
+    /// [`EPOCH_CHECKPOINT_SPACING`] old): the state a sample of this epoch arriving later meets,
+    /// whatever else arrives late; it spares that sample's rewind the steps before the epoch
+    /// (and, after a propagation, the propagation): a sensor late by its latency rewinds for
+    /// each of its samples.
+    fn epoch_checkpoint(&mut self, t: GpsTime, prev_t: Option<GpsTime>) {
+        if let Some(last_t) = self
+            .checkpoints
+            .len
+            .checked_sub(1)
+            .map(|i| self.checkpoints.get(i).t)
             && t - last_t >= EPOCH_CHECKPOINT_SPACING
         {
             // Every sample fused at t is after the IMU epoch before it, and after the last
             // checkpoint (its epoch or an earlier one) when that epoch is unknown.
-            self.take_checkpoint(t, e.prev_t.unwrap_or(last_t));
+            self.take_checkpoint(t, prev_t.unwrap_or(last_t));
         }
-        self.finish_step(t);
     }
 
     /// The end of IMU epoch `t` once its mechanization is done (and its state before the
     /// updates checkpointed where aiding is due or the covariance was just propagated): fusion
-    /// of the aiding due, ZUPT, the periodic checkpoint.
+    /// of the aiding due and ZUPT. The periodic checkpoint follows after the solution
+    /// ([`Self::finish_deferred_step`]).
     fn finish_step(&mut self, t: GpsTime) {
         self.fuse_due(t);
         self.maybe_zupt(t);
+    }
+
+    /// The rest of the last IMU step, once its solution is formed ([`Self::catch_up`]) or at
+    /// the latest before the next step or a rewind: the state has not changed since the step,
+    /// so this is the work the step would have done itself, in the same order — where nothing
+    /// was fused at its epoch, the covariance propagation and the checkpoint before the
+    /// (absent) updates; then the periodic checkpoint, every
+    /// [`CHECKPOINT_PERIOD`] of IMU time.
+    fn finish_deferred_step(&mut self) {
+        let Some(d) = self.deferred_step.take() else {
+            return;
+        };
+        if d.propagate {
+            self.core
+                .ekf
+                .propagate_covariance(&self.ell, &self.core.nav.r_e);
+            self.epoch_checkpoint(d.t, d.prev_t);
+        }
         let due = self.checkpoints.len == 0
-            || t - self.checkpoints.get(self.checkpoints.len - 1).t >= CHECKPOINT_PERIOD;
+            || d.t - self.checkpoints.get(self.checkpoints.len - 1).t >= CHECKPOINT_PERIOD;
         if due {
-            self.take_checkpoint(t, t);
+            self.take_checkpoint(d.t, d.t);
         }
     }
 
@@ -135,6 +184,7 @@ impl Navigator {
     pub fn catch_up(&mut self) {
         // Every input starts here: the last IMU step's solution is no longer the state's.
         self.solution_ready = false;
+        self.finish_deferred_step();
         if self.phase == Phase::Navigating
             && let Some(ts) = self.rewind_to.take()
         {
@@ -213,6 +263,11 @@ impl Navigator {
         }
         if c_before_updates {
             self.finish_step(c_t);
+            self.deferred_step = Some(DeferredStep {
+                t: c_t,
+                prev_t: None,
+                propagate: false,
+            });
         }
         // The log is in time order (IMU times only increase): the steps after the checkpoint
         // are its tail, found from the end — a few steps, where the log holds seconds.

@@ -63,35 +63,44 @@ impl Navigator {
         }
     }
 
-    /// The zero-velocity update due at `t`, if any. Counted in the health once per epoch as
-    /// time advances (`zupt_counted_until`), whether it is fused live or first in a replay:
-    /// a late aiding sample (an odometer's latency) rewinds the filter, and the replayed
-    /// static detector, fed the corrected biases, may schedule its updates at other epochs
-    /// than the live run did.
-    pub(super) fn maybe_zupt(&mut self, t: GpsTime) {
+    /// Whether a zero-velocity update is due at `t` (static long enough, its interval since
+    /// the last one, slow, no odometer saying the vehicle moves).
+    pub(super) fn zupt_due(&self, t: GpsTime) -> bool {
         let a = self.config.aiding;
         if !self.config.updates.zupt {
-            return;
+            return false;
         }
         let Some(since) = self.core.static_since else {
-            return;
+            return false;
         };
         if (t - since).seconds_f64() < a.zupt_window_s {
-            return;
+            return false;
         }
         if let Some(last) = self.core.last_zupt
             && (t - last).seconds_f64() < a.zupt_interval_s
         {
-            return;
+            return false;
         }
         if self.core.nav.v_e.norm() > a.zupt_max_speed_m_s {
-            return;
+            return false;
         }
         // A recent odometer sample saying the vehicle moves vetoes the update.
         if let Some((to, v)) = self.core.last_odo
             && (t - to).seconds_f64() < 1.0
             && v.abs() > 0.02
         {
+            return false;
+        }
+        true
+    }
+
+    /// The zero-velocity update due at `t`, if any. Counted in the health once per epoch as
+    /// time advances (`zupt_counted_until`), whether it is fused live or first in a replay:
+    /// a late aiding sample (an odometer's latency) rewinds the filter, and the replayed
+    /// static detector, fed the corrected biases, may schedule its updates at other epochs
+    /// than the live run did.
+    pub(super) fn maybe_zupt(&mut self, t: GpsTime) {
+        if !self.zupt_due(t) {
             return;
         }
         self.core.last_zupt = Some(t);
@@ -101,7 +110,7 @@ impl Navigator {
             self.zupt_counted_until = Some(t);
             Tally::Count
         };
-        let m = ekf::zero_velocity(&self.core.nav, a.zupt_sigma_m_s);
+        let m = ekf::zero_velocity(&self.core.nav, self.config.aiding.zupt_sigma_m_s);
         self.run_update(Counter::Zupt, &m, tally);
     }
 }
