@@ -49,30 +49,25 @@ impl Navigator {
         // covariance and transition only: their order does not matter.
         self.update_static_detector(t, &inc);
         let aiding_due = self.aiding_due(t);
-        if !aiding_due && !self.zupt_due(t) {
-            // Nothing is fused at this epoch: the solution is the mechanized state, and the
-            // propagation and checkpoints wait until it is formed (fusion and ZUPT would be
-            // no-ops).
-            self.deferred_step = Some(DeferredStep {
-                t,
-                prev_t: e.prev_t,
-                propagate,
-            });
-            return;
+        // Where nothing is fused at this epoch the solution is the mechanized state: the
+        // propagation and its checkpoint wait until it is formed (fusion and ZUPT would be
+        // no-ops).
+        let nothing_fused = !aiding_due && !self.zupt_due(t);
+        if !nothing_fused {
+            if propagate {
+                self.core
+                    .ekf
+                    .propagate_covariance(&self.ell, &self.core.nav.r_e);
+            }
+            if propagate || aiding_due {
+                self.epoch_checkpoint(t, e.prev_t);
+            }
+            self.finish_step(t);
         }
-        if propagate {
-            self.core
-                .ekf
-                .propagate_covariance(&self.ell, &self.core.nav.r_e);
-        }
-        if propagate || aiding_due {
-            self.epoch_checkpoint(t, e.prev_t);
-        }
-        self.finish_step(t);
         self.deferred_step = Some(DeferredStep {
             t,
             prev_t: e.prev_t,
-            propagate: false,
+            propagate: propagate && nothing_fused,
         });
     }
 
