@@ -40,7 +40,7 @@ pub mod cost;
 pub mod floor;
 
 use crate::experiments::plot::{Chart, Line, color, line_chart};
-use crate::recorder::{OFFLINE_BATCH, Recorder, RecorderOptions};
+use crate::recorder::{OFFLINE_BATCH, OFFLINE_QUEUE, Recorder, RecorderOptions};
 use crate::recording::Recording;
 use anyhow::{Context, bail};
 use drivers_sim::offline::{OfflineSim, feed};
@@ -560,6 +560,7 @@ fn replay_throughput(
             solution_rate_hz: recorder.solution_rate_hz,
             truth_rate_hz: recorder.truth_rate_hz,
             view_rate_hz: recorder.view_rate_hz,
+            queue_capacity: OFFLINE_QUEUE,
             ..Default::default()
         },
     )?;

@@ -20,8 +20,8 @@ pub mod kfgins_yaml;
 pub mod text;
 
 use crate::recorder::{
-    CONFIG_KEY_FILTER_TOML, CONFIG_METADATA_NAME, OFFLINE_BATCH, Record, Recorder, RecorderError,
-    RecorderOptions,
+    CONFIG_KEY_FILTER_TOML, CONFIG_METADATA_NAME, OFFLINE_BATCH, OFFLINE_QUEUE, Record, Recorder,
+    RecorderError, RecorderOptions,
 };
 use crate::recording::{Recording, RecordingError};
 use fusion::navigator::NavigatorConfig;
@@ -255,6 +255,7 @@ pub fn write_recording(
                 (CONFIG_METADATA_NAME.to_string(), config_meta),
                 (IMPORT_METADATA_NAME.to_string(), provenance),
             ],
+            queue_capacity: OFFLINE_QUEUE,
             ..Default::default()
         },
     )?;

@@ -51,8 +51,8 @@ use crate::config;
 use crate::daemon::{engine_status, feed_deferred, stamp_solution};
 use crate::recorder::{
     CALIBRATION_KEY_ELAPSED_S, CALIBRATION_KEY_SNAPSHOT, CALIBRATION_METADATA_NAME,
-    CONFIG_KEY_FILTER_TOML, CONFIG_METADATA_NAME, OFFLINE_BATCH, RateGate, Record, Recorder,
-    RecorderOptions, WARM_START_KEY_SNAPSHOT, WARM_START_METADATA_NAME, log_time_of,
+    CONFIG_KEY_FILTER_TOML, CONFIG_METADATA_NAME, OFFLINE_BATCH, OFFLINE_QUEUE, RateGate, Record,
+    Recorder, RecorderOptions, WARM_START_KEY_SNAPSHOT, WARM_START_METADATA_NAME, log_time_of,
     recorded_rates,
 };
 use crate::recording::{Recording, RecordingError, TimeBase};
@@ -384,6 +384,7 @@ pub fn replay_offline(opts: &OfflineOptions) -> Result<OfflineSummary, ReplayErr
             solution_rate_hz: replay_solution_rate_hz,
             truth_rate_hz,
             view_rate_hz,
+            queue_capacity: OFFLINE_QUEUE,
             ..Default::default()
         },
     )?;
