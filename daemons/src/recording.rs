@@ -537,22 +537,28 @@ impl Recording {
                 let data = self
                     .decompress_chunk(&body)
                     .map_err(|e| self.corrupt(at, what(e)))?;
-                // Decode the whole chunk before releasing any of it (its CRC was checked).
-                let mut entries = Vec::new();
+                // Decode the whole chunk before releasing any of it (its CRC was checked): a
+                // bad message takes back the chunk's entries decoded before it. Decoded
+                // straight into the queue, as an entry is ≈ 0.6 kB to move.
+                let released = self.pending.len();
                 let mut p = 0usize;
                 while p < data.len() {
-                    let (iop, ibody, next) = inner_record(&data, p).map_err(|e| {
-                        self.corrupt(at, format!("chunk, uncompressed offset {p}: {e}"))
-                    })?;
-                    if let Some(e) = self.inner(iop, ibody, at).map_err(|e| {
-                        self.corrupt(at, format!("chunk, uncompressed offset {p}: {e}"))
-                    })? {
-                        entries.push(e);
+                    let decoded = inner_record(&data, p)
+                        .and_then(|(iop, ibody, next)| Ok((self.inner(iop, ibody, at)?, next)));
+                    match decoded {
+                        Ok((entry, next)) => {
+                            self.pending.extend(entry);
+                            p = next;
+                        }
+                        Err(e) => {
+                            self.pending.truncate(released);
+                            return Err(
+                                self.corrupt(at, format!("chunk, uncompressed offset {p}: {e}"))
+                            );
+                        }
                     }
-                    p = next;
                 }
                 self.chunks_read.insert(at);
-                self.pending.extend(entries);
             }
             op::CHUNK_INDEX => {
                 let mut c = Cur::new(&body);

@@ -15,9 +15,8 @@ use crate::scenario::TimeWindow;
 use crate::stats::{RmsMax, StreamingPercentiles};
 use msgs::{NavMode, NavSolution, Status, TruthSample};
 use serde::Serialize;
-use std::collections::{BTreeMap, HashMap};
+use std::collections::{BTreeMap, HashMap, VecDeque};
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 use std::sync::mpsc::Receiver;
 
 /// Errors of the analysis.
@@ -226,22 +225,23 @@ pub fn analyze_with_progress(
         crate::replay::embedded_filter_config(&rec).map_or([0.0; 3], |c| c.gnss.lever_arm_b_m)
     });
     let thinned = thinned_topics(rec.metadata());
+    let mut a = Analyzer::new(path, outages, antenna_lever_arm_b_m, &thinned);
     // Decompressing and decoding on a thread of their own, the matching here.
-    let messages = rec.read_ahead().map(|e| {
-        e.map(|e| Message {
-            offset: e.offset,
-            topic: Topic::Read(e.topic),
-            record: e.record,
-        })
-    });
-    let a = analyze_messages(
-        path,
-        messages,
-        outages,
-        antenna_lever_arm_b_m,
-        &thinned,
-        |offset| pb.set_position(offset),
-    );
+    for (n, e) in rec.read_ahead().enumerate() {
+        match e {
+            Ok(e) => {
+                if n % 4096 == 0 {
+                    pb.set_position(e.offset);
+                }
+                a.add(&e.topic, e.record.as_ref());
+            }
+            Err(e) => {
+                a.truncated(&e);
+                break;
+            }
+        }
+    }
+    let a = a.finish();
     pb.finish_and_clear();
     Ok(a)
 }
@@ -261,21 +261,15 @@ pub fn analyze_written(
     antenna_lever_arm_b_m: [f64; 3],
     thinned: &[&str],
 ) -> Analysis {
-    let messages = tap.into_iter().flatten().map(|w| {
-        Ok::<_, RecordingError>(Message {
-            offset: 0,
-            topic: Topic::Tapped(w.topic),
-            record: w.record,
-        })
-    });
-    analyze_messages(
-        path,
-        messages,
-        outages,
-        antenna_lever_arm_b_m,
-        thinned,
-        |_| {},
-    )
+    let mut a = Analyzer::new(path, outages, antenna_lever_arm_b_m, thinned);
+    // By reference: a record is ≈ 0.5 kB, moving each out of its batch cost more than the
+    // rest of the analysis of an IMU sample.
+    for batch in tap {
+        for w in &batch {
+            a.add(w.topic, w.record.as_ref());
+        }
+    }
+    a.finish()
 }
 
 /// The topics a recording keeps one message per interval of time of validity (its
@@ -293,218 +287,235 @@ pub fn thinned_topics(metadata: &BTreeMap<String, BTreeMap<String, String>>) -> 
     v
 }
 
-/// One message of the recording, read back or tapped.
-struct Message {
-    /// Where it lies in the file, bytes (progress only; 0 when tapped).
-    offset: u64,
-    topic: Topic,
-    record: Option<Record>,
+/// The analysis of a recording's messages, fed in file order ([`Analyzer::add`]): the state
+/// of [`analyze`] and [`analyze_written`], which differ only in where the messages come from.
+struct Analyzer<'a> {
+    s: Summary,
+    outages: &'a [TimeWindow],
+    thinned: &'a [&'a str],
+    last_seq: HashMap<&'static str, u64>,
+    first_truth: Option<TruthSample>,
+    last_status: Option<Status>,
+    /// The final status of each earlier life of the fusion daemon (restarts).
+    latency_lives: Vec<Status>,
+    t_min: i64,
+    t_max: i64,
+    w: Window,
+    m: Matched<'a>,
+    first_nav_ns: Option<i64>,
+    last_nav_ns: i64,
 }
 
-/// A message's topic: as the reader shares it, or as the recorder names it.
-enum Topic {
-    Read(Arc<str>),
-    Tapped(&'static str),
-}
-
-impl std::ops::Deref for Topic {
-    type Target = str;
-    fn deref(&self) -> &str {
-        match self {
-            Self::Read(t) => t,
-            Self::Tapped(t) => t,
+impl<'a> Analyzer<'a> {
+    /// The analysis of the recording `path`; the receiver's fixes are compared at
+    /// `antenna_lever_arm_b_m` (body axes, m); `thinned` as in [`analyze_written`].
+    fn new(
+        path: &Path,
+        outages: &'a [TimeWindow],
+        antenna_lever_arm_b_m: [f64; 3],
+        thinned: &'a [&'a str],
+    ) -> Self {
+        let mut m = Matched::new(outages);
+        m.antenna_lever_arm_b_m = antenna_lever_arm_b_m;
+        Self {
+            s: Summary {
+                recording: path.display().to_string(),
+                ..Default::default()
+            },
+            outages,
+            thinned,
+            last_seq: HashMap::new(),
+            first_truth: None,
+            last_status: None,
+            latency_lives: Vec::new(),
+            t_min: i64::MAX,
+            t_max: i64::MIN,
+            w: Window::default(),
+            m,
+            first_nav_ns: None,
+            last_nav_ns: 0,
         }
     }
-}
 
-/// The analysis of the messages of the recording `path`, in file order; a read error ends them
-/// (`recording_truncated`).
-fn analyze_messages(
-    path: &Path,
-    messages: impl Iterator<Item = Result<Message, RecordingError>>,
-    outages: &[TimeWindow],
-    antenna_lever_arm_b_m: [f64; 3],
-    thinned: &[&str],
-    progress: impl Fn(u64),
-) -> Analysis {
-    let mut s = Summary {
-        recording: path.display().to_string(),
-        ..Default::default()
-    };
-    let mut last_seq: HashMap<&'static str, u64> = HashMap::new();
-    let mut first_truth: Option<TruthSample> = None;
-    let mut last_status: Option<Status> = None;
-    // The final status of each earlier life of the fusion daemon (restarts).
-    let mut latency_lives: Vec<Status> = Vec::new();
-    let (mut t_min, mut t_max) = (i64::MAX, i64::MIN);
-    let mut w = Window::default();
-    let mut m = Matched::new(outages);
-    m.antenna_lever_arm_b_m = antenna_lever_arm_b_m;
-    let (mut first_nav_ns, mut last_nav_ns) = (None::<i64>, 0i64);
-    let mut n = 0u64;
-    // Per record, by topic: counted without building a key string for every message.
-    fn count<'a, V: Default>(map: &'a mut BTreeMap<String, V>, topic: &str) -> &'a mut V {
-        if !map.contains_key(topic) {
-            map.insert(topic.to_string(), V::default());
-        }
-        map.get_mut(topic).expect("inserted above")
+    /// The reading stopped at `e` (a cut or damaged file): the figures are of what came before.
+    fn truncated(&mut self, e: &RecordingError) {
+        tracing::warn!("{}: reading stopped: {e}", self.s.recording);
+        self.s.recording_truncated = true;
     }
-    for e in messages {
-        let e = match e {
-            Ok(e) => e,
-            Err(e) => {
-                tracing::warn!("{}: reading stopped: {e}", path.display());
-                s.recording_truncated = true;
-                break;
+
+    /// The next message of the file: its topic, and its record when it is one of Sextant's.
+    fn add(&mut self, topic: &str, record: Option<&Record>) {
+        // Per record, by topic: counted without building a key string for every message.
+        fn count<'m, V: Default>(map: &'m mut BTreeMap<String, V>, topic: &str) -> &'m mut V {
+            if !map.contains_key(topic) {
+                map.insert(topic.to_string(), V::default());
             }
-        };
-        n += 1;
-        if n.is_multiple_of(4096) {
-            progress(e.offset);
+            map.get_mut(topic).expect("inserted above")
         }
-        *count(&mut s.messages_per_channel, &e.topic) += 1;
-        let Some(record) = e.record else {
-            continue;
+        let s = &mut self.s;
+        *count(&mut s.messages_per_channel, topic) += 1;
+        let Some(record) = record else {
+            return;
         };
         let Some(ch) = record.channel() else {
-            continue;
+            return;
         };
         let topic = ch.name();
         let h = *record.header();
         if h.time_ns > 0 {
-            t_min = t_min.min(h.time_ns);
-            t_max = t_max.max(h.time_ns);
+            self.t_min = self.t_min.min(h.time_ns);
+            self.t_max = self.t_max.max(h.time_ns);
         }
         let gaps = count(&mut s.sequence_gaps_per_channel, topic);
-        if let Some(prev) = last_seq.insert(topic, h.seq) {
-            if h.seq > prev + 1 && !thinned.contains(&topic) {
+        if let Some(prev) = self.last_seq.insert(topic, h.seq) {
+            if h.seq > prev + 1 && !self.thinned.contains(&topic) {
                 *gaps += h.seq - prev - 1;
             } else if h.seq <= prev {
                 *count(&mut s.sequence_restarts_per_channel, topic) += 1;
             }
         }
+        let m = &mut self.m;
         match record {
             Record::Truth(t) => {
-                let origin = *first_truth.get_or_insert(t);
-                let (navs, fixes) = w.truth(t);
+                let origin = *self.first_truth.get_or_insert(*t);
+                let (navs, fixes) = self.w.truth(*t);
                 for nav in &navs {
-                    m.solution(nav, &t, &origin);
+                    m.solution(nav, t, &origin);
                 }
                 for pos in &fixes {
-                    m.fix(pos, &t);
+                    m.fix(pos, t);
                 }
             }
             Record::Nav(nav) => {
                 s.solutions += 1;
-                first_nav_ns.get_or_insert(nav.header.time_ns);
-                last_nav_ns = nav.header.time_ns;
+                self.first_nav_ns.get_or_insert(nav.header.time_ns);
+                self.last_nav_ns = nav.header.time_ns;
                 if nav.header.send_mono_ns > 0 && nav.imu_send_mono_ns > 0 {
                     m.latency_us.push(
                         nav.header.send_mono_ns.saturating_sub(nav.imu_send_mono_ns) as f64 * 1e-3,
                     );
                 }
-                w.nav(nav, |nav, tr| {
-                    if let Some(origin) = &first_truth {
+                let first_truth = &self.first_truth;
+                self.w.nav(nav, |nav, tr| {
+                    if let Some(origin) = first_truth {
                         m.solution(nav, tr, origin)
                     }
                 });
             }
             Record::Gnss(g) if g.fix_valid == 1 => {
-                w.fix(g.header.time_ns, g.pos_ecef_m, |pos, tr| m.fix(pos, tr))
+                self.w
+                    .fix(g.header.time_ns, g.pos_ecef_m, |pos, tr| m.fix(pos, tr))
             }
             Record::Status(st) => {
                 // A restarted daemon counts from zero: keep the last report of each life.
-                if let Some(prev) = &last_status
+                if let Some(prev) = &self.last_status
                     && st.latency_count < prev.latency_count
                 {
-                    latency_lives.push(*prev);
+                    self.latency_lives.push(*prev);
                 }
-                last_status = Some(*st);
+                self.last_status = Some(**st);
             }
             _ => {}
         }
         if h.time_ns > 0 {
-            w.evict_before(h.time_ns - MATCH_WINDOW_NS);
+            self.w.evict_before(h.time_ns - MATCH_WINDOW_NS);
         }
     }
-    if let Some(st) = &last_status {
-        s.records_dropped = st.records_dropped;
-        s.final_mode = Some(
-            NavMode::from_u32(st.mode)
-                .map(|m| m.name().to_string())
-                .unwrap_or_else(|| format!("unknown({})", st.mode)),
-        );
-    }
-    if t_max > t_min {
-        s.recorded_time_span_s = (t_max - t_min) as f64 * 1e-9;
-    }
-    if let Some(a) = first_nav_ns {
-        s.duration_s = (last_nav_ns - a) as f64 * 1e-9;
-    } else if t_max > t_min {
-        s.duration_s = (t_max - t_min) as f64 * 1e-9;
-    }
-    let t0_ns = first_truth
-        .map(|t| t.header.time_ns)
-        .or(first_nav_ns)
-        .unwrap_or(0);
-    s.solutions_matched_with_truth = m.horizontal.count();
-    s.gnss_fix_horizontal_error_rms_m = m.fix_horizontal.rms();
-    s.gnss_fix_vertical_error_rms_m = m.fix_vertical.rms();
-    s.horizontal_error_rms_m = m.horizontal.rms();
-    s.horizontal_error_max_m = m.horizontal.max_abs();
-    s.vertical_error_rms_m = m.vertical.rms();
-    s.vertical_error_max_m = m.vertical.max_abs();
-    s.attitude_error_rms_deg = m.attitude.rms();
-    s.attitude_error_max_deg = m.attitude.max_abs();
-    latency_lives.extend(last_status);
-    let daemon_count: u64 = latency_lives.iter().map(|st| st.latency_count).sum();
-    if daemon_count > 0 {
-        // Several lives (a restart): their percentiles weighted by their counts, an
-        // approximation of the percentile of the union; exact for one life.
-        let weighted = |f: fn(&Status) -> f64| {
-            latency_lives
+
+    /// The figures of the messages added.
+    fn finish(self) -> Analysis {
+        let Self {
+            mut s,
+            outages,
+            last_status,
+            mut latency_lives,
+            t_min,
+            t_max,
+            mut m,
+            first_truth,
+            first_nav_ns,
+            last_nav_ns,
+            ..
+        } = self;
+        if let Some(st) = &last_status {
+            s.records_dropped = st.records_dropped;
+            s.final_mode = Some(
+                NavMode::from_u32(st.mode)
+                    .map(|m| m.name().to_string())
+                    .unwrap_or_else(|| format!("unknown({})", st.mode)),
+            );
+        }
+        if t_max > t_min {
+            s.recorded_time_span_s = (t_max - t_min) as f64 * 1e-9;
+        }
+        if let Some(a) = first_nav_ns {
+            s.duration_s = (last_nav_ns - a) as f64 * 1e-9;
+        } else if t_max > t_min {
+            s.duration_s = (t_max - t_min) as f64 * 1e-9;
+        }
+        let t0_ns = first_truth
+            .map(|t| t.header.time_ns)
+            .or(first_nav_ns)
+            .unwrap_or(0);
+        s.solutions_matched_with_truth = m.horizontal.count();
+        s.gnss_fix_horizontal_error_rms_m = m.fix_horizontal.rms();
+        s.gnss_fix_vertical_error_rms_m = m.fix_vertical.rms();
+        s.horizontal_error_rms_m = m.horizontal.rms();
+        s.horizontal_error_max_m = m.horizontal.max_abs();
+        s.vertical_error_rms_m = m.vertical.rms();
+        s.vertical_error_max_m = m.vertical.max_abs();
+        s.attitude_error_rms_deg = m.attitude.rms();
+        s.attitude_error_max_deg = m.attitude.max_abs();
+        latency_lives.extend(last_status);
+        let daemon_count: u64 = latency_lives.iter().map(|st| st.latency_count).sum();
+        if daemon_count > 0 {
+            // Several lives (a restart): their percentiles weighted by their counts, an
+            // approximation of the percentile of the union; exact for one life.
+            let weighted = |f: fn(&Status) -> f64| {
+                latency_lives
+                    .iter()
+                    .map(|st| f(st) * st.latency_count as f64)
+                    .sum::<f64>()
+                    / daemon_count as f64
+            };
+            s.latency_p50_us = Some(weighted(|st| st.latency_p50_us));
+            s.latency_p99_us = Some(weighted(|st| st.latency_p99_us));
+            s.latency_max_us = latency_lives
                 .iter()
-                .map(|st| f(st) * st.latency_count as f64)
-                .sum::<f64>()
-                / daemon_count as f64
-        };
-        s.latency_p50_us = Some(weighted(|st| st.latency_p50_us));
-        s.latency_p99_us = Some(weighted(|st| st.latency_p99_us));
-        s.latency_max_us = latency_lives
+                .map(|st| st.latency_max_us)
+                .reduce(f64::max);
+            s.latency_solutions = daemon_count;
+        } else {
+            s.latency_p50_us = m.latency_us.percentile(50.0);
+            s.latency_p99_us = m.latency_us.percentile(99.0);
+            s.latency_max_us = m.latency_us.max();
+            s.latency_solutions = m.latency_us.count();
+        }
+        let (mut all_during, mut all_after) = (RmsMax::default(), RmsMax::default());
+        for (w, (during, after)) in outages.iter().zip(&m.outages) {
+            s.gnss_outages.push(OutageSummary {
+                start_s: (w.start_ns - t0_ns) as f64 * 1e-9,
+                end_s: (w.end_ns - t0_ns) as f64 * 1e-9,
+                horizontal_error_max_m: during.max_abs(),
+                after_outage_horizontal_error_rms_m: after.rms(),
+            });
+            all_during.merge(during);
+            all_after.merge(after);
+        }
+        s.outage_horizontal_error_max_m = all_during.max_abs();
+        s.after_outage_horizontal_error_rms_m = all_after.rms();
+        let mut series = m.series.into_series(0.0, t0_ns);
+        series.outages_s = outages
             .iter()
-            .map(|st| st.latency_max_us)
-            .reduce(f64::max);
-        s.latency_solutions = daemon_count;
-    } else {
-        s.latency_p50_us = m.latency_us.percentile(50.0);
-        s.latency_p99_us = m.latency_us.percentile(99.0);
-        s.latency_max_us = m.latency_us.max();
-        s.latency_solutions = m.latency_us.count();
+            .map(|w| {
+                (
+                    (w.start_ns - t0_ns) as f64 * 1e-9,
+                    (w.end_ns - t0_ns) as f64 * 1e-9,
+                )
+            })
+            .collect();
+        Analysis { summary: s, series }
     }
-    let (mut all_during, mut all_after) = (RmsMax::default(), RmsMax::default());
-    for (w, (during, after)) in outages.iter().zip(&m.outages) {
-        s.gnss_outages.push(OutageSummary {
-            start_s: (w.start_ns - t0_ns) as f64 * 1e-9,
-            end_s: (w.end_ns - t0_ns) as f64 * 1e-9,
-            horizontal_error_max_m: during.max_abs(),
-            after_outage_horizontal_error_rms_m: after.rms(),
-        });
-        all_during.merge(during);
-        all_after.merge(after);
-    }
-    s.outage_horizontal_error_max_m = all_during.max_abs();
-    s.after_outage_horizontal_error_rms_m = all_after.rms();
-    let mut series = m.series.into_series(0.0, t0_ns);
-    series.outages_s = outages
-        .iter()
-        .map(|w| {
-            (
-                (w.start_ns - t0_ns) as f64 * 1e-9,
-                (w.end_ns - t0_ns) as f64 * 1e-9,
-            )
-        })
-        .collect();
-    Analysis { summary: s, series }
 }
 
 /// How far (time of validity) a solution or fix and the truth sample of its time may lie apart
@@ -524,7 +535,15 @@ const MAX_SERIES_POINTS: usize = 40_000;
 #[derive(Default)]
 pub(crate) struct Window {
     truth: BTreeMap<i64, TruthSample>,
-    navs: BTreeMap<i64, Vec<NavSolution>>,
+    /// The solutions waiting, in arrival order: a recording's solutions come in time order
+    /// (a restarted daemon's start over, earlier than its previous life's last ones), so the
+    /// store is a queue searched by bisection that takes no allocation per solution. Most wait
+    /// in vain: a recording's truth is usually thinned (10 Hz against solutions at the IMU's
+    /// rate), and the window holds a minute of them.
+    navs: VecDeque<NavSolution>,
+    /// 0 when `navs` is in order of time of validity; else the index of its last solution
+    /// earlier than the one before it (the queue is in order from there on).
+    navs_disorder: usize,
     fixes: BTreeMap<i64, Vec<[f64; 3]>>,
 }
 
@@ -534,21 +553,47 @@ impl Window {
     pub(crate) fn truth(&mut self, t: TruthSample) -> (Vec<NavSolution>, Vec<[f64; 3]>) {
         let k = t.header.time_ns;
         self.truth.insert(k, t);
-        (
-            self.navs.remove(&k).unwrap_or_default(),
-            self.fixes.remove(&k).unwrap_or_default(),
-        )
+        let navs = if self.navs_disorder == 0 {
+            let first = self.navs.partition_point(|n| n.header.time_ns < k);
+            let n = self
+                .navs
+                .range(first..)
+                .take_while(|n| n.header.time_ns == k)
+                .count();
+            self.navs.drain(first..first + n).collect()
+        } else {
+            let matched = (self.navs.iter())
+                .filter(|n| n.header.time_ns == k)
+                .copied()
+                .collect();
+            self.navs.retain(|n| n.header.time_ns != k);
+            self.navs_disorder = (1..self.navs.len())
+                .rev()
+                .find(|&i| self.navs[i].header.time_ns < self.navs[i - 1].header.time_ns)
+                .unwrap_or(0);
+            matched
+        };
+        (navs, self.fixes.remove(&k).unwrap_or_default())
     }
 
-    /// A solution: matched at once when its truth sample is there, else it waits.
+    /// A solution: matched at once when its truth sample is there, else it waits (a copy).
     pub(crate) fn nav(
         &mut self,
-        n: NavSolution,
+        n: &NavSolution,
         on_match: impl FnOnce(&NavSolution, &TruthSample),
     ) {
         match self.truth.get(&n.header.time_ns) {
-            Some(t) => on_match(&n, t),
-            None => self.navs.entry(n.header.time_ns).or_default().push(n),
+            Some(t) => on_match(n, t),
+            None => {
+                if self
+                    .navs
+                    .back()
+                    .is_some_and(|b| b.header.time_ns > n.header.time_ns)
+                {
+                    self.navs_disorder = self.navs.len();
+                }
+                self.navs.push_back(*n);
+            }
         }
     }
 
@@ -570,8 +615,15 @@ impl Window {
             }
         }
         drop_front(&mut self.truth, t_ns);
-        drop_front(&mut self.navs, t_ns);
         drop_front(&mut self.fixes, t_ns);
+        // From the front, called for every record (a bisection each time would touch a
+        // dozen solutions of the minute held). Out of order, solutions older than `t_ns` stay
+        // behind a later one until that one goes (a restart's time step bounds what is held).
+        let old = (self.navs.iter())
+            .take_while(|n| n.header.time_ns < t_ns)
+            .count();
+        self.navs.drain(..old);
+        self.navs_disorder = self.navs_disorder.saturating_sub(old);
     }
 }
 
@@ -899,6 +951,58 @@ mod tests {
         // q and -q are the same attitude.
         let mq = [-q[0], -q[1], -q[2], -q[3]];
         assert!((attitude_error_rad([1.0, 0.0, 0.0, 0.0], mq) - a).abs() < 1e-12);
+    }
+
+    /// The matching window pairs each truth sample with the solutions of its time whichever
+    /// comes first, across a restart whose solutions start over 30 s earlier, and holds no
+    /// more than the window (plus the restart's step) of unmatched solutions.
+    #[test]
+    fn the_window_matches_across_arrival_orders_and_a_restart() {
+        let nav = |t: i64| {
+            let mut n = NavSolution::default();
+            n.header.time_ns = t;
+            n
+        };
+        let truth = |t: i64| {
+            let mut tr = TruthSample::default();
+            tr.header.time_ns = t;
+            tr
+        };
+        let (mut w, mut matched, mut most) = (Window::default(), 0usize, 0usize);
+        let ms = 1_000_000i64;
+        // Solutions at 200 Hz; truth at 10 Hz, alternately before and after its solution.
+        // Life 1: 0–200 s; life 2 (a restart) starts over at 170 s and runs to 400 s.
+        let lives = [(0i64, 200_000i64), (170_000, 400_000)];
+        for (start, end) in lives {
+            for t_ms in (start..end).step_by(5) {
+                let t = t_ms * ms;
+                let due = t_ms % 100 == 0;
+                let truth_first = t_ms % 200 == 0;
+                if due && truth_first {
+                    matched += w.truth(truth(t)).0.len();
+                }
+                w.nav(&nav(t), |n, tr| {
+                    assert_eq!(n.header.time_ns, tr.header.time_ns);
+                    matched += 1;
+                });
+                if due && !truth_first {
+                    let (navs, _) = w.truth(truth(t));
+                    assert!(navs.iter().all(|n| n.header.time_ns == t));
+                    matched += navs.len();
+                }
+                w.evict_before(t - MATCH_WINDOW_NS);
+                most = most.max(w.navs.len());
+            }
+        }
+        // Every truth epoch of both lives; in life 2's first 30 s the truth of life 1 (same
+        // times, still in the window) meets the solution first: one pair each, no more.
+        assert_eq!(matched, 2000 + 2300);
+        // A minute of 200 Hz solutions, plus the 30 s the restart stepped back.
+        assert!(most <= (60 + 30) * 200 + 1, "{most}");
+        assert_eq!(
+            w.navs_disorder, 0,
+            "in order again once life 1 has left the window"
+        );
     }
 
     #[test]

@@ -635,7 +635,7 @@ pub fn report(path: &Path, out_dir: &Path) -> Result<ReportSummary, ReportError>
                     bore_arcsec: nav.boresight_rad.map(|x| x / ARCSEC),
                     bore_sig3_arcsec: nav.boresight_sigma_rad.map(|x| 3.0 * x / ARCSEC),
                 });
-                window.nav(nav, |nav, tr| {
+                window.nav(&nav, |nav, tr| {
                     if let Some(origin) = &first_truth
                         && truth_acc.solution(nav, tr)
                     {
