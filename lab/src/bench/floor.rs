@@ -77,6 +77,26 @@ pub struct FloorRun {
     pub echo_cpu_percent: f64,
     /// Peak resident memory of the echo process, MiB.
     pub echo_peak_rss_mib: f64,
+    /// Runs measured: 1, or the slices [`FloorRun::append`]ed.
+    pub runs: usize,
+}
+
+impl FloorRun {
+    /// Add an equally long run of the same rate (a slice of the bench's alternation of the
+    /// floor with the live run): latencies together, samples summed, the echo's CPU the mean
+    /// over the runs, its peak memory the largest.
+    pub fn append(&mut self, run: FloorRun) {
+        let (a, b) = (self.runs as f64, run.runs as f64);
+        if a + b > 0.0 {
+            self.echo_cpu_percent =
+                (self.echo_cpu_percent * a + run.echo_cpu_percent * b) / (a + b);
+        }
+        self.echo_peak_rss_mib = self.echo_peak_rss_mib.max(run.echo_peak_rss_mib);
+        self.sent += run.sent;
+        self.runs += run.runs;
+        self.latencies_us.extend(run.latencies_us);
+        self.latencies_us.sort_by(f64::total_cmp);
+    }
 }
 
 /// Run the floor at `imu_hz` for `duration_s` against the echo process `echo_pid` listening on
@@ -159,6 +179,7 @@ pub fn measure(
         sent: n,
         echo_cpu_percent: cpu,
         echo_peak_rss_mib: rss,
+        runs: 1,
     })
 }
 

@@ -74,6 +74,8 @@ pub struct BenchOptions {
 /// Wall seconds of each live latency run, simulated seconds of the offline run, wall seconds
 /// of the paced recorder run.
 struct Sizes {
+    /// Wall seconds of the live runs at one rate, over all their slices: each slice has its
+    /// own [`BENCH_ALIGNMENT_S`] on top of its share of the rest.
     live_s: f64,
     /// Seconds of each floor run: as long as the live run's measured part, but 1 s in quick
     /// mode (tests), where the comparison is a smoke check.
@@ -83,6 +85,11 @@ struct Sizes {
     replay_s: f64,
     record_paced_s: f64,
     record_saturated: usize,
+    /// Slices the floor and the live run alternate in at each rate: a noisy spell of the
+    /// machine (a virtual machine's host takes tens of seconds of it at a time) then falls on
+    /// both rather than on whichever ran through it, and the ratio of their percentiles
+    /// measures Sextant rather than the spell.
+    slices: usize,
 }
 
 impl Sizes {
@@ -95,6 +102,7 @@ impl Sizes {
                 replay_s: 130.0,
                 record_paced_s: 1.0,
                 record_saturated: 50_000,
+                slices: 2,
             }
         } else {
             Sizes {
@@ -104,6 +112,7 @@ impl Sizes {
                 replay_s: 600.0,
                 record_paced_s: 5.0,
                 record_saturated: 500_000,
+                slices: 3,
             }
         }
     }
@@ -298,13 +307,40 @@ struct LatencySeries {
     beside_other_drivers: Vec<f64>,
 }
 
-/// One live run at `imu_hz`: returns (latencies µs, per-process figures).
-fn live_run(
+/// What one slice of the live run at a rate measured ([`live_slice`]).
+struct LiveSlice {
+    series: LatencySeries,
+    /// Simulated time its solutions span (first to last), s.
+    span_s: f64,
+    /// Its recording's size on disk, bytes.
+    bytes: u64,
+    /// Its drivers' simulated duration, s.
+    duration_s: f64,
+    /// Per process: its name, CPU seconds over the measured window, and at the window's end
+    /// its resident and peak resident memory, KiB.
+    procs: Vec<(String, f64, u64, u64)>,
+    /// The measured window, wall s.
+    window_s: f64,
+}
+
+/// The file of a slice of a bench run: `{stem}.{ext}` for the first, `{stem}_slice{n}.{ext}`
+/// for the n-th after it.
+fn slice_file(stem: &str, slice: usize, ext: &str) -> String {
+    match slice {
+        0 => format!("{stem}.{ext}"),
+        k => format!("{stem}_slice{}.{ext}", k + 1),
+    }
+}
+
+/// Slice `slice` (from 0) of the live run at `imu_hz`: the daemon and every simulated driver
+/// for `duration_s` of wall time (its short alignment included).
+fn live_slice(
     opts: &BenchOptions,
     cfg_dir: &Path,
     imu_hz: f64,
     duration_s: f64,
-) -> anyhow::Result<(Vec<f64>, Value)> {
+    slice: usize,
+) -> anyhow::Result<LiveSlice> {
     let scenario = cfg_dir.join(format!("scenarios/bench_imu_{}hz.toml", imu_hz as u64));
     std::fs::copy(cfg_dir.join("scenarios/vehicle.toml"), &scenario)?;
     toml_set(
@@ -313,15 +349,21 @@ fn live_run(
         "rate_hz",
         toml::Value::Float(imu_hz),
     )?;
-    let prefix = format!("{}_{}hz", opts.prefix, imu_hz as u64);
-    let recording = opts.out.join(format!("latency_{}hz.mcap", imu_hz as u64));
+    let prefix = format!("{}_{}hz_{slice}", opts.prefix, imu_hz as u64);
+    let recording = opts.out.join(slice_file(
+        &format!("latency_{}hz", imu_hz as u64),
+        slice,
+        "mcap",
+    ));
     let _ = std::fs::remove_file(&recording);
     let logs = opts.out.join("logs");
     std::fs::create_dir_all(&logs)?;
     let log = |name: &str| -> anyhow::Result<std::fs::File> {
-        Ok(std::fs::File::create(
-            logs.join(format!("{name}_{}hz.log", imu_hz as u64)),
-        )?)
+        Ok(std::fs::File::create(logs.join(slice_file(
+            &format!("{name}_{}hz", imu_hz as u64),
+            slice,
+            "log",
+        )))?)
     };
     let mut fusion = Command::new(opts.bin_dir.join("sextant-fusion"))
         .arg("--config")
@@ -390,26 +432,84 @@ fn live_run(
     }
     std::thread::sleep(Duration::from_millis(200));
     stop(&mut fusion, Duration::from_secs(10));
-    let mut procs = serde_json::Map::new();
-    for (k, (name, _)) in pids.iter().enumerate() {
-        if let (Some(a), Some(b)) = (first[k], last[k]) {
-            procs.insert(
-                name.clone(),
-                json!({
-                    "cpu_percent": 100.0 * (b.cpu_s - a.cpu_s) / window_s,
-                    "rss_mib": b.rss_kib as f64 / 1024.0,
-                    "peak_rss_mib": b.hwm_kib as f64 / 1024.0,
-                }),
-            );
+    let procs = (pids.iter().zip(first.iter().zip(&last)))
+        .filter_map(|((name, _), (a, b))| {
+            let (a, b) = (a.as_ref()?, b.as_ref()?);
+            Some((name.clone(), b.cpu_s - a.cpu_s, b.rss_kib, b.hwm_kib))
+        })
+        .collect();
+    let (series, span_s) = latencies_and_span(&recording)?;
+    if series.total.is_empty() {
+        bail!(
+            "no solution in {} (see {})",
+            recording.display(),
+            logs.display()
+        );
+    }
+    Ok(LiveSlice {
+        series,
+        span_s,
+        bytes: crate::recording::recording_len(&recording),
+        duration_s,
+        procs,
+        window_s,
+    })
+}
+
+/// The slices of the live run at one rate as one run: (latencies µs, sorted; per-process
+/// figures, with `navigating_s`, `recording` and `latency_split`).
+fn combine_live(slices: Vec<LiveSlice>) -> (Vec<f64>, Value) {
+    let mut series = LatencySeries::default();
+    let (mut span_s, mut bytes, mut duration_s, mut window_s) = (0.0, 0u64, 0.0, 0.0);
+    // Per process: CPU s, resident KiB at the last slice's end, peak KiB over the slices.
+    let mut cpu: Vec<(String, f64, u64, u64)> = Vec::new();
+    for sl in slices {
+        for (all, part) in [
+            (&mut series.total, sl.series.total),
+            (&mut series.transport, sl.series.transport),
+            (&mut series.processing, sl.series.processing),
+            (
+                &mut series.apart_from_other_drivers,
+                sl.series.apart_from_other_drivers,
+            ),
+            (
+                &mut series.beside_other_drivers,
+                sl.series.beside_other_drivers,
+            ),
+        ] {
+            all.extend(part);
+        }
+        span_s += sl.span_s;
+        bytes += sl.bytes;
+        duration_s += sl.duration_s;
+        window_s += sl.window_s;
+        for (name, cpu_s, rss, hwm) in sl.procs {
+            match cpu.iter_mut().find(|p| p.0 == name) {
+                Some(p) => {
+                    p.1 += cpu_s;
+                    p.2 = rss;
+                    p.3 = p.3.max(hwm);
+                }
+                None => cpu.push((name, cpu_s, rss, hwm)),
+            }
         }
     }
-    let (mut series, span_s) = latencies_and_span(&recording)?;
+    let mut procs = serde_json::Map::new();
+    for (name, cpu_s, rss, hwm) in cpu {
+        procs.insert(
+            name,
+            json!({
+                "cpu_percent": 100.0 * cpu_s / window_s,
+                "rss_mib": rss as f64 / 1024.0,
+                "peak_rss_mib": hwm as f64 / 1024.0,
+            }),
+        );
+    }
     // How long it navigated: the alignment ends when its window is complete and a GNSS fix
     // is `buffer_window_s` old, not at a fixed time.
     procs.insert("navigating_s".into(), json!(span_s));
     // The recording's size per 600 s of operation (the default run's length), in the
-    // configuration's encoding: this run's files scaled by its simulated duration.
-    let bytes = crate::recording::recording_len(&recording);
+    // configuration's encoding: the slices' files scaled by their simulated duration.
     procs.insert(
         "recording".into(),
         json!({
@@ -419,6 +519,7 @@ fn live_run(
         }),
     );
     for v in [
+        &mut series.total,
         &mut series.transport,
         &mut series.processing,
         &mut series.apart_from_other_drivers,
@@ -448,16 +549,7 @@ fn live_run(
             ],
         }),
     );
-    let mut lat = series.total;
-    if lat.is_empty() {
-        bail!(
-            "no solution in {} (see {})",
-            recording.display(),
-            logs.display()
-        );
-    }
-    lat.sort_by(f64::total_cmp);
-    Ok((lat, Value::Object(procs)))
+    (series.total, Value::Object(procs))
 }
 
 fn latency_figures(lat: &[f64], imu_hz: f64, duration_s: f64) -> Value {
@@ -889,11 +981,35 @@ pub fn run(opts: &BenchOptions) -> anyhow::Result<Value> {
     let logs = opts.out.join("logs");
     std::fs::create_dir_all(&logs)?;
     for hz in [200.0, 1000.0] {
-        eprintln!("bench: floor, IMU {hz} Hz, {} s", sizes.floor_s);
-        let floor_prefix = format!("{}_floor_{}hz", opts.prefix, hz as u64);
-        let fl = floor::run(&opts.bin_dir, &floor_prefix, hz, sizes.floor_s, &logs)?;
-        eprintln!("bench: live run, IMU {hz} Hz, {} s", sizes.live_s);
-        let (lat, procs) = live_run(opts, &cfg_dir, hz, sizes.live_s)?;
+        // The floor and the live run alternate in slices (`Sizes::slices`).
+        let n = sizes.slices;
+        let floor_slice_s = sizes.floor_s / n as f64;
+        // Whole seconds: the drivers stop after their last sample at or before the end, and
+        // the CPU window closes 0.5 s before it, after the 1 Hz GNSS driver's last sample.
+        let live_slice_s =
+            (BENCH_ALIGNMENT_S + (sizes.live_s - BENCH_ALIGNMENT_S) / n as f64).ceil();
+        let mut fl = floor::FloorRun::default();
+        let mut slices = Vec::new();
+        for k in 0..n {
+            eprintln!(
+                "bench: floor, IMU {hz} Hz, {floor_slice_s:.1} s (slice {} of {n})",
+                k + 1
+            );
+            let floor_prefix = format!("{}_floor_{}hz_{k}", opts.prefix, hz as u64);
+            fl.append(floor::run(
+                &opts.bin_dir,
+                &floor_prefix,
+                hz,
+                floor_slice_s,
+                &logs,
+            )?);
+            eprintln!(
+                "bench: live run, IMU {hz} Hz, {live_slice_s:.1} s (slice {} of {n})",
+                k + 1
+            );
+            slices.push(live_slice(opts, &cfg_dir, hz, live_slice_s, k)?);
+        }
+        let (lat, procs) = combine_live(slices);
         let mut procs = procs;
         let measured_s = procs
             .as_object_mut()
