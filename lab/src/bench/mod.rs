@@ -17,12 +17,14 @@
 //! 4. **Recording throughput**: the [`Recorder`] saturated with a realistic record mix
 //!    (records/s, MB/s of MCAP written), then paced at 10× the default live load (the default
 //!    `sextant run` at speed 10) to check that nothing is dropped.
-//! 5. **The floor** ([`floor`]), measured in the same run just before each live run, at the same
-//!    IMU rate and for as many samples as the live run has solutions (1 s in quick mode): a bare iceoryx2
-//!    IMU → reply round trip between two processes with Sextant's own services and wake-up
-//!    mechanism and message sizes. Sextant's latency is reported against it (p50 excess in µs,
-//!    p99 ratio): on a loaded machine both move together, so the comparison survives the load
-//!    that the absolute figures do not.
+//! 5. **The floor** ([`floor`]), measured in the same run at the same IMU rate and for about as
+//!    many samples as the live run has solutions (1 s in quick mode): a bare iceoryx2 IMU →
+//!    reply round trip between two processes with Sextant's own services and wake-up mechanism
+//!    and message sizes. The floor and the live run alternate in slices (three, two in quick
+//!    mode), each live slice a run of its own with its short alignment, and each figure is
+//!    taken over all the slices. Sextant's latency is reported against the floor (p50 excess
+//!    in µs, p99 ratio): on a loaded machine both move together, so the comparison survives
+//!    the load that the absolute figures do not, and a spell of load falls on both.
 //! 6. **Cost curves** ([`cost`]): the offline fusion cost per IMU sample against the IMU rate,
 //!    the active filter states, the satellites of tight coupling and the redundant IMU channels.
 //! 7. **Replay** ([`replay_throughput`]): `replay --offline`'s replay stage (reading, the
