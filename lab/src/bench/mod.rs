@@ -462,9 +462,11 @@ fn live_slice(
 /// figures, with `navigating_s`, `recording` and `latency_split`).
 fn combine_live(slices: Vec<LiveSlice>) -> (Vec<f64>, Value) {
     let mut series = LatencySeries::default();
-    let (mut span_s, mut bytes, mut duration_s, mut window_s) = (0.0, 0u64, 0.0, 0.0);
-    // Per process: CPU s, resident KiB at the last slice's end, peak KiB over the slices.
-    let mut cpu: Vec<(String, f64, u64, u64)> = Vec::new();
+    let (mut span_s, mut bytes, mut duration_s) = (0.0, 0u64, 0.0);
+    // Per process: CPU s and the windows it was measured over, s (a process whose /proc
+    // entry could not be read in a slice is left out of that slice), resident KiB at the
+    // last such window's end, peak KiB over them.
+    let mut cpu: Vec<(String, f64, f64, u64, u64)> = Vec::new();
     for sl in slices {
         for (all, part) in [
             (&mut series.total, sl.series.total),
@@ -484,20 +486,20 @@ fn combine_live(slices: Vec<LiveSlice>) -> (Vec<f64>, Value) {
         span_s += sl.span_s;
         bytes += sl.bytes;
         duration_s += sl.duration_s;
-        window_s += sl.window_s;
         for (name, cpu_s, rss, hwm) in sl.procs {
             match cpu.iter_mut().find(|p| p.0 == name) {
                 Some(p) => {
                     p.1 += cpu_s;
-                    p.2 = rss;
-                    p.3 = p.3.max(hwm);
+                    p.2 += sl.window_s;
+                    p.3 = rss;
+                    p.4 = p.4.max(hwm);
                 }
-                None => cpu.push((name, cpu_s, rss, hwm)),
+                None => cpu.push((name, cpu_s, sl.window_s, rss, hwm)),
             }
         }
     }
     let mut procs = serde_json::Map::new();
-    for (name, cpu_s, rss, hwm) in cpu {
+    for (name, cpu_s, window_s, rss, hwm) in cpu {
         procs.insert(
             name,
             json!({
