@@ -77,7 +77,8 @@ pub struct BenchOptions {
 /// of the paced recorder run.
 struct Sizes {
     /// Wall seconds of the live runs at one rate, over all their slices: each slice has its
-    /// own [`BENCH_ALIGNMENT_S`] on top of its share of the rest.
+    /// own [`BENCH_ALIGNMENT_S`] on top of its share of the rest, rounded up to whole seconds
+    /// (three slices of 11 s for 30 s).
     live_s: f64,
     /// Seconds of each floor run: as long as the live run's measured part, but 1 s in quick
     /// mode (tests), where the comparison is a smoke check.
